@@ -1,0 +1,7 @@
+"""Constraint surfaces: they hold the vertices and own the metric (lengths, areas, gradients)."""
+from .base import Constraint
+from .bump import GaussianBump
+from .sphere import Sphere
+from .torus import Torus
+
+__all__ = ["Constraint", "GaussianBump", "Sphere", "Torus"]

@@ -1,0 +1,48 @@
+"""The interface every constraint surface implements."""
+from __future__ import annotations
+
+
+class Constraint:
+    """A surface that holds the vertices and measures lengths and areas on itself.
+
+    Projection operators (the paper's formalism): ``project_tangent(x, v)`` is P_T, the part of
+    ``v`` tangent to the surface at ``x``; ``project_normal(x, radius)`` is P_N, the closest point
+    of the surface. Forces need the metric: per-cell areas, perimeters and centroids
+    (``cell_geometry``) and per-corner gradients of area and perimeter (``corner_gradients``).
+    ``radius`` is the per-vertex (or per-replica) size parameter of the surface.
+    """
+
+    name = "constraint"
+
+    def normal(self, x):
+        raise NotImplementedError(f"{type(self).__name__}.normal is not implemented yet")
+
+    def project_tangent(self, x, v):
+        n = self.normal(x)
+        return v - (v * n).sum(axis=-1)[..., None] * n
+
+    def project_normal(self, x, radius):
+        raise NotImplementedError(f"{type(self).__name__}.project_normal is not implemented yet")
+
+    def distance_to_surface(self, x, radius):
+        raise NotImplementedError(f"{type(self).__name__}.distance_to_surface is not implemented yet")
+
+    def total_area_np(self, radius):
+        raise NotImplementedError(f"{type(self).__name__}.total_area is not implemented yet")
+
+    def cell_geometry(self, state):
+        raise NotImplementedError(f"{type(self).__name__} does not yet provide cell areas and perimeters "
+                                  "(only Sphere does); vertex-model forces need them")
+
+    def corner_gradients(self, state, geometry):
+        raise NotImplementedError(f"{type(self).__name__} does not yet provide area and perimeter gradients "
+                                  "(only Sphere does); vertex-model forces need them")
+
+    def edge_lengths(self, state, u, v):
+        raise NotImplementedError(f"{type(self).__name__} does not yet provide geodesic lengths (only Sphere does)")
+
+    def cell_areas_np(self, state):
+        return state.device.to_numpy(self.cell_geometry(state).area)
+
+    def __repr__(self):
+        return f"{type(self).__name__}()"

@@ -1,0 +1,112 @@
+"""Where the arrays live: the CPU (NumPy) or an NVIDIA GPU (CuPy).
+
+A :class:`Device` is chosen once per simulation; every array of a State lives on it and every
+operation takes its array module from it (``device.xp``). The NumPy path is the reference: it runs
+on any machine and defines the numbers that GPU kernels must reproduce.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+DEVICE_NAMES = ("cpu", "gpu", "auto")
+
+
+def _cupy_or_none():
+    """Return the cupy module if it imports and sees a usable GPU, else None."""
+    try:
+        import cupy
+        if cupy.cuda.runtime.getDeviceCount() < 1:
+            return None
+        cupy.zeros(1).sum()  # a real launch: fails early on a broken driver
+        return cupy
+    except Exception:
+        return None
+
+
+class Device:
+    """An execution device: ``name`` is ``"cpu"`` or ``"gpu"``, ``xp`` its array module."""
+
+    def __init__(self, name: str, xp):
+        self.name = name
+        self.xp = xp
+
+    @property
+    def is_gpu(self) -> bool:
+        return self.name == "gpu"
+
+    def asarray(self, a, dtype=None):
+        """Copy or move ``a`` onto this device."""
+        return self.xp.asarray(a, dtype=dtype)
+
+    def to_numpy(self, a):
+        """Return ``a`` as a NumPy array (a device-to-host copy on the GPU)."""
+        if self.is_gpu and not isinstance(a, np.ndarray):
+            return a.get()
+        return np.asarray(a)
+
+    def synchronize(self):
+        if self.is_gpu:
+            self.xp.cuda.get_current_stream().synchronize()
+
+    def __repr__(self):
+        return f"Device({self.name!r})"
+
+
+CPU = Device("cpu", np)
+
+
+def GPU() -> Device:
+    """The current CUDA device through CuPy; raises RuntimeError if none is usable."""
+    cp = _cupy_or_none()
+    if cp is None:
+        raise RuntimeError("device='gpu' needs CuPy and a working NVIDIA GPU; install the 'gpu' extra "
+                           "(pip install 'spherevm[gpu]') or use device='cpu'")
+    return Device("gpu", cp)
+
+
+def resolve(device="auto") -> Device:
+    """Turn ``"cpu"``, ``"gpu"``, ``"auto"`` or a Device into a Device.
+
+    ``"auto"`` takes the GPU when CuPy sees one and falls back to the CPU otherwise.
+    """
+    if isinstance(device, Device):
+        return device
+    if not isinstance(device, str) or device.lower() not in DEVICE_NAMES:
+        raise ValueError(f"device must be one of {DEVICE_NAMES} or a spherevm.device.Device, got {device!r}")
+    name = device.lower()
+    if name == "cpu":
+        return CPU
+    if name == "gpu":
+        return GPU()
+    cp = _cupy_or_none()
+    return Device("gpu", cp) if cp is not None else CPU
+
+
+def array_module(*arrays):
+    """NumPy or CuPy, whichever owns the given arrays (NumPy if none is a CuPy array)."""
+    for a in arrays:
+        if type(a).__module__.startswith("cupy"):
+            import cupy
+            return cupy
+    return np
+
+
+def info() -> dict:
+    """Versions and device facts, as printed by ``spherevm info``."""
+    import platform
+    import scipy
+    out = {"python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__}
+    try:
+        import cupy
+        out["cupy"] = cupy.__version__
+        try:
+            out["cuda_runtime"] = str(cupy.cuda.runtime.runtimeGetVersion())
+            n = cupy.cuda.runtime.getDeviceCount()
+            out["gpus"] = [cupy.cuda.runtime.getDeviceProperties(i)["name"].decode() for i in range(n)]
+        except Exception as exc:  # CuPy present, driver or GPU missing
+            out["gpu_error"] = str(exc).splitlines()[0]
+    except ImportError:
+        out["cupy"] = None
+    out["gpu_usable"] = _cupy_or_none() is not None
+    out["default_device"] = resolve("auto").name
+    return out

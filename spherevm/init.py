@@ -1,0 +1,178 @@
+"""Initial tilings of the sphere: random (the paper's protocol), from polygons, and regular."""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import ConvexHull
+
+from . import topology
+from .constraints import Sphere
+from .device import CPU
+from .state import State
+
+REGULAR_TILINGS = ("dodecahedron", "truncated_icosahedron")
+
+
+def default_radius(n_cells: int) -> float:
+    """sqrt(N / 4 pi): the radius at which the mean cell area <A> is 1."""
+    return float(np.sqrt(n_cells / (4.0 * np.pi)))
+
+
+def _check_radius(radius, n_cells):
+    if radius is None:
+        return default_radius(n_cells)
+    r = float(radius)
+    if not np.isfinite(r) or r <= 0:
+        raise ValueError(f"radius must be positive and finite, got {radius}")
+    return r
+
+
+def dual_of_triangulation(points, triangles, radius):
+    """The trivalent tiling dual to a triangulated sphere (Voronoi-like, as in the paper).
+
+    Each point becomes a cell; each triangle becomes a vertex at its centroid pushed onto the
+    sphere. ``triangles`` must be counter-clockwise seen from outside. Returns local arrays
+    ``(positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells)``.
+    """
+    tri = np.asarray(triangles, dtype=np.int64)
+    pts = np.asarray(points, dtype=np.float64)
+    n_tri = len(tri)
+    centroid = pts[tri].mean(axis=1)
+    positions = radius * centroid / np.linalg.norm(centroid, axis=1)[:, None]
+    # neighbour across the directed edge (i, j) of triangle t is the triangle holding (j, i)
+    n_pts = len(pts)
+    key = tri * n_pts + np.roll(tri, -1, axis=1)          # edge (t[k], t[k+1]) sits in slot k
+    rev = np.roll(tri, -1, axis=1) * n_pts + tri
+    order = np.argsort(key.reshape(-1))
+    sorted_keys = key.reshape(-1)[order]
+    across = order[np.searchsorted(sorted_keys, rev.reshape(-1))] // 3
+    across = across.reshape(n_tri, 3)
+    # cells around triangle t=(i, j, k) counter-clockwise are (i, j, k); cell i lies between the
+    # neighbours across (k, i) and (i, j)
+    vertex_cells = tri.astype(np.int32)
+    vertex_neighbors = np.roll(across, 1, axis=1).astype(np.int32)
+    table, sides = topology.cell_table(vertex_neighbors, vertex_cells, n_pts)
+    return positions, table, sides, vertex_neighbors, vertex_cells
+
+
+def _oriented_hull(points):
+    hull = ConvexHull(points)
+    tri = hull.simplices.copy()
+    p = points[tri]
+    outward = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p.mean(axis=1)) > 0
+    tri[~outward] = tri[~outward][:, [0, 2, 1]]
+    return tri
+
+
+def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, device=CPU) -> State:
+    """Random tilings of the sphere, the paper's initial condition.
+
+    For each replica: ``n_cells`` points uniform on the sphere, their convex hull, and one vertex at
+    the centroid of each hull facet pushed onto the sphere (so cells have any side count the hull
+    yields). Default radius ``sqrt(N/4 pi)`` so that <A> = 1. Replica ``r`` uses the random stream
+    ``(seed, r)``: the same seed gives the same tilings, and replica r does not depend on how many
+    replicas are made.
+    """
+    n = int(n_cells)
+    if n != n_cells or n < 4:
+        raise ValueError(f"n_cells must be an integer >= 4, got {n_cells}")
+    if int(replicas) != replicas or replicas < 1:
+        raise ValueError(f"replicas must be an integer >= 1, got {replicas}")
+    if int(seed) != seed or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed}")
+    R = _check_radius(radius, n)
+    states = []
+    for r in range(int(replicas)):  # initialisation only, not a per-step path
+        rng = np.random.default_rng([int(seed), r])
+        pts = rng.normal(size=(n, 3))
+        pts /= np.linalg.norm(pts, axis=1)[:, None]
+        tri = _oriented_hull(pts)
+        if len(np.unique(tri)) != n:  # a point inside the hull cannot happen on a sphere
+            raise RuntimeError("convex hull lost points; try another seed")
+        pos, table, sides, vn, vc = dual_of_triangulation(pts, tri, R)
+        states.append(State(pos, table, sides, vn, vc, [0, len(pos)], [0, n], R, constraint=Sphere(),
+                            validate=False))
+    state = State.concatenate(states, device=device)
+    state.validate()
+    return state
+
+
+def from_polygons(vertices, cells, radius, device=CPU, validate=True) -> State:
+    """A single-replica State from vertex positions and counter-clockwise cell vertex lists.
+
+    ``vertices`` (V, 3) are projected onto the sphere of the given radius; ``cells`` is a list of
+    vertex-index lists, each counter-clockwise seen from outside. The network must be trivalent.
+    """
+    R = float(radius)
+    if not np.isfinite(R) or R <= 0:
+        raise ValueError(f"radius must be positive and finite, got {radius}")
+    pos = np.asarray(vertices, dtype=np.float64)
+    if pos.ndim != 2 or pos.shape[1] != 3:
+        raise ValueError(f"vertices must have shape (n_vertices, 3), got {pos.shape}")
+    if not np.isfinite(pos).all():
+        raise ValueError(f"vertices must be finite: vertex {int(np.flatnonzero(~np.isfinite(pos).all(1))[0])} is not")
+    norms = np.linalg.norm(pos, axis=1)
+    if np.any(norms == 0):
+        raise ValueError(f"vertex {int(np.flatnonzero(norms == 0)[0])} is at the sphere's centre")
+    pos = R * pos / norms[:, None]
+    cells = [list(map(int, c)) for c in cells]
+    short = [i for i, c in enumerate(cells) if len(c) < 3]
+    if short:
+        raise ValueError(f"cell {short[0]} has {len(cells[short[0]])} vertices; cells need at least 3")
+    table, sides = topology.pad_cells(cells)
+    vn, vc = topology.build_vertex_tables(table, sides, len(pos))
+    return State(pos, table, sides, vn, vc, [0, len(pos)], [0, len(cells)], R, constraint=Sphere(),
+                 device=device, validate=validate)
+
+
+def _icosahedron():
+    import trimesh
+    ico = trimesh.creation.icosahedron()
+    v = np.asarray(ico.vertices, dtype=np.float64)
+    return v / np.linalg.norm(v, axis=1)[:, None], np.asarray(ico.faces, dtype=np.int64)
+
+
+def _ccw_cells(points, groups):
+    """Order each group of vertex indices counter-clockwise about its centre, seen from outside."""
+    cells = []
+    for g in groups:
+        g = np.asarray(g)
+        c = points[g].mean(axis=0)
+        n = c / np.linalg.norm(c)
+        e1 = points[g[0]] - c
+        e1 -= e1.dot(n) * n
+        e2 = np.cross(n, e1)
+        d = points[g] - c
+        cells.append(g[np.argsort(np.arctan2(d @ e2, d @ e1))].tolist())
+    return cells
+
+
+def regular_tiling(name: str, radius=None, device=CPU) -> State:
+    """A regular (Platonic or Archimedean) tiling of the sphere.
+
+    ``"dodecahedron"``: 12 regular pentagons (20 vertices). ``"truncated_icosahedron"``: 12 regular
+    pentagons and 20 regular hexagons (60 vertices, all edges of equal length), the football.
+    Default radius ``sqrt(N/4 pi)``.
+    """
+    if name not in REGULAR_TILINGS:
+        raise ValueError(f"name must be one of {REGULAR_TILINGS}, got {name!r}")
+    ico_v, ico_f = _icosahedron()
+    if name == "dodecahedron":
+        verts = ico_v[ico_f].mean(axis=1)
+        groups = [np.flatnonzero((ico_f == i).any(axis=1)) for i in range(len(ico_v))]
+    else:  # cut each icosahedron edge in thirds: regular pentagons and hexagons
+        edges = np.unique(np.sort(np.concatenate([ico_f[:, [0, 1]], ico_f[:, [1, 2]], ico_f[:, [2, 0]]]), axis=1),
+                          axis=0)
+        near = {}
+        verts = []
+        for i, j in edges:
+            for a, b in ((i, j), (j, i)):
+                near[(a, b)] = len(verts)
+                verts.append(ico_v[a] + (ico_v[b] - ico_v[a]) / 3.0)
+        verts = np.array(verts)
+        groups = [[near[(i, j)] for (a, j) in near if a == i] for i in range(len(ico_v))]
+        groups += [[near[(i, j)], near[(j, i)], near[(j, k)], near[(k, j)], near[(k, i)], near[(i, k)]]
+                   for i, j, k in ico_f]
+    n_cells = len(groups)
+    R = _check_radius(radius, n_cells)
+    verts = verts / np.linalg.norm(verts, axis=1)[:, None]
+    return from_polygons(verts, _ccw_cells(verts, groups), R, device=device)

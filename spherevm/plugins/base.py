@@ -1,0 +1,80 @@
+"""The four kinds of operation. Built-in plugins derive from these exactly as a user's would."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..trigger import Always, as_trigger
+
+
+class Operation:
+    """Something the Simulation runs: it has a trigger and may publish loggable quantities.
+
+    ``loggables`` maps a quantity name to a callable ``f(simulation)`` returning a scalar or a
+    per-replica array; writers and ``Simulation.log`` find them by name.
+    """
+
+    def __init__(self, trigger=None):
+        self.trigger = Always() if trigger is None else as_trigger(trigger)
+        self._simulation = None
+
+    def attach(self, simulation):
+        """Called when the operation joins a Simulation whose State is set."""
+        self._simulation = simulation
+
+    def detach(self):
+        self._simulation = None
+
+    @property
+    def loggables(self) -> dict:
+        return {}
+
+
+@dataclass
+class ForceResult:
+    """What a Force computes: ``forces (V, 3)`` on the device and ``energy`` per replica."""
+    forces: object
+    energy: object
+    cell_energy: object = None
+
+
+class Force(Operation):
+    """A contribution to the potential energy; subclasses implement :meth:`compute`.
+
+    ``compute(state)`` returns a :class:`ForceResult` whose forces are minus the surface
+    (tangent-plane) gradient of the energy, on the state's device.
+    """
+
+    def compute(self, state) -> ForceResult:
+        raise NotImplementedError
+
+    def energy(self, state):
+        """Energy per replica, as a NumPy array."""
+        return state.device.to_numpy(self.compute(state).energy)
+
+    def forces(self, state):
+        """Forces ``(n_vertices, 3)``, as a NumPy array."""
+        return state.device.to_numpy(self.compute(state).forces)
+
+
+class Integrator(Operation):
+    """Moves the vertices one step: ``step(simulation, forces)`` with the summed forces."""
+
+    def step(self, simulation, forces):
+        raise NotImplementedError
+
+
+class Updater(Operation):
+    """Changes the state between steps (for example the topology): ``update(simulation, timestep)``."""
+
+    def update(self, simulation, timestep):
+        raise NotImplementedError
+
+
+class Writer(Operation):
+    """Records the simulation: ``write(simulation, timestep)``; ``close()`` at the end."""
+
+    def write(self, simulation, timestep):
+        raise NotImplementedError
+
+    def close(self):
+        pass

@@ -1,0 +1,92 @@
+"""The vertex-model energy E = sum_c kA (A_c - A0)^2 + kP (P_c - P0)^2 and its forces."""
+from __future__ import annotations
+
+import weakref
+
+import numpy as np
+
+from ..base import Force, ForceResult
+
+
+def _param(name, value, lower=0.0):
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim > 1:
+        raise ValueError(f"{name} must be a scalar or a per-cell 1-D array, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)) or np.any(arr < lower):
+        raise ValueError(f"{name} must be finite and >= {lower}, got {value!r}")
+    return arr
+
+
+class VertexModel(Force):
+    """Area and perimeter elasticity of every cell, measured on the constraint surface.
+
+    ``E = sum_c kA (A_c - A0)^2 + kP (P_c - P0)^2`` with scalar or per-cell (length ``n_cells``)
+    parameters. Forces are minus the surface gradient, computed per vertex from its three corners
+    (see :meth:`spherevm.constraints.Sphere.corner_gradients`), so they are tangent by construction.
+
+    :meth:`dimensionless` gives the paper's form ``E/(kP <A>) = sum kr (a - a0)^2 + (p - p0)^2`` in
+    the unit of length ``sqrt(<A>)`` of each replica.
+    """
+
+    def __init__(self, kA=1.0, kP=1.0, A0=1.0, P0=3.8):
+        super().__init__()
+        self.kA, self.kP = _param("kA", kA), _param("kP", kP)
+        self.A0, self.P0 = _param("A0", A0), _param("P0", P0)
+        self._dimensionless = None
+
+    @classmethod
+    def dimensionless(cls, kr=0.0, p0=3.8, a0=1.0, kP=1.0) -> "VertexModel":
+        """The paper's parameters: kr = kA <A>/kP, p0 = P0/sqrt(<A>), a0 = A0/<A>.
+
+        Resolved per replica from its mean cell area <A> = 4 pi R^2 / N, so that ensembles of
+        spheres of different sizes share one set of dimensionless parameters.
+        """
+        model = cls(kA=0.0, kP=kP, A0=0.0, P0=0.0)
+        model._dimensionless = (_param("kr", kr), _param("p0", p0), _param("a0", a0))
+        return model
+
+    def parameters(self, state):
+        """Per-cell ``(kA, kP, A0, P0)`` as NumPy arrays of length ``n_cells``."""
+        n = state.n_cells
+        if self._dimensionless is not None:
+            kr, p0, a0 = self._dimensionless
+            mean_area = state.mean_cell_area[state.cell_replica_np()]
+            values = (kr * self.kP / mean_area, self.kP, a0 * mean_area, p0 * np.sqrt(mean_area))
+        else:
+            values = (self.kA, self.kP, self.A0, self.P0)
+        out = []
+        for name, v in zip(("kA", "kP", "A0", "P0"), values):
+            v = np.asarray(v, dtype=np.float64)
+            if v.ndim == 1 and len(v) != n:
+                raise ValueError(f"per-cell {name} has length {len(v)}, but the state has {n} cells")
+            out.append(np.broadcast_to(v, (n,)))
+        return out
+
+    def _device_parameters(self, state):
+        """Per-cell parameters on the device, cached for the State they were made for."""
+        cached = getattr(self, "_cache_for", None)
+        if cached is None or cached() is not state:
+            self._cache = [state.device.asarray(np.ascontiguousarray(p)) for p in self.parameters(state)]
+            self._cache_for = weakref.ref(state)
+        return self._cache
+
+    def compute(self, state) -> ForceResult:
+        xp = state.device.xp
+        kA, kP, A0, P0 = self._device_parameters(state)
+        geometry = state.constraint.cell_geometry(state)
+        dA_cell = geometry.area - A0
+        dP_cell = geometry.perimeter - P0
+        cell_energy = kA * dA_cell ** 2 + kP * dP_cell ** 2
+        energy = xp.bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)
+        dA, dP = state.constraint.corner_gradients(state, geometry)
+        cells = state.vertex_cells
+        tA = (2.0 * kA * dA_cell)[cells][..., None]
+        tP = (2.0 * kP * dP_cell)[cells][..., None]
+        forces = -(tA * dA + tP * dP).sum(axis=1)
+        return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
+
+    def __repr__(self):
+        if self._dimensionless is not None:
+            kr, p0, a0 = self._dimensionless
+            return f"VertexModel.dimensionless(kr={kr}, p0={p0}, a0={a0}, kP={self.kP})"
+        return f"VertexModel(kA={self.kA}, kP={self.kP}, A0={self.A0}, P0={self.P0})"

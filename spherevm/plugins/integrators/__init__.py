@@ -1,0 +1,4 @@
+"""Built-in integrators."""
+from .fire import FIRE
+
+__all__ = ["FIRE"]

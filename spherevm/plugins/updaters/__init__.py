@@ -1,0 +1,3 @@
+"""Built-in updaters."""
+
+__all__ = []

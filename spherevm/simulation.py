@@ -1,0 +1,292 @@
+"""Simulation: owns the State and the operations, runs steps and minimisations."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import analysis
+from .device import resolve
+from .plugins.base import Force, Integrator, Updater, Writer
+
+
+class Operations:
+    """The operations of a Simulation: forces, one integrator, updaters and writers.
+
+    Order inside a step: updaters, force computation, integrator, writers.
+    """
+
+    def __init__(self, simulation):
+        self._sim = simulation
+        self.forces = _OperationList(simulation, Force)
+        self.updaters = _OperationList(simulation, Updater)
+        self.writers = _OperationList(simulation, Writer)
+        self._integrator = None
+
+    @property
+    def integrator(self):
+        return self._integrator
+
+    @integrator.setter
+    def integrator(self, value):
+        if value is not None and not isinstance(value, Integrator):
+            raise TypeError(f"integrator must be a spherevm.plugins.Integrator, got {type(value).__name__}")
+        if self._integrator is not None:
+            self._integrator.detach()
+        self._integrator = value
+        if value is not None and self._sim._state is not None:
+            value.attach(self._sim)
+
+    def __iter__(self):
+        yield from self.updaters
+        yield from self.forces
+        if self._integrator is not None:
+            yield self._integrator
+        yield from self.writers
+
+
+class _OperationList(list):
+    """A list that type-checks its operations and attaches them to the simulation."""
+
+    def __init__(self, simulation, kind):
+        super().__init__()
+        self._sim, self._kind = simulation, kind
+
+    def _check(self, op):
+        if not isinstance(op, self._kind):
+            raise TypeError(f"expected a spherevm.plugins.{self._kind.__name__}, got {type(op).__name__}")
+        if self._sim._state is not None:
+            op.attach(self._sim)
+        return op
+
+    def append(self, op):
+        super().append(self._check(op))
+
+    def extend(self, ops):
+        for op in ops:
+            self.append(op)
+
+    def insert(self, i, op):
+        super().insert(i, self._check(op))
+
+    def remove(self, op):
+        super().remove(op)
+        op.detach()
+
+
+@dataclass
+class MinimizeResult:
+    """Outcome of :meth:`Simulation.minimize`, one entry per replica (NumPy arrays)."""
+    converged: np.ndarray
+    reason: np.ndarray          # "force", "energy" or "max_steps"
+    energy: np.ndarray          # total energy per replica
+    energy_per_cell: np.ndarray
+    max_force: np.ndarray
+    steps: np.ndarray
+    mean_shape_index: np.ndarray = field(default=None)
+
+    @property
+    def all_converged(self) -> bool:
+        return bool(np.all(self.converged))
+
+    def table(self) -> str:
+        """A plain-text table, one row per replica."""
+        rows = ["replica  energy/cell     <P/sqrt(A)>  max|F|      converged  reason     steps"]
+        for r in range(len(self.converged)):
+            rows.append(f"{r:7d}  {self.energy_per_cell[r]:.6e}  {self.mean_shape_index[r]:11.6f}  "
+                        f"{self.max_force[r]:.3e}  {str(bool(self.converged[r])):9s}  {self.reason[r]:9s}  "
+                        f"{int(self.steps[r]):6d}")
+        return "\n".join(rows)
+
+
+class Simulation:
+    """A State plus the operations acting on it (HOOMD-blue style).
+
+    >>> sim = Simulation(device="cpu")
+    >>> sim.state = spherevm.init.random_tiling(64)
+    >>> sim.operations.forces.append(spherevm.plugins.forces.VertexModel.dimensionless(kr=0, p0=3.8))
+    >>> sim.operations.integrator = spherevm.plugins.integrators.FIRE(dt=0.05)
+    >>> result = sim.minimize(force_tol=1e-10)
+    """
+
+    def __init__(self, device="auto", seed: int = 0):
+        self.device = resolve(device)
+        if int(seed) != seed or seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+        self.seed = int(seed)
+        self.timestep = 0
+        self._state = None
+        self._cache = None
+        self.operations = Operations(self)
+
+    # ------------------------------------------------------------------ state
+    @property
+    def state(self):
+        return self._state
+
+    @state.setter
+    def state(self, value):
+        from .state import State
+        if not isinstance(value, State):
+            raise TypeError(f"state must be a spherevm.State, got {type(value).__name__}")
+        self._state = value if value.device is self.device else value.to(self.device)
+        self._cache = None
+        for op in self.operations:
+            op.attach(self)
+
+    def _require_state(self):
+        if self._state is None:
+            raise RuntimeError("set sim.state first, for example sim.state = spherevm.init.random_tiling(64)")
+
+    def state_changed(self):
+        """Operations call this after moving vertices or changing topology: cached forces go stale."""
+        self._cache = None
+
+    # ------------------------------------------------------------------ forces and logging
+    def compute_forces(self):
+        """Summed forces ``(V, 3)`` and energy per replica on the device, cached until the state changes."""
+        self._require_state()
+        if self._cache is None:
+            if not self.operations.forces:
+                raise RuntimeError("no force in sim.operations.forces; append one, e.g. "
+                                   "spherevm.plugins.forces.VertexModel.dimensionless(kr=1, p0=3.8)")
+            xp = self.device.xp
+            forces = xp.zeros_like(self._state.positions)
+            energy = xp.zeros(self._state.n_replicas)
+            for f in self.operations.forces:
+                res = f.compute(self._state)
+                forces = forces + res.forces
+                energy = energy + res.energy
+            self._cache = (forces, energy)
+        return self._cache
+
+    def max_force(self):
+        """Largest vertex force magnitude per replica (device array)."""
+        xp = self.device.xp
+        forces, _ = self.compute_forces()
+        mag = xp.sqrt((forces * forces).sum(axis=1))
+        out = xp.zeros(self._state.n_replicas)
+        if hasattr(xp, "maximum") and hasattr(xp.maximum, "at"):
+            xp.maximum.at(out, self._state.vertex_replica, mag)
+        else:
+            import cupyx
+            cupyx.scatter_max(out, self._state.vertex_replica, mag)
+        return out
+
+    @property
+    def loggables(self) -> dict:
+        """Every loggable quantity by name: ``f(sim)`` returning a scalar or per-replica array."""
+        to_np = self.device.to_numpy
+        out = {
+            "timestep": lambda s: s.timestep,
+            "energy": lambda s: to_np(s.compute_forces()[1]),
+            "energy_per_cell": lambda s: to_np(s.compute_forces()[1]) / s.state.cells_per_replica,
+            "max_force": lambda s: to_np(s.max_force()),
+            "mean_shape_index": lambda s: analysis.mean_shape_index(s.state),
+        }
+        for op in self.operations:
+            out.update(op.loggables)
+        return out
+
+    def log(self, name: str):
+        """The current value of a loggable quantity (NumPy)."""
+        table = self.loggables
+        if name not in table:
+            raise ValueError(f"unknown loggable {name!r}; available: {sorted(table)}")
+        return table[name](self)
+
+    # ------------------------------------------------------------------ running
+    def _step(self, forces_needed=True):
+        ts = self.timestep
+        for u in self.operations.updaters:
+            if u.trigger(ts):
+                u.update(self, ts)
+        integrator = self.operations.integrator
+        if integrator is not None and integrator.trigger(ts):
+            forces, _ = self.compute_forces()
+            integrator.step(self, forces)
+        self.timestep += 1
+
+    def _write(self):
+        for w in self.operations.writers:
+            if w.trigger(self.timestep):
+                w.write(self, self.timestep)
+
+    def run(self, steps: int):
+        """Advance ``steps`` timesteps: updaters, forces, integrator, writers on each."""
+        self._require_state()
+        if int(steps) != steps or steps < 0:
+            raise ValueError(f"steps must be a non-negative integer, got {steps!r}")
+        if self.operations.integrator is None:
+            raise RuntimeError("set sim.operations.integrator before run()")
+        if self.timestep == 0:
+            self._write()
+        for _ in range(int(steps)):
+            self._step()
+            self._write()
+        self.flush()
+
+    def flush(self):
+        for w in self.operations.writers:
+            if hasattr(w, "flush"):
+                w.flush()
+
+    def minimize(self, force_tol: float = 1e-10, energy_tol: float = 1e-20, max_steps: int = 100_000,
+                 check_every: int = 10, progress=None) -> MinimizeResult:
+        """Minimise every replica with the FIRE integrator until it converges or runs out of steps.
+
+        A replica stops (and stops moving) when its largest vertex force is below ``force_tol`` or
+        its energy per cell below ``energy_tol``; the others go on. Convergence is checked every
+        ``check_every`` steps (one small read-back). ``progress`` is an optional callable
+        ``progress(step, n_done, n_replicas)`` called at every check.
+        """
+        from .plugins.integrators import FIRE
+        self._require_state()
+        for name, val in (("force_tol", force_tol), ("energy_tol", energy_tol)):
+            if not np.isfinite(val) or val < 0:
+                raise ValueError(f"{name} must be finite and >= 0, got {val!r}")
+        if int(max_steps) != max_steps or max_steps < 0:
+            raise ValueError(f"max_steps must be a non-negative integer, got {max_steps!r}")
+        if int(check_every) != check_every or check_every < 1:
+            raise ValueError(f"check_every must be a positive integer, got {check_every!r}")
+        if self.operations.integrator is None:
+            self.operations.integrator = FIRE()
+        fire = self.operations.integrator
+        if not isinstance(fire, FIRE):
+            raise TypeError(f"minimize() needs the FIRE integrator, found {type(fire).__name__}")
+        fire.reset()
+        n_rep = self._state.n_replicas
+        n_cells = self._state.cells_per_replica
+        done = np.zeros(n_rep, dtype=bool)
+        reason = np.full(n_rep, "max_steps", dtype=object)
+        steps = np.full(n_rep, int(max_steps), dtype=np.int64)
+        to_np = self.device.to_numpy
+        start = self.timestep
+        if start == 0:
+            self._write()
+        k = 0
+        while True:
+            if k % check_every == 0 or k == max_steps:
+                _, energy = self.compute_forces()
+                fmax = to_np(self.max_force())
+                epc = to_np(energy) / n_cells
+                by_force = ~done & (fmax < force_tol)
+                by_energy = ~done & ~by_force & (epc < energy_tol)
+                reason[by_force], reason[by_energy] = "force", "energy"
+                newly = by_force | by_energy
+                steps[newly] = k
+                done |= newly
+                fire.active = self.device.asarray(~done)
+                if progress is not None:
+                    progress(k, int(done.sum()), n_rep)
+                if done.all() or k >= max_steps:
+                    break
+            self._step()
+            self._write()
+            k += 1
+        self.flush()
+        _, energy = self.compute_forces()
+        e = to_np(energy)
+        return MinimizeResult(converged=done, reason=reason.astype(str), energy=e, energy_per_cell=e / n_cells,
+                              max_force=to_np(self.max_force()), steps=steps,
+                              mean_shape_index=analysis.mean_shape_index(self._state))

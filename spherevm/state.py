@@ -1,0 +1,177 @@
+"""State: every array of one or many tissues (replicas), struct of arrays, on one device."""
+from __future__ import annotations
+
+import numpy as np
+
+from . import topology
+from .device import CPU, resolve
+
+
+class State:
+    """Vertex positions and the trivalent cell network of one or more replicas.
+
+    Replicas are independent tissues stored back to back: replica ``r`` owns vertices
+    ``vertex_start[r]:vertex_start[r+1]`` and cells ``cell_start[r]:cell_start[r+1]``; all indices are
+    global. Each replica lives on its own surface (``constraint`` with per-replica ``radius``).
+    Positions are float64, indices int32. See :mod:`spherevm.topology` for the orientation rules.
+
+    The constructor validates the network (see :func:`spherevm.topology.check`); call
+    :meth:`validate` again after editing arrays by hand.
+    """
+
+    def __init__(self, positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells,
+                 vertex_start, cell_start, radius, constraint=None, device=CPU, validate=True):
+        from .constraints import Sphere
+        self.device = resolve(device)
+        self.constraint = constraint if constraint is not None else Sphere()
+        xp = self.device.xp
+        self.positions = xp.asarray(positions, dtype=xp.float64)
+        self.cell_vertices = xp.asarray(cell_vertices, dtype=xp.int32)
+        self.cell_sides = xp.asarray(cell_sides, dtype=xp.int32)
+        self.vertex_neighbors = xp.asarray(vertex_neighbors, dtype=xp.int32)
+        self.vertex_cells = xp.asarray(vertex_cells, dtype=xp.int32)
+        self.vertex_start = np.asarray(vertex_start, dtype=np.int64)
+        self.cell_start = np.asarray(cell_start, dtype=np.int64)
+        self.radius = xp.asarray(np.broadcast_to(np.asarray(radius, dtype=np.float64),
+                                                 (len(self.vertex_start) - 1,)).copy())
+        self._derive_layout()
+        if validate:
+            self.validate()
+
+    # ------------------------------------------------------------------ layout
+    def _derive_layout(self):
+        vs, cs = self.vertex_start, self.cell_start
+        if vs.ndim != 1 or cs.shape != vs.shape or len(vs) < 2:
+            raise ValueError("vertex_start and cell_start must both have length n_replicas + 1 >= 2")
+        if vs[0] != 0 or cs[0] != 0 or np.any(np.diff(vs) <= 0) or np.any(np.diff(cs) <= 0):
+            raise ValueError("vertex_start and cell_start must start at 0 and increase strictly")
+        if vs[-1] != len(self.positions) or cs[-1] != len(self.cell_sides):
+            raise ValueError(f"replica layout covers {vs[-1]} vertices and {cs[-1]} cells, "
+                             f"but the arrays hold {len(self.positions)} and {len(self.cell_sides)}")
+        r = np.asarray(self.device.to_numpy(self.radius))
+        if not np.all(np.isfinite(r)) or np.any(r <= 0):
+            raise ValueError(f"radius must be positive and finite, got {r[~(np.isfinite(r) & (r > 0))][0]}")
+        xp = self.device.xp
+        self._vertex_replica = np.repeat(np.arange(self.n_replicas, dtype=np.int32), np.diff(vs))
+        self._cell_replica = np.repeat(np.arange(self.n_replicas, dtype=np.int32), np.diff(cs))
+        self.vertex_replica = xp.asarray(self._vertex_replica)
+        self.cell_replica = xp.asarray(self._cell_replica)
+
+    def vertex_start_np(self):
+        return self.vertex_start
+
+    def cell_start_np(self):
+        return self.cell_start
+
+    def vertex_replica_np(self):
+        return self._vertex_replica
+
+    def cell_replica_np(self):
+        return self._cell_replica
+
+    def radius_np(self):
+        return np.asarray(self.device.to_numpy(self.radius))
+
+    @property
+    def n_vertices(self) -> int:
+        return int(self.positions.shape[0])
+
+    @property
+    def n_cells(self) -> int:
+        return int(self.cell_sides.shape[0])
+
+    @property
+    def n_replicas(self) -> int:
+        return len(self.vertex_start) - 1
+
+    @property
+    def max_sides(self) -> int:
+        return int(self.cell_vertices.shape[1])
+
+    @property
+    def cells_per_replica(self):
+        return np.diff(self.cell_start)
+
+    @property
+    def vertices_per_replica(self):
+        return np.diff(self.vertex_start)
+
+    @property
+    def mean_cell_area(self):
+        """<A> per replica: total surface area over the number of cells."""
+        return self.constraint.total_area_np(self.radius_np()) / self.cells_per_replica
+
+    # ------------------------------------------------------------------ checks and copies
+    def validate(self, tol: float = 1e-9):
+        """Raise ValueError naming the first offending cell or vertex if the network is invalid."""
+        topology.check(self, tol=tol)
+        return self
+
+    def to(self, device) -> "State":
+        """A copy of this State on another device (``"cpu"``, ``"gpu"``, ``"auto"`` or a Device)."""
+        return State(**self._arrays_np(), constraint=self.constraint, device=device, validate=False)
+
+    def copy(self) -> "State":
+        return State(**self._arrays(), constraint=self.constraint, device=self.device, validate=False)
+
+    def _arrays(self):
+        return dict(positions=self.positions.copy(), cell_vertices=self.cell_vertices.copy(),
+                    cell_sides=self.cell_sides.copy(), vertex_neighbors=self.vertex_neighbors.copy(),
+                    vertex_cells=self.vertex_cells.copy(), vertex_start=self.vertex_start.copy(),
+                    cell_start=self.cell_start.copy(), radius=self.radius.copy())
+
+    def _arrays_np(self):
+        return {k: self.device.to_numpy(v) for k, v in self._arrays().items()}
+
+    def replica(self, r: int) -> "State":
+        """Replica ``r`` alone, as a new single-replica State with local indices."""
+        if not 0 <= r < self.n_replicas:
+            raise IndexError(f"replica must be in 0..{self.n_replicas - 1}, got {r}")
+        a = self._arrays_np()
+        v0, v1 = self.vertex_start[r], self.vertex_start[r + 1]
+        c0, c1 = self.cell_start[r], self.cell_start[r + 1]
+        cv = a["cell_vertices"][c0:c1]
+        cv = np.where(cv >= 0, cv - v0, -1)
+        sides = a["cell_sides"][c0:c1]
+        cv = cv[:, :max(int(sides.max()), 3)]
+        return State(a["positions"][v0:v1], cv, sides, a["vertex_neighbors"][v0:v1] - v0,
+                     a["vertex_cells"][v0:v1] - c0, [0, v1 - v0], [0, c1 - c0], a["radius"][r:r + 1],
+                     constraint=self.constraint, device=self.device, validate=False)
+
+    @classmethod
+    def concatenate(cls, states, device=None) -> "State":
+        """Stack single- or multi-replica States (same constraint type) into one ensemble."""
+        states = list(states)
+        if not states:
+            raise ValueError("states must hold at least one State")
+        width = max(s.max_sides for s in states)
+        parts = {k: [] for k in ("positions", "cell_vertices", "cell_sides", "vertex_neighbors",
+                                 "vertex_cells", "radius")}
+        vstart, cstart = [0], [0]
+        for s in states:
+            a = s._arrays_np()
+            v0, c0 = vstart[-1], cstart[-1]
+            cv = np.full((s.n_cells, width), -1, dtype=np.int32)
+            cv[:, :s.max_sides] = np.where(a["cell_vertices"] >= 0, a["cell_vertices"] + v0, -1)
+            parts["positions"].append(a["positions"])
+            parts["cell_vertices"].append(cv)
+            parts["cell_sides"].append(a["cell_sides"])
+            parts["vertex_neighbors"].append(a["vertex_neighbors"] + v0)
+            parts["vertex_cells"].append(a["vertex_cells"] + c0)
+            parts["radius"].append(a["radius"])
+            vstart.extend((s.vertex_start[1:] + v0).tolist())
+            cstart.extend((s.cell_start[1:] + c0).tolist())
+        return cls(**{k: np.concatenate(v) for k, v in parts.items()}, vertex_start=vstart,
+                   cell_start=cstart, constraint=states[0].constraint,
+                   device=device if device is not None else states[0].device, validate=False)
+
+    # ------------------------------------------------------------------ files
+    @classmethod
+    def from_gsd(cls, path, frame: int = -1, device=CPU) -> "State":
+        """Restore a State exactly (bitwise positions, identical topology) from a GSD frame."""
+        from .plugins.writers.gsd import read_state
+        return read_state(path, frame=frame, device=device)
+
+    def __repr__(self):
+        return (f"State(n_replicas={self.n_replicas}, n_cells={self.n_cells}, n_vertices={self.n_vertices}, "
+                f"max_sides={self.max_sides}, constraint={self.constraint!r}, device={self.device.name!r})")

@@ -1,0 +1,183 @@
+"""Trivalent cell networks: building them from polygons, checking them, listing edges.
+
+Conventions (all indices global over the replicas of a State):
+
+* ``vertex_neighbors[v] = (n0, n1, n2)`` counter-clockwise seen from outside the surface;
+* ``vertex_cells[v, k]`` is the cell lying between the edges ``v -> n_k`` and ``v -> n_{k+1}``; in
+  that cell's counter-clockwise vertex list ``n_k`` follows ``v`` and ``n_{k+1}`` precedes it;
+* ``cell_vertices[c]`` lists the cell's vertices counter-clockwise, padded with -1 up to
+  ``max_sides``; ``cell_sides[c]`` counts them.
+
+So the ``(n_vertices, 3)`` arrays list every cell corner exactly once: corner ``(v, k)`` lies in cell
+``vertex_cells[v, k]`` and owns that cell's edge ``v -> vertex_neighbors[v, k]``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def pad_cells(cells, min_width: int = 0):
+    """List of vertex lists -> (padded int32 table, sides)."""
+    sides = np.array([len(c) for c in cells], dtype=np.int32)
+    width = max(int(sides.max()) if len(sides) else 0, min_width)
+    table = np.full((len(cells), width), -1, dtype=np.int32)
+    mask = np.arange(width)[None, :] < sides[:, None]
+    table[mask] = np.concatenate([np.asarray(c, dtype=np.int64) for c in cells]) if len(cells) else []
+    return table, sides
+
+
+def cell_corners(cell_vertices, cell_sides):
+    """Every corner of the padded table: (cell, vertex, next vertex, previous vertex), flat."""
+    cv = np.asarray(cell_vertices)
+    sides = np.asarray(cell_sides)
+    n_cells, width = cv.shape
+    col = np.arange(width)[None, :]
+    valid = col < sides[:, None]
+    nxt_col = (col + 1) % sides[:, None]
+    prv_col = (col - 1) % sides[:, None]
+    rows = np.broadcast_to(np.arange(n_cells)[:, None], cv.shape)
+    cell = rows[valid]
+    vert = cv[valid]
+    nxt = cv[rows, nxt_col][valid]
+    prv = cv[rows, prv_col][valid]
+    return cell, vert, nxt, prv
+
+
+def build_vertex_tables(cell_vertices, cell_sides, n_vertices: int):
+    """Derive ``vertex_neighbors`` and ``vertex_cells`` from counter-clockwise cells.
+
+    Raises ValueError naming the first vertex that is not trivalent or whose corners do not close
+    into one fan (a sign of a clockwise or inconsistent cell).
+    """
+    cell, vert, nxt, prv = cell_corners(cell_vertices, cell_sides)
+    if len(vert) and (vert.min() < 0 or vert.max() >= n_vertices):
+        bad = int(np.flatnonzero((vert < 0) | (vert >= n_vertices))[0])
+        raise ValueError(f"cell {int(cell[bad])} refers to vertex {int(vert[bad])}, outside 0..{n_vertices - 1}")
+    counts = np.bincount(vert, minlength=n_vertices)
+    if np.any(counts != 3):
+        v = int(np.flatnonzero(counts != 3)[0])
+        raise ValueError(f"network is not trivalent: vertex {v} is a corner of {int(counts[v])} cells "
+                         "(every vertex must belong to exactly 3 cells)")
+    order = np.argsort(vert, kind="stable")
+    c3 = cell[order].reshape(n_vertices, 3)
+    nx3 = nxt[order].reshape(n_vertices, 3)
+    pv3 = prv[order].reshape(n_vertices, 3)
+    # Put the three corners in counter-clockwise order: corner j follows corner i when prev_i == next_j.
+    swap = pv3[:, 0] != nx3[:, 1]
+    for arr in (c3, nx3, pv3):
+        arr[swap, 1], arr[swap, 2] = arr[swap, 2].copy(), arr[swap, 1].copy()
+    closed = (pv3[:, 0] == nx3[:, 1]) & (pv3[:, 1] == nx3[:, 2]) & (pv3[:, 2] == nx3[:, 0])
+    if not np.all(closed):
+        v = int(np.flatnonzero(~closed)[0])
+        raise ValueError(f"the cells around vertex {v} (cells {sorted(set(c3[v].tolist()))}) do not close "
+                         "into a fan: some cell is listed clockwise or shares an edge wrongly")
+    return nx3.astype(np.int32), c3.astype(np.int32)
+
+
+def edges(vertex_neighbors):
+    """Unique undirected edges ``(E, 2)`` with ``u < v``, in order of ``u`` then of ``v``'s slot."""
+    vn = np.asarray(vertex_neighbors)
+    u = np.repeat(np.arange(len(vn)), 3)
+    v = vn.reshape(-1)
+    keep = u < v
+    return np.stack([u[keep], v[keep]], axis=1).astype(np.int32)
+
+
+def check(state, tol: float = 1e-9):
+    """Validate a State; raise ValueError naming the first offending cell or vertex.
+
+    Checks: finite positions on the surface, trivalent network with reciprocal neighbours, cell
+    table and vertex tables consistent (so every edge is shared by exactly two cells, once in each
+    direction), replica layout, counter-clockwise cells (positive area), and V - E + F = 2 per
+    replica.
+    """
+    pos = state.device.to_numpy(state.positions)
+    vn = state.device.to_numpy(state.vertex_neighbors)
+    vc = state.device.to_numpy(state.vertex_cells)
+    cv = state.device.to_numpy(state.cell_vertices)
+    sides = state.device.to_numpy(state.cell_sides)
+    nv, nc = len(pos), len(sides)
+    if pos.shape != (nv, 3) or vn.shape != (nv, 3) or vc.shape != (nv, 3):
+        raise ValueError("positions, vertex_neighbors and vertex_cells must all have shape (n_vertices, 3)")
+    if cv.ndim != 2 or cv.shape[0] != nc:
+        raise ValueError("cell_vertices must have shape (n_cells, max_sides)")
+    bad = ~np.isfinite(pos).all(axis=1)
+    if bad.any():
+        raise ValueError(f"positions must be finite: vertex {int(np.flatnonzero(bad)[0])} is {pos[bad][0]}")
+    if np.any(sides < 3) or np.any(sides > cv.shape[1]):
+        c = int(np.flatnonzero((sides < 3) | (sides > cv.shape[1]))[0])
+        raise ValueError(f"cell {c} has {int(sides[c])} sides; cells need 3 <= sides <= max_sides={cv.shape[1]}")
+    for name, arr, hi in (("vertex_neighbors", vn, nv), ("vertex_cells", vc, nc)):
+        if arr.min(initial=0) < 0 or arr.max(initial=0) >= hi:
+            v = int(np.flatnonzero(((arr < 0) | (arr >= hi)).any(axis=1))[0])
+            raise ValueError(f"{name} of vertex {v} is {arr[v].tolist()}, outside 0..{hi - 1}")
+    # replica layout: every edge and every corner stays inside its replica
+    vrep, crep = state.vertex_replica_np(), state.cell_replica_np()
+    cross = (vrep[vn] != vrep[:, None]).any(axis=1) | (crep[vc] != vrep[:, None]).any(axis=1)
+    if cross.any():
+        raise ValueError(f"vertex {int(np.flatnonzero(cross)[0])} is connected to another replica")
+    # derive the vertex tables from the cells and compare (trivalence, fans, two cells per edge)
+    ref_vn, ref_vc = build_vertex_tables(cv, sides, nv)
+    # the stored tables may start their cyclic order at any slot: rotate to compare
+    same = np.zeros(nv, dtype=bool)
+    for shift in range(3):
+        rn, rc = np.roll(ref_vn, shift, axis=1), np.roll(ref_vc, shift, axis=1)
+        same |= (rn == vn).all(axis=1) & (rc == vc).all(axis=1)
+    if not same.all():
+        v = int(np.flatnonzero(~same)[0])
+        raise ValueError(f"vertex {v}: vertex_neighbors {vn[v].tolist()} / vertex_cells {vc[v].tolist()} "
+                         f"disagree with the cell table (expected {ref_vn[v].tolist()} / {ref_vc[v].tolist()})")
+    back = (vn[vn] == np.arange(nv)[:, None, None]).any(axis=2)
+    if not back.all():
+        v = int(np.flatnonzero(~back.all(axis=1))[0])
+        raise ValueError(f"vertex {v} lists neighbours {vn[v].tolist()} that do not list it back")
+    # on the surface
+    dist = state.constraint.distance_to_surface(pos, state.radius_np()[vrep])
+    off = np.abs(dist) > tol * state.radius_np()[vrep]
+    if off.any():
+        v = int(np.flatnonzero(off)[0])
+        raise ValueError(f"vertex {v} is off the surface by {dist[v]:.3g} (allowed {tol:g} R); "
+                         "project positions with the constraint first")
+    # Euler characteristic per replica: V - E + F with E = 3V/2
+    nvr = np.diff(state.vertex_start_np())
+    ncr = np.diff(state.cell_start_np())
+    chi = nvr - 3 * nvr // 2 + ncr
+    if np.any(nvr % 2) or np.any(chi != 2):
+        r = int(np.flatnonzero((chi != 2) | (nvr % 2 == 1))[0])
+        raise ValueError(f"replica {r} has Euler characteristic V - E + F = {int(chi[r])}, a sphere needs 2")
+    # orientation: counter-clockwise cells have positive area
+    areas = state.constraint.cell_areas_np(state)
+    neg = areas <= 0
+    if neg.any():
+        c = int(np.flatnonzero(neg)[0])
+        raise ValueError(f"cell {c} has area {areas[c]:.3g} <= 0: it is listed clockwise seen from outside "
+                         "(list cell vertices counter-clockwise) or it is folded")
+
+
+def cell_table(vertex_neighbors, vertex_cells, n_cells: int, min_width: int = 0):
+    """Padded counter-clockwise cell table and side counts from the vertex tables.
+
+    Walks every cell at once by its successor map (inside cell ``vertex_cells[v, k]`` vertex
+    ``vertex_neighbors[v, k]`` follows ``v``): ``max_sides`` vectorised steps, no loop over cells.
+    """
+    vn = np.asarray(vertex_neighbors).reshape(-1)
+    vc = np.asarray(vertex_cells).reshape(-1)
+    n_v = len(vn) // 3
+    corner_v = np.repeat(np.arange(n_v, dtype=np.int64), 3)
+    sides = np.bincount(vc, minlength=n_cells).astype(np.int32)
+    if np.any(sides < 1):
+        raise ValueError(f"cell {int(np.flatnonzero(sides < 1)[0])} has no vertex")
+    keys = vc.astype(np.int64) * n_v + corner_v
+    order = np.argsort(keys)
+    skeys, snext = keys[order], vn[order]
+    first = np.empty(n_cells, dtype=np.int64)
+    first[vc[::-1]] = corner_v[::-1]
+    width = max(int(sides.max()), min_width)
+    table = np.full((n_cells, width), -1, dtype=np.int32)
+    cur = first
+    cells = np.arange(n_cells, dtype=np.int64)
+    for col in range(width):  # max_sides steps, each vectorised over all cells
+        live = col < sides
+        table[live, col] = cur[live]
+        cur = snext[np.searchsorted(skeys, cells * n_v + cur)]
+    return table, sides

@@ -1,0 +1,143 @@
+"""Triggers decide on which timesteps an operation runs (as in HOOMD-blue)."""
+from __future__ import annotations
+
+
+class Trigger:
+    """Base class: ``trigger(timestep) -> bool``. Combine with ``&``, ``|`` and ``~``."""
+
+    def __call__(self, timestep: int) -> bool:
+        raise NotImplementedError
+
+    def __and__(self, other):
+        return And(self, other)
+
+    def __or__(self, other):
+        return Or(self, other)
+
+    def __invert__(self):
+        return Not(self)
+
+
+def _nonneg_int(name, value):
+    if int(value) != value or value < 0:
+        raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
+    return int(value)
+
+
+class Periodic(Trigger):
+    """Every ``period`` steps, on timesteps with ``(timestep - phase) % period == 0``."""
+
+    def __init__(self, period: int, phase: int = 0):
+        self.period = _nonneg_int("period", period)
+        if self.period < 1:
+            raise ValueError(f"period must be >= 1, got {period!r}")
+        self.phase = _nonneg_int("phase", phase)
+
+    def __call__(self, timestep):
+        return timestep >= self.phase and (timestep - self.phase) % self.period == 0
+
+    def __repr__(self):
+        return f"Periodic({self.period}, phase={self.phase})"
+
+
+class On(Trigger):
+    """Exactly on the given timestep."""
+
+    def __init__(self, timestep: int):
+        self.timestep = _nonneg_int("timestep", timestep)
+
+    def __call__(self, timestep):
+        return timestep == self.timestep
+
+    def __repr__(self):
+        return f"On({self.timestep})"
+
+
+class After(Trigger):
+    """On every timestep strictly after the given one."""
+
+    def __init__(self, timestep: int):
+        self.timestep = _nonneg_int("timestep", timestep)
+
+    def __call__(self, timestep):
+        return timestep > self.timestep
+
+    def __repr__(self):
+        return f"After({self.timestep})"
+
+
+class Before(Trigger):
+    """On every timestep strictly before the given one."""
+
+    def __init__(self, timestep: int):
+        self.timestep = _nonneg_int("timestep", timestep)
+
+    def __call__(self, timestep):
+        return timestep < self.timestep
+
+    def __repr__(self):
+        return f"Before({self.timestep})"
+
+
+class And(Trigger):
+    """True when all the given triggers are."""
+
+    def __init__(self, *triggers):
+        if not triggers or not all(isinstance(t, Trigger) for t in triggers):
+            raise ValueError("And needs one or more Trigger objects")
+        self.triggers = triggers
+
+    def __call__(self, timestep):
+        return all(t(timestep) for t in self.triggers)
+
+    def __repr__(self):
+        return f"And{self.triggers!r}"
+
+
+class Or(Trigger):
+    """True when any of the given triggers is."""
+
+    def __init__(self, *triggers):
+        if not triggers or not all(isinstance(t, Trigger) for t in triggers):
+            raise ValueError("Or needs one or more Trigger objects")
+        self.triggers = triggers
+
+    def __call__(self, timestep):
+        return any(t(timestep) for t in self.triggers)
+
+    def __repr__(self):
+        return f"Or{self.triggers!r}"
+
+
+class Not(Trigger):
+    """True when the given trigger is not."""
+
+    def __init__(self, trigger: Trigger):
+        if not isinstance(trigger, Trigger):
+            raise ValueError("Not needs a Trigger")
+        self.trigger = trigger
+
+    def __call__(self, timestep):
+        return not self.trigger(timestep)
+
+    def __repr__(self):
+        return f"Not({self.trigger!r})"
+
+
+class Always(Trigger):
+    """Every timestep."""
+
+    def __call__(self, timestep):
+        return True
+
+    def __repr__(self):
+        return "Always()"
+
+
+def as_trigger(value) -> Trigger:
+    """A Trigger from a Trigger, or from an int period (``100`` means ``Periodic(100)``)."""
+    if isinstance(value, Trigger):
+        return value
+    if isinstance(value, int) and not isinstance(value, bool):
+        return Periodic(value)
+    raise ValueError(f"trigger must be a spherevm.trigger.Trigger or a positive int period, got {value!r}")

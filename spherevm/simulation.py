@@ -126,10 +126,11 @@ class Simulation:
 
     @state.setter
     def state(self, value):
+        """Set the State; the Simulation works on its own copy (on its device)."""
         from .state import State
         if not isinstance(value, State):
             raise TypeError(f"state must be a spherevm.State, got {type(value).__name__}")
-        self._state = value if value.device is self.device else value.to(self.device)
+        self._state = value.copy() if value.device is self.device else value.to(self.device)
         self._cache = None
         for op in self.operations:
             op.attach(self)

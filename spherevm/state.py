@@ -102,9 +102,13 @@ class State:
         return self.constraint.total_area_np(self.radius_np()) / self.cells_per_replica
 
     # ------------------------------------------------------------------ checks and copies
-    def validate(self, tol: float = 1e-9):
-        """Raise ValueError naming the first offending cell or vertex if the network is invalid."""
-        topology.check(self, tol=tol)
+    def validate(self, tol: float = 1e-9, orientation: bool = True):
+        """Raise ValueError naming the first offending cell or vertex if the network is invalid.
+
+        ``tol`` is the allowed distance from the surface in units of R; ``orientation=False`` skips
+        the positive-area test (cells may fold over at kA = 0).
+        """
+        topology.check(self, tol=tol, orientation=orientation)
         return self
 
     def to(self, device) -> "State":

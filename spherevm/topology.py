@@ -83,13 +83,14 @@ def edges(vertex_neighbors):
     return np.stack([u[keep], v[keep]], axis=1).astype(np.int32)
 
 
-def check(state, tol: float = 1e-9):
+def check(state, tol: float = 1e-9, orientation: bool = True):
     """Validate a State; raise ValueError naming the first offending cell or vertex.
 
     Checks: finite positions on the surface, trivalent network with reciprocal neighbours, cell
     table and vertex tables consistent (so every edge is shared by exactly two cells, once in each
     direction), replica layout, counter-clockwise cells (positive area), and V - E + F = 2 per
-    replica.
+    replica. ``orientation=False`` skips the area sign test: at kA = 0 the energy does not care
+    about area, and minimisation may legitimately fold a cell over.
     """
     pos = state.device.to_numpy(state.positions)
     vn = state.device.to_numpy(state.vertex_neighbors)
@@ -145,6 +146,8 @@ def check(state, tol: float = 1e-9):
     if np.any(nvr % 2) or np.any(chi != 2):
         r = int(np.flatnonzero((chi != 2) | (nvr % 2 == 1))[0])
         raise ValueError(f"replica {r} has Euler characteristic V - E + F = {int(chi[r])}, a sphere needs 2")
+    if not orientation:
+        return
     # orientation: counter-clockwise cells have positive area
     areas = state.constraint.cell_areas_np(state)
     neg = areas <= 0

@@ -10,6 +10,7 @@ from .device import CPU
 from .state import State
 
 REGULAR_TILINGS = ("dodecahedron", "truncated_icosahedron")
+MAX_ATTEMPTS = 1000
 
 
 def default_radius(n_cells: int) -> float:
@@ -26,18 +27,26 @@ def _check_radius(radius, n_cells):
     return r
 
 
-def dual_of_triangulation(points, triangles, radius):
+def dual_of_triangulation(points, triangles, radius, vertices="centroid"):
     """The trivalent tiling dual to a triangulated sphere (Voronoi-like, as in the paper).
 
     Each point becomes a cell; each triangle becomes a vertex at its centroid pushed onto the
-    sphere. ``triangles`` must be counter-clockwise seen from outside. Returns local arrays
+    sphere (``vertices="centroid"``, the paper's choice) or at its circumcentre, the exact spherical
+    Voronoi vertex (``"circumcenter"``). ``triangles`` must be counter-clockwise seen from outside.
+    Returns local arrays
     ``(positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells)``.
     """
     tri = np.asarray(triangles, dtype=np.int64)
     pts = np.asarray(points, dtype=np.float64)
     n_tri = len(tri)
-    centroid = pts[tri].mean(axis=1)
-    positions = radius * centroid / np.linalg.norm(centroid, axis=1)[:, None]
+    p = pts[tri]
+    if vertices == "centroid":
+        direction = p.mean(axis=1)
+    elif vertices == "circumcenter":
+        direction = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    else:
+        raise ValueError(f"vertices must be 'centroid' or 'circumcenter', got {vertices!r}")
+    positions = radius * direction / np.linalg.norm(direction, axis=1)[:, None]
     # neighbour across the directed edge (i, j) of triangle t is the triangle holding (j, i)
     n_pts = len(pts)
     key = tri * n_pts + np.roll(tri, -1, axis=1)          # edge (t[k], t[k+1]) sits in slot k
@@ -55,15 +64,18 @@ def dual_of_triangulation(points, triangles, radius):
 
 
 def _oriented_hull(points):
+    """Counter-clockwise hull triangles, and whether the origin lies strictly inside the hull."""
     hull = ConvexHull(points)
     tri = hull.simplices.copy()
     p = points[tri]
-    outward = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p.mean(axis=1)) > 0
+    # qhull's facet equations give the outward normals, also when the origin lies outside the hull
+    outward = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), hull.equations[:, :3]) > 0
     tri[~outward] = tri[~outward][:, [0, 2, 1]]
-    return tri
+    return tri, bool(np.all(hull.equations[:, 3] < 0))
 
 
-def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, device=CPU) -> State:
+def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, vertices="centroid",
+                  device=CPU) -> State:
     """Random tilings of the sphere, the paper's initial condition.
 
     For each replica: ``n_cells`` points uniform on the sphere, their convex hull, and one vertex at
@@ -71,6 +83,16 @@ def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, d
     yields). Default radius ``sqrt(N/4 pi)`` so that <A> = 1. Replica ``r`` uses the random stream
     ``(seed, r)``: the same seed gives the same tilings, and replica r does not depend on how many
     replicas are made.
+
+    ``vertices="circumcenter"`` puts vertices at the facet circumcentres instead: the exact spherical
+    Voronoi tessellation of the points.
+
+    Small spheres: a point set lying within one hemisphere (probability (N^2 - N + 2)/2^N, so
+    common for N < 16 and below 1e-6 from N = 32) has the origin outside its hull and gives a cell
+    larger than a hemisphere; facet centroids can also fold a cell over when a facet is very
+    obtuse. Such draws are rejected and redrawn from the stream ``(seed, r, attempt)``, so every
+    tiling returned has all cells counter-clockwise with positive area. This conditions the
+    ensemble of small-N tilings; at N >= 32 it practically never happens.
     """
     n = int(n_cells)
     if n != n_cells or n < 4:
@@ -82,15 +104,21 @@ def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, d
     R = _check_radius(radius, n)
     states = []
     for r in range(int(replicas)):  # initialisation only, not a per-step path
-        rng = np.random.default_rng([int(seed), r])
-        pts = rng.normal(size=(n, 3))
-        pts /= np.linalg.norm(pts, axis=1)[:, None]
-        tri = _oriented_hull(pts)
-        if len(np.unique(tri)) != n:  # a point inside the hull cannot happen on a sphere
-            raise RuntimeError("convex hull lost points; try another seed")
-        pos, table, sides, vn, vc = dual_of_triangulation(pts, tri, R)
-        states.append(State(pos, table, sides, vn, vc, [0, len(pos)], [0, n], R, constraint=Sphere(),
-                            validate=False))
+        for attempt in range(MAX_ATTEMPTS):
+            rng = np.random.default_rng([int(seed), r] + ([attempt] if attempt else []))
+            pts = rng.normal(size=(n, 3))
+            pts /= np.linalg.norm(pts, axis=1)[:, None]
+            tri, origin_inside = _oriented_hull(pts)
+            if not origin_inside:
+                continue
+            pos, table, sides, vn, vc = dual_of_triangulation(pts, tri, R, vertices)
+            one = State(pos, table, sides, vn, vc, [0, len(pos)], [0, n], R, constraint=Sphere(), validate=False)
+            if np.all(one.constraint.cell_areas_np(one) > 0):
+                states.append(one)
+                break
+        else:
+            raise RuntimeError(f"no valid random tiling of {n} cells in {MAX_ATTEMPTS} draws (seed {seed}, "
+                               f"replica {r}); use more cells or vertices='circumcenter'")
     state = State.concatenate(states, device=device)
     state.validate()
     return state

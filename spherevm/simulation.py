@@ -78,7 +78,7 @@ class _OperationList(list):
 class MinimizeResult:
     """Outcome of :meth:`Simulation.minimize`, one entry per replica (NumPy arrays)."""
     converged: np.ndarray
-    reason: np.ndarray          # "force", "energy" or "max_steps"
+    reason: np.ndarray          # "force", "energy", "max_steps" or an operation's halt reason
     energy: np.ndarray          # total energy per replica
     energy_per_cell: np.ndarray
     max_force: np.ndarray
@@ -117,6 +117,7 @@ class Simulation:
         self.timestep = 0
         self._state = None
         self._cache = None
+        self.active_replicas = None  # per-replica bool (NumPy): replicas still being evolved
         self.operations = Operations(self)
 
     # ------------------------------------------------------------------ state
@@ -132,6 +133,7 @@ class Simulation:
             raise TypeError(f"state must be a spherevm.State, got {type(value).__name__}")
         self._state = value.copy() if value.device is self.device else value.to(self.device)
         self._cache = None
+        self.active_replicas = np.ones(self._state.n_replicas, dtype=bool)
         for op in self.operations:
             op.attach(self)
 
@@ -197,13 +199,14 @@ class Simulation:
         return table[name](self)
 
     # ------------------------------------------------------------------ running
-    def _step(self, forces_needed=True):
-        ts = self.timestep
+    def _update(self):
         for u in self.operations.updaters:
-            if u.trigger(ts):
-                u.update(self, ts)
+            if u.trigger(self.timestep):
+                u.update(self, self.timestep)
+
+    def _integrate(self):
         integrator = self.operations.integrator
-        if integrator is not None and integrator.trigger(ts):
+        if integrator.trigger(self.timestep):
             forces, _ = self.compute_forces()
             integrator.step(self, forces)
         self.timestep += 1
@@ -223,7 +226,8 @@ class Simulation:
         if self.timestep == 0:
             self._write()
         for _ in range(int(steps)):
-            self._step()
+            self._update()
+            self._integrate()
             self._write()
         self.flush()
 
@@ -256,9 +260,12 @@ class Simulation:
         if not isinstance(fire, FIRE):
             raise TypeError(f"minimize() needs the FIRE integrator, found {type(fire).__name__}")
         fire.reset()
+        for op in self.operations:
+            op.reset_halted()
         n_rep = self._state.n_replicas
         n_cells = self._state.cells_per_replica
-        done = np.zeros(n_rep, dtype=bool)
+        done = np.zeros(n_rep, dtype=bool)          # stopped, for any reason
+        converged = np.zeros(n_rep, dtype=bool)
         reason = np.full(n_rep, "max_steps", dtype=object)
         steps = np.full(n_rep, int(max_steps), dtype=np.int64)
         to_np = self.device.to_numpy
@@ -267,6 +274,7 @@ class Simulation:
             self._write()
         k = 0
         while True:
+            self._update()
             if k % check_every == 0 or k == max_steps:
                 _, energy = self.compute_forces()
                 fmax = to_np(self.max_force())
@@ -275,19 +283,30 @@ class Simulation:
                 by_energy = ~done & ~by_force & (epc < energy_tol)
                 reason[by_force], reason[by_energy] = "force", "energy"
                 newly = by_force | by_energy
+                for op in self.operations:
+                    halted = op.halted()
+                    if halted is not None:
+                        stop = ~done & ~newly & np.asarray(halted, dtype=bool)
+                        reason[stop] = op.halt_reason
+                        steps[stop] = k
+                        done |= stop
                 steps[newly] = k
                 done |= newly
+                converged |= newly
+                self.active_replicas = ~done
                 fire.active = self.device.asarray(~done)
                 if progress is not None:
                     progress(k, int(done.sum()), n_rep)
                 if done.all() or k >= max_steps:
                     break
-            self._step()
+            self._integrate()
             self._write()
             k += 1
+        self.active_replicas = np.ones(n_rep, dtype=bool)
+        fire.active = self.device.asarray(self.active_replicas)
         self.flush()
         _, energy = self.compute_forces()
         e = to_np(energy)
-        return MinimizeResult(converged=done, reason=reason.astype(str), energy=e, energy_per_cell=e / n_cells,
+        return MinimizeResult(converged=converged, reason=reason.astype(str), energy=e, energy_per_cell=e / n_cells,
                               max_force=to_np(self.max_force()), steps=steps,
                               mean_shape_index=analysis.mean_shape_index(self._state))

@@ -184,3 +184,115 @@ def cell_table(vertex_neighbors, vertex_cells, n_cells: int, min_width: int = 0)
         table[live, col] = cur[live]
         cur = snext[np.searchsorted(skeys, cells * n_v + cur)]
     return table, sides
+
+
+# ---------------------------------------------------------------------- T1 neighbour exchange
+def t1_cells(vertex_neighbors, vertex_cells, u, slot):
+    """The four cells and four outer neighbours around the edges ``(u, vertex_neighbors[u, slot])``.
+
+    Returns ``v, a, b, c, d, C1, C2, C3, C4`` (arrays): ``C1`` holds the edge as ``u -> v``
+    (counter-clockwise), ``C2`` as ``v -> u``; ``C3`` and ``C4`` are the third cells at ``u`` and
+    ``v``. ``a, b`` are u's other neighbours (``a`` on the ``C1`` side), ``c, d`` v's (``d`` on the
+    ``C1`` side): counter-clockwise, ``C1 = (.., a, u, v, d, ..)`` and ``C2 = (.., c, v, u, b, ..)``.
+    """
+    vn, vc = vertex_neighbors, vertex_cells
+    k1, k2 = (slot + 1) % 3, (slot + 2) % 3
+    v = vn[u, slot]
+    a, b = vn[u, k1], vn[u, k2]
+    C1, C3, C2 = vc[u, slot], vc[u, k1], vc[u, k2]
+    j = (vn[v] == u[:, None]).argmax(axis=1)
+    c, d = vn[v, (j + 1) % 3], vn[v, (j + 2) % 3]
+    C4 = vc[v, (j + 1) % 3]
+    return v, a, b, c, d, C1, C2, C3, C4
+
+
+def _remove_from_rows(table, sides, rows, vert):
+    width = table.shape[1]
+    sub = table[rows]
+    p = (sub == vert[:, None]).argmax(axis=1)
+    j = np.arange(width)[None, :]
+    src = np.minimum(j + (j >= p[:, None]), width - 1)
+    new = np.take_along_axis(sub, src, axis=1)
+    new[j >= (sides[rows] - 1)[:, None]] = -1
+    table[rows] = new
+    sides[rows] -= 1
+
+
+def _split_in_rows(table, sides, rows, vert, first, second):
+    """Replace ``vert`` in each row by the pair ``first, second`` (the row must have room)."""
+    width = table.shape[1]
+    sub = table[rows]
+    p = (sub == vert[:, None]).argmax(axis=1)
+    j = np.arange(width)[None, :]
+    src = np.maximum(j - (j > p[:, None]), 0)
+    new = np.take_along_axis(sub, src, axis=1)
+    r = np.arange(len(rows))
+    new[r, p] = first
+    new[r, p + 1] = second
+    new[j >= (sides[rows] + 1)[:, None]] = -1
+    table[rows] = new
+    sides[rows] += 1
+
+
+def t1_flip(state, u, slot, new_length, sense: int = 1):
+    """Flip the edges ``(u[i], vertex_neighbors[u[i], slot[i]])`` of ``state`` in place.
+
+    The caller guarantees the flips touch disjoint cells and that ``C1``, ``C2`` keep >= 3 sides.
+    Each edge is rotated by +90 degrees (``sense=1``, counter-clockwise seen from outside) or -90
+    degrees about the surface normal at its midpoint: ``C1`` and ``C2`` (which shared it) lose a
+    side, ``C3`` and ``C4`` (at its ends) gain one and now share it. The two vertices are placed
+    symmetrically about the midpoint at geodesic separation ``new_length``. Flipping again with the
+    opposite sense restores the original network. Tables stay on the host (NumPy) here; the
+    State's arrays are updated in place, widening ``cell_vertices`` when a cell needs more room.
+    Returns the array of vertices moved (``u`` and ``v`` of every flip).
+    """
+    dev = state.device
+    u = np.asarray(u, dtype=np.int64)
+    slot = np.asarray(slot, dtype=np.int64)
+    vn = dev.to_numpy(state.vertex_neighbors).copy()
+    vc = dev.to_numpy(state.vertex_cells).copy()
+    table = dev.to_numpy(state.cell_vertices).copy()
+    sides = dev.to_numpy(state.cell_sides).copy()
+    pos = dev.to_numpy(state.positions).copy()
+    v, a, b, c, d, C1, C2, C3, C4 = t1_cells(vn, vc, u, slot)
+    X, Y = (v, u) if sense > 0 else (u, v)   # X ends up on the C1 side, Y on the C2 side
+    # vertex tables (counter-clockwise): X = (Y, d, a) in cells (C4, C1, C3); Y = (X, b, c) in (C3, C2, C4)
+    vn[X] = np.stack([Y, d, a], axis=1)
+    vc[X] = np.stack([C4, C1, C3], axis=1)
+    vn[Y] = np.stack([X, b, c], axis=1)
+    vc[Y] = np.stack([C3, C2, C4], axis=1)
+    for outer, old, new in ((a, u, X), (d, v, X), (b, u, Y), (c, v, Y)):
+        hit = vn[outer] == old[:, None]
+        rows = np.where(hit.any(axis=1))[0]
+        vn[outer[rows], hit[rows].argmax(axis=1)] = new[rows]
+    # cell table: C1 drops Y, C2 drops X, C3 turns u into (Y, X), C4 turns v into (X, Y)
+    need = int(max(sides[C3].max(initial=0), sides[C4].max(initial=0))) + 1
+    if need > table.shape[1]:
+        table = np.concatenate([table, np.full((len(table), need - table.shape[1]), -1, np.int32)], axis=1)
+    _remove_from_rows(table, sides, C1, Y)
+    _remove_from_rows(table, sides, C2, X)
+    _split_in_rows(table, sides, C3, u, Y, X)
+    _split_in_rows(table, sides, C4, v, X, Y)
+    # positions: rotate the edge about the normal at its midpoint
+    radius = state.radius_np()[state.vertex_replica_np()[u]]
+    con = state.constraint
+    mid = con.project_normal(0.5 * (pos[u] + pos[v]), radius)
+    normal = con.normal(mid)
+    along = con.project_tangent(mid, pos[v] - pos[u])
+    norm = np.linalg.norm(along, axis=1)
+    # a zero-length edge has no direction: fall back to the direction between the cells' sides
+    across_c1 = con.project_tangent(mid, 0.5 * (pos[a] + pos[d]) - 0.5 * (pos[b] + pos[c]))
+    tiny = norm <= 1e-12 * radius
+    perp = np.cross(normal, along / np.where(tiny, 1.0, norm)[:, None])
+    perp[tiny] = across_c1[tiny]
+    perp /= np.linalg.norm(perp, axis=1)[:, None]
+    half = 0.5 * np.broadcast_to(np.asarray(new_length, dtype=np.float64), u.shape)
+    pos[X] = con.geodesic_offset(mid, perp, half, radius)
+    pos[Y] = con.geodesic_offset(mid, -perp, half, radius)
+    xp = dev.xp
+    state.vertex_neighbors = xp.asarray(vn)
+    state.vertex_cells = xp.asarray(vc)
+    state.cell_vertices = xp.asarray(table)
+    state.cell_sides = xp.asarray(sides)
+    state.positions = xp.asarray(pos)
+    return np.concatenate([u, v])

@@ -24,6 +24,10 @@ class Constraint:
     def project_normal(self, x, radius):
         raise NotImplementedError(f"{type(self).__name__}.project_normal is not implemented yet")
 
+    def geodesic_offset(self, x, direction, distance, radius):
+        """The point at ``distance`` from ``x`` along the unit tangent ``direction`` (projected back)."""
+        return self.project_normal(x + distance[..., None] * direction, radius)
+
     def distance_to_surface(self, x, radius):
         raise NotImplementedError(f"{type(self).__name__}.distance_to_surface is not implemented yet")
 

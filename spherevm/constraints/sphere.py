@@ -37,6 +37,12 @@ class Sphere(Constraint):
         xp = array_module(x)
         return xp.asarray(radius)[..., None] * geo.normalize(x)
 
+    def geodesic_offset(self, x, direction, distance, radius):
+        """Exact geodesic step: ``R (cos(s/R) x_hat + sin(s/R) direction)``."""
+        xp = array_module(x)
+        phi = (distance / radius)[..., None]
+        return xp.asarray(radius)[..., None] * (xp.cos(phi) * geo.normalize(x) + xp.sin(phi) * direction)
+
     def distance_to_surface(self, x, radius):
         xp = array_module(x)
         return xp.sqrt((x * x).sum(axis=-1)) - radius

@@ -20,6 +20,7 @@ ENTRY_POINT_GROUP = "spherevm.plugins"
 BUILTINS = {
     "vertex_model": forces.VertexModel,
     "fire": integrators.FIRE,
+    "t1": updaters.T1,
     "gsd": writers.GSD,
     "table": writers.Table,
 }

@@ -28,6 +28,15 @@ class Operation:
     def loggables(self) -> dict:
         return {}
 
+    halt_reason = "halted"
+
+    def halted(self):
+        """Per-replica bool mask of replicas this operation wants stopped (``minimize`` honours it), or None."""
+        return None
+
+    def reset_halted(self):
+        """Forget what made replicas halt (called when a minimisation starts)."""
+
 
 @dataclass
 class ForceResult:

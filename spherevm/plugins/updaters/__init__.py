@@ -1,3 +1,4 @@
 """Built-in updaters."""
+from .t1 import T1
 
-__all__ = []
+__all__ = ["T1"]

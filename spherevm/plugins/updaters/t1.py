@@ -1,0 +1,193 @@
+"""T1 neighbour exchanges: short edges are rotated so that four cells swap neighbours."""
+from __future__ import annotations
+
+import numpy as np
+
+from ... import topology
+from ..base import Updater
+
+PRESETS = {
+    # The rules of the paper's own code: threshold 0.1, new edge twice the old length.
+    "reference": dict(threshold=0.1, new_length=None, length_factor=2.0),
+}
+
+
+class T1(Updater):
+    """Flip every edge shorter than ``threshold`` (units of sqrt(<A>) of its replica).
+
+    The flip rotates the edge by 90 degrees about the surface normal at its midpoint: the two cells
+    that shared it stop touching, the two cells at its ends now share it, and its vertices sit
+    symmetrically about the midpoint, ``new_length`` apart (or ``length_factor`` times the old
+    length). Rules, applied per pass (every time the trigger fires):
+
+    * a flip that would leave a cell with fewer than 3 sides (a triangle losing a side) is refused
+      and counted, never an error;
+    * conflicting flips (short edges touching a common cell) are resolved deterministically: an
+      edge flips only if it has the lowest index among the candidate edges touching each of its
+      four cells, so at most one flip per cell per pass; the rest wait for the next pass. The edge
+      index is ``3 u + k`` for the edge ``u -> vertex_neighbors[u, k]`` with ``u < v``; the GPU
+      kernel follows the same rule;
+    * ``reset_velocities``: zero the integrator's velocities of the flipped vertices (FIRE).
+
+    Oscillation: a flip that makes two cells neighbours again after an earlier flip separated them
+    is a flip back. When one pair of cells has been re-joined ``max_flip_backs`` times, its replica
+    is reported as halted (``Simulation.minimize`` stops it with reason ``"t1_oscillation"``)
+    instead of flipping back and forth until max_steps. ``flip_backs`` holds, per replica, the
+    largest re-join count of any pair.
+
+    ``preset="reference"`` reproduces the paper's code: threshold 0.1, new edge twice the old length.
+    Defaults: threshold 0.04 and new_length 0.06 (1.5 x threshold, so a fresh edge is not
+    immediately short again). See docs/t1.md.
+    """
+
+    def __init__(self, threshold=0.04, new_length=0.06, length_factor=None, preset=None, trigger=1,
+                 reset_velocities=True, max_flip_backs=10):
+        super().__init__(trigger)
+        if preset is not None:
+            if preset not in PRESETS:
+                raise ValueError(f"preset must be one of {sorted(PRESETS)} or None, got {preset!r}")
+            threshold, new_length, length_factor = (PRESETS[preset][k] for k in
+                                                    ("threshold", "new_length", "length_factor"))
+        self.preset = preset
+        self.threshold = float(threshold)
+        if not np.isfinite(self.threshold) or self.threshold <= 0:
+            raise ValueError(f"threshold must be positive and finite, got {threshold!r}")
+        if length_factor is not None:
+            self.length_factor, self.new_length = float(length_factor), None
+            if not np.isfinite(self.length_factor) or self.length_factor <= 0:
+                raise ValueError(f"length_factor must be positive and finite, got {length_factor!r}")
+        else:
+            if new_length is None:
+                raise ValueError("give new_length (in units of sqrt(<A>)) or length_factor")
+            self.new_length, self.length_factor = float(new_length), None
+            if not np.isfinite(self.new_length) or self.new_length <= self.threshold:
+                raise ValueError(f"new_length must be finite and > threshold={self.threshold} "
+                                 f"(else the new edge flips straight back), got {new_length!r}")
+        if int(max_flip_backs) != max_flip_backs or max_flip_backs < 1:
+            raise ValueError(f"max_flip_backs must be a positive integer, got {max_flip_backs!r}")
+        self.reset_velocities = bool(reset_velocities)
+        self.max_flip_backs = int(max_flip_backs)
+        self._reset_counters(0)
+
+    def _reset_counters(self, n_replicas):
+        self.last_flips = np.zeros(n_replicas, dtype=np.int64)
+        self.last_refused = np.zeros(n_replicas, dtype=np.int64)
+        self.total_flips = np.zeros(n_replicas, dtype=np.int64)
+        self.total_refused = np.zeros(n_replicas, dtype=np.int64)
+        self.flip_backs = np.zeros(n_replicas, dtype=np.int64)
+        self._forget_pairs()
+
+    def _forget_pairs(self):
+        self._separated = np.zeros(0, dtype=np.int64)  # cell pairs separated by a flip (sorted keys)
+        self._rejoins = np.zeros(0, dtype=np.int64)    # how often each was joined again
+
+    def attach(self, simulation):
+        super().attach(simulation)
+        self._reset_counters(simulation.state.n_replicas)
+
+    # ------------------------------------------------------------------ detection
+    def short_edges(self, state):
+        """Candidate edges ``(u, slot)`` shorter than the threshold, in increasing edge index."""
+        dev = state.device
+        xp = dev.xp
+        vn = state.vertex_neighbors
+        u = xp.arange(state.n_vertices, dtype=xp.int32)[:, None]
+        own = u < vn                                     # each undirected edge once
+        scale = xp.asarray(np.sqrt(state.mean_cell_area))[state.vertex_replica]
+        uu = xp.broadcast_to(u, vn.shape)
+        lengths = state.constraint.edge_lengths(state, uu, vn)
+        short = own & (lengths < (self.threshold * scale)[:, None])
+        flat = dev.to_numpy(xp.flatnonzero(short.reshape(-1)))
+        return flat // 3, flat % 3, dev.to_numpy(lengths.reshape(-1)[flat]) if len(flat) else np.zeros(0)
+
+    def select(self, state, u, slot):
+        """Apply the rules: returns (flip mask, refused mask) over the candidates, and their cells."""
+        dev = state.device
+        vn, vc = dev.to_numpy(state.vertex_neighbors), dev.to_numpy(state.vertex_cells)
+        sides = dev.to_numpy(state.cell_sides)
+        _, _, _, _, _, C1, C2, C3, C4 = topology.t1_cells(vn, vc, u, slot)
+        cells = np.stack([C1, C2, C3, C4], axis=1)
+        ordered = np.sort(cells, axis=1)
+        distinct = (ordered[:, 1:] != ordered[:, :-1]).all(axis=1)
+        refused = (sides[C1] <= 3) | (sides[C2] <= 3) | ~distinct
+        index = 3 * u + slot
+        claim = np.full(state.n_cells, np.iinfo(np.int64).max, dtype=np.int64)
+        ok = ~refused
+        np.minimum.at(claim, cells[ok].reshape(-1), np.repeat(index[ok], 4))
+        flip = ok & (claim[cells] == index[:, None]).all(axis=1)
+        return flip, refused, cells
+
+    # ------------------------------------------------------------------ the pass
+    def update(self, simulation, timestep):
+        state = simulation.state
+        n_rep = state.n_replicas
+        self.last_flips = np.zeros(n_rep, dtype=np.int64)
+        self.last_refused = np.zeros(n_rep, dtype=np.int64)
+        u, slot, lengths = self.short_edges(state)
+        if simulation.active_replicas is not None and len(u):
+            keep = simulation.active_replicas[state.vertex_replica_np()[u]]
+            u, slot, lengths = u[keep], slot[keep], lengths[keep]
+        if len(u) == 0:
+            return
+        flip, refused, cells = self.select(state, u, slot)
+        rep = state.vertex_replica_np()[u]
+        self.last_refused = np.bincount(rep[refused], minlength=n_rep)
+        self.total_refused += self.last_refused
+        if not flip.any():
+            return
+        u, slot, lengths, cells, rep = u[flip], slot[flip], lengths[flip], cells[flip], rep[flip]
+        if self.length_factor is not None:
+            new = self.length_factor * lengths
+        else:
+            new = self.new_length * np.sqrt(state.mean_cell_area)[rep]
+        self._count_flip_backs(state, cells, rep)
+        moved = topology.t1_flip(state, u, slot, new)
+        self.last_flips = np.bincount(rep, minlength=n_rep)
+        self.total_flips += self.last_flips
+        integrator = simulation.operations.integrator
+        if self.reset_velocities and hasattr(integrator, "reset_vertices"):
+            integrator.reset_vertices(state.device.asarray(moved))
+        simulation.state_changed()
+
+    def _count_flip_backs(self, state, cells, rep):
+        """Count re-joins: a flip making two cells neighbours again that an earlier flip separated."""
+        n = state.n_cells
+
+        def pair_key(x, y):
+            return np.minimum(x, y).astype(np.int64) * n + np.maximum(x, y)
+
+        removed, made = pair_key(cells[:, 0], cells[:, 1]), pair_key(cells[:, 2], cells[:, 3])
+        pos = np.searchsorted(self._separated, made)
+        pos = np.minimum(pos, max(len(self._separated) - 1, 0))
+        back = (self._separated[pos] == made) if len(self._separated) else np.zeros(len(made), bool)
+        self._rejoins[pos[back]] += 1
+        worst = np.zeros(state.n_replicas, dtype=np.int64)
+        np.maximum.at(worst, rep[back], self._rejoins[pos[back]])
+        self.flip_backs = np.maximum(self.flip_backs, worst)
+        keys = np.concatenate([self._separated, removed])
+        counts = np.concatenate([self._rejoins, np.zeros(len(removed), dtype=np.int64)])
+        self._separated, first = np.unique(keys, return_index=True)
+        self._rejoins = counts[first]
+
+    # ------------------------------------------------------------------ reporting
+    def halted(self):
+        """Per-replica mask of replicas caught flipping back and forth, for Simulation.minimize."""
+        return self.flip_backs >= self.max_flip_backs
+
+    halt_reason = "t1_oscillation"
+
+    def reset_halted(self):
+        self.flip_backs[:] = 0
+        self._forget_pairs()
+
+    @property
+    def loggables(self):
+        return {"t1_flips": lambda s: self.last_flips.copy(),
+                "t1_refused": lambda s: self.last_refused.copy(),
+                "t1_total_flips": lambda s: self.total_flips.copy(),
+                "t1_total_refused": lambda s: self.total_refused.copy(),
+                "t1_flip_backs": lambda s: self.flip_backs.copy()}
+
+    def __repr__(self):
+        length = f"length_factor={self.length_factor}" if self.length_factor else f"new_length={self.new_length}"
+        return f"T1(threshold={self.threshold}, {length}, trigger={self.trigger!r})"

@@ -1,0 +1,259 @@
+"""T1 neighbour exchanges: exact flips, rules, invariants under thousands of flips, ensembles."""
+import numpy as np
+import pytest
+
+import spherevm as svm
+from spherevm import topology
+from spherevm.plugins.forces import VertexModel
+from spherevm.plugins.integrators import FIRE
+from spherevm.plugins.updaters import T1
+
+
+def _cells(state):
+    """Cell vertex lists, each rotated to start at its smallest vertex (a canonical form)."""
+    out = []
+    for row, n in zip(state.cell_vertices, state.cell_sides):
+        r = row[:n].tolist()
+        i = r.index(min(r))
+        out.append(tuple(r[i:] + r[:i]))
+    return out
+
+
+def _vertex_tables(state):
+    """vertex_neighbors / vertex_cells rows rotated to a canonical starting slot."""
+    vn, vc = state.vertex_neighbors, state.vertex_cells
+    k = vn.argmin(axis=1)
+    idx = (k[:, None] + np.arange(3)[None, :]) % 3
+    return np.take_along_axis(vn, idx, 1), np.take_along_axis(vc, idx, 1)
+
+
+def _check_invariants(state, orientation=True):
+    state.validate(orientation=orientation)
+    area, _ = svm.analysis.cell_shapes(state)
+    per_rep = np.bincount(state.cell_replica_np(), weights=area)
+    assert np.allclose(per_rep, 4 * np.pi * state.radius_np() ** 2, rtol=1e-10, atol=0)
+    assert state.cell_sides.min() >= 3
+
+
+def _sim_with_t1(state, t1, force=None):
+    sim = svm.Simulation(device="cpu")
+    sim.state = state
+    sim.operations.updaters.append(t1)
+    sim.operations.forces.append(force or VertexModel.dimensionless(kr=1.0, p0=3.8))
+    sim.operations.integrator = FIRE(dt=0.01)
+    return sim
+
+
+def test_hand_built_flip_on_the_dodecahedron():
+    s = svm.init.regular_tiling("dodecahedron")
+    u, slot = 0, 0
+    v, a, b, c, d, C1, C2, C3, C4 = (int(x[0]) for x in topology.t1_cells(
+        s.vertex_neighbors, s.vertex_cells, np.array([u]), np.array([slot])))
+    pu, pv = s.positions[u].copy(), s.positions[v].copy()
+    before = _cells(s)
+    L = 0.3
+    topology.t1_flip(s, np.array([u]), np.array([slot]), L)
+    s.validate()
+    # vertex tables: v = (u, d, a) in cells (C4, C1, C3); u = (v, b, c) in (C3, C2, C4)
+    assert s.vertex_neighbors[v].tolist() == [u, d, a] and s.vertex_cells[v].tolist() == [C4, C1, C3]
+    assert s.vertex_neighbors[u].tolist() == [v, b, c] and s.vertex_cells[u].tolist() == [C3, C2, C4]
+    assert v in s.vertex_neighbors[a] and u not in s.vertex_neighbors[a]
+    assert u in s.vertex_neighbors[c] and v not in s.vertex_neighbors[c]
+    assert s.cell_sides[[C1, C2, C3, C4]].tolist() == [4, 4, 6, 6]
+    after = _cells(s)
+    assert set(after[C1]) == set(before[C1]) - {u} and set(after[C2]) == set(before[C2]) - {v}
+    assert set(after[C3]) == set(before[C3]) | {v} and set(after[C4]) == set(before[C4]) | {u}
+    unchanged = [i for i in range(12) if i not in (C1, C2, C3, C4)]
+    assert all(after[i] == before[i] for i in unchanged)
+    # positions: same midpoint, geodesic separation L, new edge perpendicular to the old one
+    R = s.radius_np()[0]
+    nu, nv = s.positions[u], s.positions[v]
+    mid_old = (pu + pv) / np.linalg.norm(pu + pv)
+    mid_new = (nu + nv) / np.linalg.norm(nu + nv)
+    assert np.allclose(mid_old, mid_new, atol=1e-14)
+    sep = R * svm.geometry.geodesic_length(nu / R, nv / R)
+    assert np.isclose(sep, L, rtol=1e-12)
+    assert abs(np.dot(nv - nu, pv - pu)) < 1e-12 * np.linalg.norm(nv - nu) * np.linalg.norm(pv - pu)
+    # the new edge points from u (C2 side) to v (C1 side): counter-clockwise rotation of u -> v
+    assert np.dot(np.cross(pv - pu, nv - nu), mid_old) > 0
+
+
+def test_flip_then_inverse_restores_the_network_and_positions():
+    s = svm.init.random_tiling(60, seed=2)
+    ref = s.copy()
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        u = int(rng.integers(s.n_vertices))
+        slot = int(rng.integers(3))
+        _, _, _, _, _, C1, C2, _, _ = topology.t1_cells(s.vertex_neighbors, s.vertex_cells,
+                                                         np.array([u]), np.array([slot]))
+        if s.cell_sides[C1[0]] <= 3 or s.cell_sides[C2[0]] <= 3:
+            continue
+        v = s.vertex_neighbors[u, slot]
+        R = s.radius_np()[0]
+        old = R * svm.geometry.geodesic_length(s.positions[u] / R, s.positions[v] / R)
+        topology.t1_flip(s, np.array([u]), np.array([slot]), 0.2)
+        s.validate(orientation=False)
+        back = int(np.flatnonzero(s.vertex_neighbors[u] == v)[0])
+        topology.t1_flip(s, np.array([u]), np.array([back]), old, sense=-1)
+        assert _cells(s) == _cells(ref)
+        for x, y in zip(_vertex_tables(s), _vertex_tables(ref)):
+            assert np.array_equal(x, y)
+        assert np.allclose(s.positions, ref.positions, atol=1e-12)
+        s = ref.copy()
+
+
+def test_triangles_may_not_lose_a_side_refusals_are_counted():
+    s = svm.init.random_tiling(4, seed=0)          # a tetrahedral tiling: four triangles
+    assert s.cell_sides.tolist() == [3, 3, 3, 3]
+    t1 = T1(threshold=100.0, new_length=101.0)
+    sim = _sim_with_t1(s, t1)
+    sim.run(1)
+    assert sim.log("t1_flips").tolist() == [0] and sim.log("t1_refused").tolist() == [6]
+    assert np.array_equal(sim.state.cell_vertices, s.cell_vertices)
+
+
+def test_conflicting_flips_lowest_edge_first_one_per_cell():
+    s = svm.init.regular_tiling("truncated_icosahedron")
+    # shrink two edges of the same hexagon: only the lower-index edge may flip this pass
+    hexagon = int(np.flatnonzero(s.cell_sides == 6)[0])
+    row = s.cell_vertices[hexagon, :6]
+    pairs = [(row[0], row[1]), (row[3], row[4])]
+    pos = s.positions.copy()
+    for p, q in pairs:
+        m = 0.5 * (pos[p] + pos[q])
+        pos[p] = pos[p] + 0.49 * (m - pos[p]) * 2
+        pos[q] = pos[q] + 0.49 * (m - pos[q]) * 2
+    R = s.radius_np()[0]
+    s.positions = R * pos / np.linalg.norm(pos, axis=1)[:, None]
+    t1 = T1(threshold=0.1, new_length=0.3)
+    u, slot, _ = t1.short_edges(s)
+    assert len(u) == 2
+    index = 3 * u + slot
+    sim = _sim_with_t1(s, t1)
+    sim.run(0)
+    sim._update()
+    assert sim.log("t1_flips").tolist() == [1]
+    low = int(np.argmin(index))
+    high = 1 - low
+    assert sim.state.cell_sides[hexagon] == 5
+    # the low edge's vertices were rotated: they moved; the high edge's did not
+    moved = np.abs(sim.state.positions - s.positions).max(axis=1) > 0
+    lo_pair = [u[low], s.vertex_neighbors[u[low], slot[low]]]
+    hi_pair = [u[high], s.vertex_neighbors[u[high], slot[high]]]
+    assert moved[lo_pair].all() and not moved[hi_pair].any()
+    # the flipped edge's ends now have other neighbours; the higher edge waits for the next pass
+    sim._update()
+    assert sim.log("t1_flips").tolist() == [1]
+    assert sim.log("t1_total_flips").tolist() == [2]
+    sim.state.validate()
+
+
+def test_at_most_one_flip_per_cell_per_pass_under_stress():
+    s = svm.init.random_tiling(200, seed=5)
+    t1 = T1(threshold=0.5, new_length=0.6)
+    u, slot, _ = t1.short_edges(s)
+    flip, refused, cells = t1.select(s, u, slot)
+    assert flip.sum() > 5
+    used = cells[flip].reshape(-1)
+    assert len(np.unique(used)) == len(used)
+    # every waiting candidate conflicts with a lower-index flip or candidate
+    index = 3 * u + slot
+    for i in np.flatnonzero(~flip & ~refused):
+        others = (~refused) & (index < index[i])
+        assert np.isin(cells[i], cells[others]).any()
+
+
+def _random_walk_with_t1(state, seed, passes, kick=0.08, threshold=0.25):
+    """Random tangent kicks followed by a T1 pass, `passes` times."""
+    rng = np.random.default_rng(seed)
+    t1 = T1(threshold=threshold, new_length=1.5 * threshold, max_flip_backs=10 ** 9)
+    sim = svm.Simulation(device="cpu")
+    sim.state = state
+    sim.operations.updaters.append(t1)
+    con, st = sim.state.constraint, sim.state
+    for _ in range(passes):
+        noise = rng.normal(scale=kick, size=st.positions.shape)
+        rad = st.radius_np()[st.vertex_replica_np()]
+        st.positions = con.project_normal(st.positions + con.project_tangent(st.positions, noise), rad)
+        sim._update()
+        yield sim, t1
+
+
+def test_thousands_of_random_flips_keep_every_invariant():
+    total = 0
+    for seed in range(8):
+        state = svm.init.random_tiling(40 + 10 * seed, seed=seed)
+        for sim, t1 in _random_walk_with_t1(state, seed, passes=80):
+            _check_invariants(sim.state, orientation=False)
+        total += int(t1.total_flips.sum())
+        assert sim.state.max_sides >= sim.state.cell_sides.max()
+    assert total > 1000
+
+
+def test_ensemble_and_single_replicas_flip_identically():
+    ens = svm.init.random_tiling(50, replicas=3, seed=7)
+    t1 = T1(threshold=0.3, new_length=0.45)
+    sim_e = _sim_with_t1(ens, t1)
+    sim_e.run(30)
+    for r in range(3):
+        t1r = T1(threshold=0.3, new_length=0.45)
+        sim_r = _sim_with_t1(ens.replica(r), t1r)
+        sim_r.run(30)
+        assert t1r.total_flips[0] == t1.total_flips[r] > 0
+        mine = sim_e.state.replica(r)
+        assert _cells(mine) == _cells(sim_r.state)
+        assert np.allclose(mine.positions, sim_r.state.positions, rtol=0, atol=1e-12)
+
+
+def test_reference_preset():
+    t1 = T1(preset="reference")
+    assert t1.threshold == 0.1 and t1.length_factor == 2.0 and t1.new_length is None
+    s = svm.init.random_tiling(100, seed=3)
+    sim = _sim_with_t1(s, t1)
+    u, slot, lengths = t1.short_edges(sim.state)
+    sim._update()
+    if len(u):
+        assert sim.log("t1_flips").sum() >= 1
+
+
+@pytest.mark.parametrize("n_cells", [32, 64, 128])
+def test_fire_with_t1_converges(n_cells):
+    sim = _sim_with_t1(svm.init.random_tiling(n_cells, replicas=2, seed=n_cells), T1(),
+                       VertexModel.dimensionless(kr=1.0, p0=3.7))
+    sim.operations.integrator = FIRE(dt=0.02)
+    res = sim.minimize(force_tol=1e-10, max_steps=20000)
+    assert res.all_converged, res.table()
+    _check_invariants(sim.state)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("n_cells", [256, 512, 1024])
+def test_fire_with_t1_converges_large(n_cells):
+    sim = _sim_with_t1(svm.init.random_tiling(n_cells, replicas=2, seed=n_cells), T1(),
+                       VertexModel.dimensionless(kr=1.0, p0=3.7))
+    sim.operations.integrator = FIRE(dt=0.02)
+    res = sim.minimize(force_tol=1e-10, max_steps=50000)
+    assert res.all_converged, res.table()
+    _check_invariants(sim.state)
+
+
+def test_flipping_back_and_forth_is_detected_and_reported():
+    # every edge is "short" and every new edge too: the same pairs flip back and forth forever
+    t1 = T1(threshold=50.0, new_length=60.0, max_flip_backs=5)
+    sim = _sim_with_t1(svm.init.random_tiling(16, replicas=2, seed=1), t1)
+    res = sim.minimize(force_tol=1e-14, max_steps=5000, check_every=1)
+    assert list(res.reason) == ["t1_oscillation", "t1_oscillation"]
+    assert not res.converged.any() and np.all(res.steps < 5000)
+    assert np.all(t1.flip_backs >= 5)
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(threshold=0), "threshold"), (dict(threshold=-1), "threshold"),
+    (dict(threshold=0.1, new_length=0.1), "new_length"), (dict(threshold=0.1, new_length=0.05), "new_length"),
+    (dict(preset="cellgpu"), "preset"), (dict(length_factor=0), "length_factor"),
+    (dict(max_flip_backs=0), "max_flip_backs"),
+])
+def test_bad_t1_parameters(kw, match):
+    with pytest.raises(ValueError, match=match):
+        T1(**kw)

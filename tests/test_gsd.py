@@ -1,0 +1,328 @@
+"""GSD writer and reader: exact restore from any frame, HOOMD/OVITO layout, bad input."""
+import subprocess
+import sys
+
+import gsd.hoomd
+import numpy as np
+import pytest
+
+import spherevm as svm
+from spherevm import topology
+from spherevm.plugins.forces import VertexModel
+from spherevm.plugins.integrators import FIRE
+from spherevm.plugins.writers import GSD
+from spherevm.plugins.writers.gsd import FrameIndexError, read_cell_values, read_state
+
+TOPOLOGY = ("cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cells", "vertex_start", "cell_start")
+
+
+def make_sim(state=None):
+    sim = svm.Simulation(device="cpu", seed=1)
+    sim.state = state if state is not None else svm.init.random_tiling(64, replicas=3, seed=1)
+    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
+    sim.operations.integrator = FIRE(dt=0.02)
+    return sim
+
+
+def snapshot(state):
+    return {k: np.array(v, copy=True) for k, v in state._arrays_np().items()}
+
+
+def assert_same_state(restored, ref):
+    a = restored._arrays_np()
+    assert a["positions"].dtype == np.float64
+    assert a["positions"].tobytes() == ref["positions"].tobytes()  # bitwise
+    for k in TOPOLOGY:
+        assert a[k].shape == ref[k].shape, k
+        assert np.array_equal(a[k], ref[k]), k
+    assert np.array_equal(a["radius"], ref["radius"])
+
+
+def manual_t1(state):
+    """A State after one T1 on the first edge of replica 0 whose two cells have > 4 sides."""
+    cv, sides = state.cell_vertices, state.cell_sides
+    cells = [list(cv[c, :sides[c]]) for c in range(state.n_cells)]
+    vn, vc = state.vertex_neighbors, state.vertex_cells
+    for a, b in topology.edges(vn):
+        k = list(vn[a]).index(b)
+        c1, c2 = vc[a, k], vc[a, k - 1]   # a -> b in c1, b -> a in c2
+        if sides[c1] > 4 and sides[c2] > 4 and b < state.vertex_start[1]:
+            break
+    c3 = vc[a, (k + 1) % 3]
+    c4 = next(c for c in vc[b] if c not in (c1, c2))
+
+    def insert_after(cell, prev, v):
+        cell.insert(cell.index(prev) + 1, v)
+
+    cells[c1].remove(b)                   # c1 keeps a
+    cells[c2].remove(a)                   # c2 keeps b
+    insert_after(cells[c3], cells[c3][cells[c3].index(a) - 1], b)   # c3: p2, b, a, p1
+    insert_after(cells[c4], cells[c4][cells[c4].index(b) - 1], a)   # c4: s1, a, b, s2
+    table, new_sides = topology.pad_cells(cells)
+    new_vn, new_vc = topology.build_vertex_tables(table, new_sides, state.n_vertices)
+    pos = state.positions.copy()
+    m = pos[a] + pos[b]
+    axis = m / np.linalg.norm(m)
+    for angle in (np.pi / 2, -np.pi / 2):  # turn the edge a quarter about its midpoint
+        c, s = np.cos(angle), np.sin(angle)
+        rot = c * np.eye(3) + s * np.cross(np.eye(3), axis) + (1 - c) * np.outer(axis, axis)
+        pos[[a, b]] = state.positions[[a, b]] @ rot.T
+        new = svm.State(pos, table, new_sides, new_vn, new_vc, state.vertex_start, state.cell_start,
+                        state.radius, constraint=state.constraint, validate=False)
+        try:
+            return new.validate()
+        except ValueError:
+            continue
+    raise AssertionError("could not build a valid T1 state")
+
+
+class Snapshots(svm.plugins.Writer):
+    """Records the arrays of every state a GSD writer with the same trigger sees."""
+
+    def __init__(self, trigger):
+        super().__init__(trigger)
+        self.refs, self.steps = [], []
+
+    def write(self, simulation, timestep):
+        self.refs.append(snapshot(simulation.state))
+        self.steps.append(timestep)
+
+
+@pytest.fixture
+def written(tmp_path):
+    """A run writing 4 frames, then frames with a hand-made T1, the original topology again, and
+    a different ensemble (other sizes, replica count and max_sides)."""
+    path = tmp_path / "run.gsd"
+    sim = make_sim()
+    snaps = Snapshots(trigger=3)
+    writer = GSD(path, trigger=3)
+    sim.operations.writers.extend([snaps, writer])
+    sim.run(9)                            # frames at timesteps 0, 3, 6, 9
+    assert snaps.steps == [0, 3, 6, 9]
+    original = sim.state
+    for state in (manual_t1(original), original,
+                  svm.State.concatenate([svm.init.random_tiling(20, seed=4), svm.init.random_tiling(31, seed=5)])):
+        sim.state = state
+        snaps.write(sim, sim.timestep)
+        writer.write(sim, sim.timestep)
+    return path, sim, writer, snaps.refs
+
+
+def test_restore_every_frame_exactly(written):
+    path, sim, writer, refs = written
+    assert svm.plugins.writers.gsd.n_frames(path) == len(refs)
+    for i, ref in enumerate(refs):
+        assert_same_state(read_state(path, frame=i), ref)
+        assert_same_state(svm.State.from_gsd(path, frame=i - len(refs)), ref)
+    # the T1 frame really changed the topology, the next one restored it from frame 0's chunks
+    assert not np.array_equal(refs[4]["vertex_neighbors"], refs[0]["vertex_neighbors"])
+    with gsd.hoomd.open(path) as t:
+        assert t.file.chunk_exists(frame=4, name="spherevm/vertex_neighbors")
+        assert not t.file.chunk_exists(frame=5, name="spherevm/vertex_neighbors")
+    restored = read_state(path, frame=4, validate=True)
+    assert restored.n_vertices == refs[0]["positions"].shape[0]
+    last = read_state(path)
+    assert last.n_replicas == 2 and last.max_sides != refs[0]["cell_vertices"].shape[1]
+    assert isinstance(last.constraint, svm.constraints.Sphere)
+
+
+def test_hoomd_layout_lengths_box_and_log(written):
+    path, sim, writer, refs = written
+    with gsd.hoomd.open(path) as t:
+        assert len(t) == len(refs)
+        for i, frame in enumerate(t):
+            ref = refs[i]
+            nv = ref["positions"].shape[0]
+            bonds = topology.edges(ref["vertex_neighbors"])
+            n_rep = len(ref["radius"])
+            assert frame.particles.N == nv and frame.bonds.N == len(bonds)
+            assert np.array_equal(frame.bonds.group, bonds)
+            assert np.allclose(frame.particles.position, ref["positions"], atol=1e-6)
+            for key, value in frame.log.items():
+                if key.startswith("particles/"):
+                    assert len(value) == nv, key
+                elif key.startswith("bonds/"):
+                    assert len(value) == len(bonds), key
+                else:
+                    assert value.shape == (n_rep,), key
+            for key in ("particles/replica", "particles/cell_shape_index", "particles/cell_area",
+                        "particles/cell_energy", "particles/force", "bonds/length", "energy", "max_force"):
+                assert key in frame.log
+            box = frame.configuration.box
+            assert box[0] == box[1] == box[2] and np.all(box[3:] == 0)
+            half = box[0] / 2
+            assert box[0] >= 2.2 * ref["radius"].max() * (1 - 1e-6)
+            assert np.all(np.abs(frame.particles.position) < half)
+            d = frame.particles.position[bonds[:, 0]] - frame.particles.position[bonds[:, 1]]
+            assert np.all(np.linalg.norm(d, axis=1) < half)
+    # log values are the simulation's, per replica; cell values exact and consistent
+    state0 = svm.State.from_gsd(path, frame=0)
+    area, perimeter = svm.analysis.cell_shapes(state0)
+    cells = read_cell_values(path, frame=0)
+    assert np.array_equal(cells["area"], area) and np.array_equal(cells["perimeter"], perimeter)
+    with gsd.hoomd.open(path) as t:
+        f0 = t[0]
+        model = VertexModel.dimensionless(kr=1.0, p0=3.8)
+        res = model.compute(state0)
+        assert np.allclose(f0.log["energy"], res.energy, rtol=1e-12)
+        assert np.allclose(cells["energy"], res.cell_energy, rtol=1e-12)
+        assert np.allclose(f0.log["particles/cell_area"], area[state0.vertex_cells].mean(axis=1))
+        assert np.allclose(f0.log["bonds/length"].sum(), perimeter.sum() / 2)
+
+
+def test_readable_after_flush_without_close_and_append(tmp_path):
+    path = tmp_path / "open.gsd"
+    sim = make_sim(svm.init.random_tiling(16, replicas=2, seed=3))
+    writer = GSD(str(path), trigger=2, log=("energy_per_cell", "timestep"))
+    sim.operations.writers.append(writer)
+    assert not path.exists()            # opened lazily
+    sim.run(4)                          # frames at 0, 2, 4; not closed
+    assert read_state(path).positions.tobytes() == sim.state.positions.tobytes()
+    with gsd.hoomd.open(path) as t:
+        assert len(t) == 3 and [int(f.configuration.step) for f in t] == [0, 2, 4]
+        assert np.array_equal(t[2].log["timestep"], [4])
+    writer.close()
+    sim.run(2)                          # a write after close appends
+    assert svm.plugins.writers.gsd.n_frames(path) == 4
+    appender = GSD(path, trigger=1, mode="ab")
+    appender.write(sim, sim.timestep)
+    appender.close()
+    assert svm.plugins.writers.gsd.n_frames(path) == 5
+    overwriter = GSD(path, mode="wb")
+    overwriter.write(sim, sim.timestep)
+    overwriter.close()
+    assert svm.plugins.writers.gsd.n_frames(path) == 1
+    with pytest.raises(FileExistsError, match="xb"):
+        GSD(path, mode="xb").write(sim, 0)
+
+
+def test_crash_leaves_readable_file(tmp_path):
+    path = tmp_path / "crash.gsd"
+    code = (
+        "import os, spherevm as svm\n"
+        "sim = svm.Simulation(device='cpu')\n"
+        "sim.state = svm.init.random_tiling(16, seed=2)\n"
+        "sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1, p0=3.8))\n"
+        "sim.operations.integrator = svm.plugins.integrators.FIRE(dt=0.02)\n"
+        f"sim.operations.writers.append(svm.plugins.writers.GSD({str(path)!r}, trigger=1))\n"
+        "class Crash(svm.plugins.Writer):\n"
+        "    def write(self, simulation, timestep):\n"
+        "        os._exit(3)\n"
+        "sim.operations.writers.append(Crash(trigger=svm.trigger.On(2)))\n"
+        "sim.run(10)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 3, proc.stderr
+    assert svm.plugins.writers.gsd.n_frames(path) == 3
+    assert read_state(path).n_cells == 16
+
+
+def test_bad_input(tmp_path, written):
+    path = written[0]
+    with pytest.raises(FileNotFoundError, match="missing.gsd"):
+        read_state(tmp_path / "missing.gsd")
+    text = tmp_path / "notes.gsd"
+    text.write_text("not a gsd file\n")
+    with pytest.raises(ValueError, match="not a readable GSD file"):
+        read_state(text)
+    with pytest.raises(ValueError, match="is a directory"):
+        read_state(tmp_path)
+    plain = tmp_path / "plain.gsd"
+    with gsd.hoomd.open(plain, "w") as t:
+        f = gsd.hoomd.Frame()
+        f.particles.N = 2
+        f.particles.position = [[0, 0, 0], [1, 0, 0]]
+        t.append(f)
+    with pytest.raises(ValueError, match="not written by spherevm"):
+        svm.State.from_gsd(plain)
+    empty = tmp_path / "empty.gsd"
+    gsd.hoomd.open(empty, "w").close()
+    with pytest.raises(ValueError, match="no complete frame"):
+        read_state(empty)
+    n = svm.plugins.writers.gsd.n_frames(path)
+    for bad in (n, -n - 1, 100):
+        with pytest.raises(ValueError, match=f"out of range.*{n} frame"):
+            read_state(path, frame=bad)
+    with pytest.raises(IndexError):
+        read_state(path, frame=n)
+    assert issubclass(FrameIndexError, IndexError)
+    with pytest.raises(TypeError, match="frame must be an integer"):
+        read_state(path, frame=1.5)
+    # writer arguments
+    with pytest.raises(ValueError, match="mode must be"):
+        GSD(tmp_path / "x.gsd", mode="r")
+    with pytest.raises(ValueError, match="unknown loggable"):
+        GSD(tmp_path / "x.gsd", log=("energy", "nope")).write(make_sim(), 0)
+    with pytest.raises(ValueError, match="cannot append"):
+        GSD(text, mode="ab").write(make_sim(), 0)
+    sim = make_sim(svm.init.random_tiling(16, seed=2))
+    sim.state.positions[3, 1] = np.nan
+    target = tmp_path / "nan.gsd"
+    with pytest.raises(FloatingPointError, match="vertex 3 of replica 0.*timestep 7"):
+        GSD(target).write(sim, 7)
+    assert not target.exists()
+
+
+def test_writer_without_forces(tmp_path):
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_tiling(12, seed=1)
+    w = GSD(tmp_path / "init.gsd")
+    w.write(sim, 0)
+    w.close()
+    with gsd.hoomd.open(tmp_path / "init.gsd") as t:
+        assert "mean_shape_index" in t[0].log and "energy" not in t[0].log
+        assert "particles/cell_shape_index" in t[0].log and "particles/cell_energy" not in t[0].log
+    assert read_state(tmp_path / "init.gsd").n_cells == 12
+
+
+def test_box_grows_for_long_edges(tmp_path):
+    """In a 4-cell tiling edges are longer than 1.1 R: the box grows so that none reaches half of it."""
+    sim = make_sim(svm.init.random_tiling(4, seed=0))
+    with GSD(tmp_path / "tiny.gsd") as w:
+        w.write(sim, 0)
+    with gsd.hoomd.open(tmp_path / "tiny.gsd") as t:
+        f = t[0]
+        d = f.particles.position[f.bonds.group[:, 0]] - f.particles.position[f.bonds.group[:, 1]]
+        assert np.linalg.norm(d, axis=1).max() > 1.1 * sim.state.radius_np()[0]
+        assert np.all(np.abs(d) < f.configuration.box[0] / 2)
+    assert_same_state(read_state(tmp_path / "tiny.gsd"), snapshot(sim.state))
+
+
+def test_per_item_keys_persist_with_right_lengths(tmp_path):
+    """A per-vertex key missing from a frame would take frame 0's array (wrong length after a
+    topology change): the writer keeps writing every key it has written, NaN when unknown."""
+    path = tmp_path / "keys.gsd"
+    sim = make_sim(svm.init.random_tiling(16, seed=1))
+    w = GSD(path, log=("mean_shape_index",))
+    w.write(sim, 0)
+    sim.operations.forces.remove(sim.operations.forces[0])
+    sim.state = svm.init.random_tiling(24, replicas=2, seed=2)
+    w.write(sim, 1)
+    w.close()
+    with gsd.hoomd.open(path) as t:
+        f = t[1]
+        assert f.log["particles/force"].shape == (f.particles.N, 3)
+        assert np.all(np.isnan(f.log["particles/force"]))
+        assert np.all(np.isnan(f.log["particles/cell_energy"]))
+        assert f.log["particles/cell_area"].shape == (f.particles.N,)
+
+
+def test_ovito_opens_file(written):
+    ovito_io = pytest.importorskip("ovito.io")
+    path, sim, writer, refs = written
+    pipeline = ovito_io.import_file(str(path))
+    assert pipeline.source.num_frames == len(refs)
+    for i in (0, 4, len(refs) - 1):
+        data = pipeline.compute(i)
+        nv = refs[i]["positions"].shape[0]
+        assert data.particles.count == nv
+        assert data.particles.bonds.count == len(topology.edges(refs[i]["vertex_neighbors"]))
+        shape = np.asarray(data.particles["cell_shape_index"])
+        assert shape.shape == (nv,) and np.all(np.isfinite(shape))
+        assert np.array_equal(np.asarray(data.particles["replica"]),
+                              np.repeat(np.arange(len(refs[i]["radius"])), np.diff(refs[i]["vertex_start"])))
+        assert "length" in data.particles.bonds.keys()
+        # no bond crosses the periodic box
+        assert not np.any(np.asarray(data.particles.bonds["Periodic Image"]))
+        assert data.attributes["Timestep"] == min(3 * i, 9)
+        assert len(data.attributes["energy"]) == len(refs[i]["radius"])

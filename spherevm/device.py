@@ -110,3 +110,29 @@ def info() -> dict:
     out["gpu_usable"] = _cupy_or_none() is not None
     out["default_device"] = resolve("auto").name
     return out
+
+
+_PACKAGE_DIR = __import__("pathlib").Path(__file__).resolve().parent
+_MODULES = {}
+BLOCK = 256
+
+
+def load_module(cu_file):
+    """Compile (once per process) the CUDA source ``cu_file`` and return its cupy.RawModule.
+
+    ``cu_file`` is a path to a ``.cu`` file beside the plugin that owns it; it may include the
+    package's headers (``geometry/sphere.cuh``, ``device_common.cuh``). Compiled with
+    ``--fmad=false`` so that every product is rounded as in the NumPy path.
+    """
+    import cupy
+    key = str(cu_file)
+    if key not in _MODULES:
+        code = __import__("pathlib").Path(cu_file).read_text()
+        _MODULES[key] = cupy.RawModule(code=code, options=("-std=c++17", "--fmad=false", f"-I{_PACKAGE_DIR}"))
+    return _MODULES[key]
+
+
+def launch(kernel, n, args, block=BLOCK):
+    """Launch ``kernel`` with one thread per item over ``n`` items."""
+    if n > 0:
+        kernel(((n + block - 1) // block,), (block,), args)

@@ -153,15 +153,20 @@ class Simulation:
             if not self.operations.forces:
                 raise RuntimeError("no force in sim.operations.forces; append one, e.g. "
                                    "spherevm.plugins.forces.VertexModel.dimensionless(kr=1, p0=3.8)")
-            xp = self.device.xp
-            forces = xp.zeros_like(self._state.positions)
-            energy = xp.zeros(self._state.n_replicas)
-            for f in self.operations.forces:
-                res = f.compute(self._state)
+            results = [f.compute(self._state) for f in self.operations.forces]
+            forces, energy = results[0].forces, results[0].energy
+            for res in results[1:]:
                 forces = forces + res.forces
                 energy = energy + res.energy
-            self._cache = (forces, energy)
-        return self._cache
+            cells = [res.cell_energy for res in results]
+            cell_energy = None if any(c is None for c in cells) else sum(cells[1:], cells[0])
+            self._cache = (forces, energy, cell_energy)
+        return self._cache[:2]
+
+    def cell_energy(self):
+        """Per-cell energy summed over the forces (device array), or None if a force does not report it."""
+        self.compute_forces()
+        return self._cache[2]
 
     def max_force(self):
         """Largest vertex force magnitude per replica (device array)."""
@@ -169,11 +174,11 @@ class Simulation:
         forces, _ = self.compute_forces()
         mag = xp.sqrt((forces * forces).sum(axis=1))
         out = xp.zeros(self._state.n_replicas)
-        if hasattr(xp, "maximum") and hasattr(xp.maximum, "at"):
-            xp.maximum.at(out, self._state.vertex_replica, mag)
-        else:
+        if self.device.is_gpu:
             import cupyx
             cupyx.scatter_max(out, self._state.vertex_replica, mag)
+        else:
+            np.maximum.at(out, self._state.vertex_replica, mag)
         return out
 
     @property

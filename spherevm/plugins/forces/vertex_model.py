@@ -2,10 +2,14 @@
 from __future__ import annotations
 
 import weakref
+from pathlib import Path
 
 import numpy as np
 
+from ...device import launch, load_module
 from ..base import Force, ForceResult
+
+_KERNELS = Path(__file__).with_suffix(".cu")
 
 
 def _param(name, value, lower=0.0):
@@ -71,6 +75,8 @@ class VertexModel(Force):
         return self._cache
 
     def compute(self, state) -> ForceResult:
+        if state.device.is_gpu:
+            return self._compute_gpu(state)
         xp = state.device.xp
         kA, kP, A0, P0 = self._device_parameters(state)
         geometry = state.constraint.cell_geometry(state)
@@ -90,3 +96,22 @@ class VertexModel(Force):
             kr, p0, a0 = self._dimensionless
             return f"VertexModel.dimensionless(kr={kr}, p0={p0}, a0={a0}, kP={self.kP})"
         return f"VertexModel(kA={self.kA}, kP={self.kP}, A0={self.A0}, P0={self.P0})"
+
+    def _compute_gpu(self, state) -> ForceResult:
+        """Two fused kernels (vertex_model.cu): cell geometry and energy, then vertex forces."""
+        import cupy as cp
+        kA, kP, A0, P0 = self._device_parameters(state)
+        module = load_module(_KERNELS)
+        nc, nv = state.n_cells, state.n_vertices
+        area, perimeter, cell_energy = cp.empty(nc), cp.empty(nc), cp.empty(nc)
+        apex = cp.empty((nc, 3))
+        energy = cp.zeros(state.n_replicas)
+        launch(module.get_function("vm_cell_geometry"), nc,
+               (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, state.radius,
+                np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, area, perimeter, apex, cell_energy,
+                energy))
+        forces = cp.empty_like(state.positions)
+        launch(module.get_function("vm_vertex_forces"), nv,
+               (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, state.radius,
+                np.int32(nv), kA, kP, A0, P0, area, perimeter, apex, forces))
+        return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)

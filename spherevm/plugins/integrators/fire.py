@@ -1,9 +1,14 @@
 """FIRE energy minimisation (Bitzek et al., PRL 97, 170201, 2006) on the constraint surface."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
+from ...device import launch, load_module
 from ..base import Integrator
+
+_KERNELS = Path(__file__).with_suffix(".cu")
 
 
 def _positive(name, value):
@@ -69,6 +74,8 @@ class FIRE(Integrator):
 
     def step(self, simulation, forces):
         state = simulation.state
+        if state.device.is_gpu:
+            return self._step_gpu(simulation, forces)
         xp = state.device.xp
         rep = state.vertex_replica
         n = state.n_replicas
@@ -99,6 +106,26 @@ class FIRE(Integrator):
         x = state.constraint.project_normal(state.positions + dt * v, state.radius[rep])
         state.positions = xp.where(moving, x, state.positions)
         self.velocities = xp.where(moving, state.constraint.project_tangent(x, v), 0.0)
+        simulation.state_changed()
+
+    def _step_gpu(self, simulation, forces):
+        """Three kernels (fire.cu): per-replica sums, per-replica control, per-vertex move."""
+        import cupy as cp
+        state = simulation.state
+        module = load_module(_KERNELS)
+        nv, nr = state.n_vertices, state.n_replicas
+        sums = cp.zeros((4, nr))
+        launch(module.get_function("fire_reduce"), nv,
+               (forces, self.velocities, state.vertex_replica, np.int32(nv), sums[0], sums[1], sums[2], sums[3]))
+        keep, scale, step = cp.empty(nr), cp.empty(nr), cp.empty(nr)
+        launch(module.get_function("fire_control"), nr,
+               (np.int32(nr), sums[0], sums[1], sums[2], self.active, self.replica_dt, self.alpha,
+                self.n_positive, keep, scale, step, np.int32(self.n_min), np.float64(self.f_inc),
+                np.float64(self.f_dec), np.float64(self.alpha_start), np.float64(self.f_alpha),
+                np.float64(self.dt_max)))
+        launch(module.get_function("fire_move"), nv,
+               (state.positions, self.velocities, forces, state.vertex_replica, state.radius, self.active,
+                keep, scale, step, np.int32(nv)))
         simulation.state_changed()
 
     @property

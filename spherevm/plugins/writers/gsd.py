@@ -107,8 +107,8 @@ class GSD(Writer):
     cell_quantities : which per-cell values to record, from ``("area", "perimeter", "shape_index",
         "energy")``: exact arrays under ``spherevm/cell_<q>`` and the mean over each vertex's three
         cells under ``log/particles/cell_<q>`` (for colouring in OVITO). ``"energy"`` is written
-        when every force reports per-cell energies (``ForceResult.cell_energy``, or a
-        ``cell_energy(state)`` method when the force has one, which saves a force evaluation).
+        when every force reports per-cell energies (``ForceResult.cell_energy``, taken from the
+        simulation's force cache, so writing costs no extra force evaluation).
 
     Every frame is flushed to disk, so a crash leaves a readable file. After :meth:`close`, a
     later write reopens the file in append mode.
@@ -327,17 +327,9 @@ class GSD(Writer):
                 if "shape_index" in wanted:
                     out["shape_index"] = perimeter / np.sqrt(np.where(area > 0, area, np.nan))
         if "energy" in wanted and simulation.operations.forces:
-            total = 0.0
-            for f in simulation.operations.forces:
-                # a force may offer a cheap cell_energy(state); else a full compute (gradients too)
-                cheap = getattr(f, "cell_energy", None)
-                ce = cheap(state) if callable(cheap) else f.compute(state).cell_energy
-                if ce is None:
-                    total = None
-                    break
-                total = total + np.asarray(state.device.to_numpy(ce), dtype=np.float64)
-            if total is not None:
-                out["energy"] = np.broadcast_to(total, (state.n_cells,)).astype(np.float64)
+            ce = simulation.cell_energy()
+            if ce is not None:
+                out["energy"] = np.asarray(state.device.to_numpy(ce), dtype=np.float64)
         # the set of per-cell keys is fixed by the first frame (a frame missing a log/particles key
         # would take frame 0's array, of the wrong length after a T1): fill what is missing with NaN
         if self._cell_keys is None:

@@ -1,0 +1,115 @@
+"""GPU benchmark: one table of per-step costs, bandwidth and speed-up over the NumPy path.
+
+    python benchmarks/bench_gpu.py                # N = 1e3 .. 1e6 cells and the ensembles
+    python benchmarks/bench_gpu.py --cells 1000 10000 --numpy-max 100000
+
+For each system: time of one force evaluation, of one FIRE iteration (forces + FIRE update), kernel
+launches per step, the memory-traffic floor (each array read or written once) over the time as
+achieved GB/s, compared with the device-to-device copy bandwidth measured in the same run, and
+the NumPy time of the same work where it is affordable.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import median_time  # noqa: E402
+
+import spherevm as svm  # noqa: E402
+from spherevm.device import info, resolve  # noqa: E402
+
+
+def copy_bandwidth(device, n_bytes=2 << 30):
+    """Device-to-device copy bandwidth in GB/s (read + write) on a buffer of ``n_bytes``."""
+    cp = device.xp
+    a = cp.zeros(n_bytes // 8)
+    b = cp.empty_like(a)
+    t = median_time(lambda: cp.copyto(b, a), device, repeat=9)
+    return 2 * a.nbytes / t / 1e9
+
+
+def force_floor_bytes(state):
+    """Bytes that a force evaluation must move at least: every array it touches, once."""
+    nv, nc, ms = state.n_vertices, state.n_cells, state.max_sides
+    cell_in = nc * (4 * ms + 4 + 4 + 4 * 8)          # table, sides, replica, 4 parameters
+    cell_out = nc * (8 + 8 + 24 + 8)                  # area, perimeter, apex, cell energy
+    vert = nv * (24 + 12 + 12 + 4 + 24)               # positions, neighbours, cells, replica, forces
+    return cell_in + cell_out + cell_out + vert       # the vertex kernel reads the cell outputs again
+
+
+def fire_floor_bytes(state):
+    """Force floor plus FIRE: forces and velocities read twice, positions and velocities written."""
+    nv = state.n_vertices
+    return force_floor_bytes(state) + nv * (24 + 24 + 4) + nv * (24 + 24 + 24 + 24 + 4)
+
+
+def build(n_cells, replicas, device):
+    sim = svm.Simulation(device=device)
+    sim.state = svm.init.random_tiling(n_cells, replicas=replicas, seed=1)
+    sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=3.8))
+    sim.operations.integrator = svm.plugins.integrators.FIRE(dt=0.01)
+    return sim
+
+
+def fire_iteration(sim):
+    sim.state_changed()
+    forces, _ = sim.compute_forces()
+    sim.operations.integrator.step(sim, forces)
+
+
+def measure(n_cells, replicas, gpu, numpy_max, bw):
+    sim = build(n_cells, replicas, gpu)
+    state = sim.state
+    force = sim.operations.forces[0]
+    t_force = median_time(lambda: force.compute(state), gpu)
+    t_fire = median_time(lambda: fire_iteration(sim), gpu)
+    row = dict(system=f"{replicas} x {n_cells}" if replicas > 1 else f"{n_cells:.0e}",
+               cells=n_cells * replicas, force_ms=1e3 * t_force, fire_ms=1e3 * t_fire,
+               force_gbs=force_floor_bytes(state) / t_force / 1e9, fire_gbs=fire_floor_bytes(state) / t_fire / 1e9)
+    row["fire_frac_bw"] = row["fire_gbs"] / bw
+    if n_cells * replicas <= numpy_max:
+        cpu = build(n_cells, replicas, "cpu")
+        cs = cpu.state
+        cf = cpu.operations.forces[0]
+        reps = 3 if n_cells * replicas > 1e5 else 7
+        row["numpy_force_ms"] = 1e3 * median_time(lambda: cf.compute(cs), None, repeat=reps, warmup=1)
+        row["numpy_fire_ms"] = 1e3 * median_time(lambda: fire_iteration(cpu), None, repeat=reps, warmup=1)
+    return row
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description="spherevm GPU benchmark")
+    ap.add_argument("--cells", type=float, nargs="+", default=[1e3, 1e4, 1e5, 1e6])
+    ap.add_argument("--ensembles", nargs="*", default=["4096x64", "256x1024"])
+    ap.add_argument("--numpy-max", type=float, default=2e5, help="largest total cell count timed on NumPy")
+    args = ap.parse_args(argv)
+    gpu = resolve("gpu")
+    facts = info()
+    bw = copy_bandwidth(gpu)
+    print(f"# spherevm GPU benchmark, {datetime.date.today()}, GPU: {facts.get('gpus')}, CuPy {facts.get('cupy')}, "
+          f"CUDA runtime {facts.get('cuda_runtime')}")
+    print(f"# device-to-device copy bandwidth: {bw:.0f} GB/s; launches per step: force 2, FIRE iteration 6 "
+          f"(2 force + 3 FIRE + 1 memset)")
+    head = (f"{'system':>12} {'force ms':>9} {'GB/s':>6} {'FIRE it ms':>11} {'GB/s':>6} {'of copy':>8} "
+            f"{'NumPy force':>12} {'NumPy FIRE':>11} {'speed-up':>9}")
+    print(head)
+    systems = [(int(n), 1) for n in args.cells]
+    for e in args.ensembles:
+        r, n = e.lower().split("x")
+        systems.append((int(n), int(r)))
+    for n, r in systems:
+        row = measure(n, r, gpu, args.numpy_max, bw)
+        npf = row.get("numpy_force_ms", np.nan)
+        npi = row.get("numpy_fire_ms", np.nan)
+        print(f"{row['system']:>12} {row['force_ms']:9.4f} {row['force_gbs']:6.0f} {row['fire_ms']:11.4f} "
+              f"{row['fire_gbs']:6.0f} {row['fire_frac_bw']:8.2f} {npf:12.3f} {npi:11.3f} "
+              f"{npi / row['fire_ms']:9.1f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()

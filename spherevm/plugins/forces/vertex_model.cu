@@ -1,0 +1,76 @@
+// Vertex-model energy and forces on the sphere: the CUDA path of vertex_model.py.
+#include "geometry/sphere.cuh"
+#include "device_common.cuh"
+
+// One thread per cell: area, perimeter and fan apex (normalised vertex centroid), the cell's
+// energy, and the per-replica energy sum.
+extern "C" __global__ void vm_cell_geometry(
+    const double* __restrict__ pos, const int* __restrict__ cell_vertices, const int* __restrict__ cell_sides,
+    const int* __restrict__ cell_replica, const double* __restrict__ radius, int n_cells, int max_sides,
+    const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
+    const double* __restrict__ P0, double* __restrict__ area, double* __restrict__ perimeter,
+    double* __restrict__ apex, double* __restrict__ cell_energy, double* __restrict__ replica_energy)
+{
+    long c = (long)blockIdx.x * blockDim.x + threadIdx.x;
+    int rep = -1;
+    double e = 0.0;
+    if (c < n_cells) {
+        rep = cell_replica[c];
+        const int* row = cell_vertices + c * max_sides;
+        int n = cell_sides[c];
+        vec3 sum = v3(0.0, 0.0, 0.0);
+        for (int i = 0; i < n; ++i) sum = sum + normalize3(load3(pos, row[i]));
+        vec3 ap = normalize3(sum);
+        vec3 first = normalize3(load3(pos, row[0]));
+        vec3 cur = first;
+        double A = 0.0, P = 0.0;
+        for (int i = 0; i < n; ++i) {
+            vec3 nxt = i + 1 < n ? normalize3(load3(pos, row[i + 1])) : first;
+            P += geodesic_length(cur, nxt);
+            A += solid_angle(ap, cur, nxt);
+            cur = nxt;
+        }
+        double R = radius[rep];
+        A *= R * R;
+        P *= R;
+        double dA = A - A0[c], dP = P - P0[c];
+        e = kA[c] * dA * dA + kP[c] * dP * dP;
+        area[c] = A;
+        perimeter[c] = P;
+        store3(apex, c, ap);
+        cell_energy[c] = e;
+    }
+    segmented_block_add(e, rep, replica_energy);
+}
+
+// One thread per vertex: gather the area and perimeter gradients of its three corners (no
+// atomics) and write minus the surface gradient of the energy.
+extern "C" __global__ void vm_vertex_forces(
+    const double* __restrict__ pos, const int* __restrict__ vertex_neighbors, const int* __restrict__ vertex_cells,
+    const int* __restrict__ vertex_replica, const double* __restrict__ radius, int n_vertices,
+    const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
+    const double* __restrict__ P0, const double* __restrict__ area, const double* __restrict__ perimeter,
+    const double* __restrict__ apex, double* __restrict__ forces)
+{
+    long v = (long)blockIdx.x * blockDim.x + threadIdx.x;
+    if (v >= n_vertices) return;
+    vec3 r = load3(pos, v);
+    double rn = norm3(r);
+    vec3 u = normalize3(r);
+    double R = radius[vertex_replica[v]];
+    int nb[3] = {vertex_neighbors[3 * v], vertex_neighbors[3 * v + 1], vertex_neighbors[3 * v + 2]};
+    vec3 un[3] = {normalize3(load3(pos, nb[0])), normalize3(load3(pos, nb[1])), normalize3(load3(pos, nb[2]))};
+    vec3 g = v3(0.0, 0.0, 0.0);
+    for (int k = 0; k < 3; ++k) {
+        int c = vertex_cells[3 * v + k];
+        vec3 nxt = un[k], prv = un[(k + 1) % 3];
+        vec3 ap = load3(apex, c);
+        vec3 gA = solid_angle_gradient(ap, u, nxt) + solid_angle_gradient(prv, u, ap);
+        gA = gA - dot3(gA, u) * u;
+        vec3 gP = geodesic_length_gradient(u, nxt) + geodesic_length_gradient(u, prv);
+        double tA = 2.0 * kA[c] * (area[c] - A0[c]) * (R * R / rn);
+        double tP = 2.0 * kP[c] * (perimeter[c] - P0[c]) * (R / rn);
+        g = g + (tA * gA + tP * gP);
+    }
+    store3(forces, v, -g);
+}

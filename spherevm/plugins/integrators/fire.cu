@@ -1,0 +1,70 @@
+// FIRE on the sphere: the CUDA path of fire.py (same update, per-replica control).
+#include "geometry/sphere.cuh"
+#include "device_common.cuh"
+
+// Per vertex: F.v, v.v, F.F summed per replica, and the largest |F| per replica.
+extern "C" __global__ void fire_reduce(
+    const double* __restrict__ forces, const double* __restrict__ vel, const int* __restrict__ vertex_replica,
+    int n_vertices, double* __restrict__ power, double* __restrict__ vnorm2, double* __restrict__ fnorm2,
+    double* __restrict__ fmax)
+{
+    long v = (long)blockIdx.x * blockDim.x + threadIdx.x;
+    int rep = -1;
+    double p = 0.0, vv = 0.0, ff = 0.0;
+    if (v < n_vertices) {
+        rep = vertex_replica[v];
+        vec3 f = load3(forces, v), w = load3(vel, v);
+        p = dot3(f, w);
+        vv = dot3(w, w);
+        ff = dot3(f, f);
+        atomic_max_nonneg(fmax + rep, sqrt(ff));
+    }
+    segmented_block_add(p, rep, power);
+    segmented_block_add(vv, rep, vnorm2);
+    segmented_block_add(ff, rep, fnorm2);
+}
+
+// Per replica: the FIRE control (mixing, dt, alpha, counter) from the summed power.
+extern "C" __global__ void fire_control(
+    int n_replicas, const double* __restrict__ power, const double* __restrict__ vnorm2,
+    const double* __restrict__ fnorm2, const bool* __restrict__ active, double* __restrict__ dt,
+    double* __restrict__ alpha, long long* __restrict__ n_positive, double* __restrict__ keep,
+    double* __restrict__ scale, double* __restrict__ step, int n_min, double f_inc, double f_dec,
+    double alpha_start, double f_alpha, double dt_max)
+{
+    int r = blockIdx.x * blockDim.x + threadIdx.x;
+    if (r >= n_replicas) return;
+    bool uphill = power[r] <= 0.0;
+    bool grow = !uphill && n_positive[r] >= n_min;
+    double mix = uphill ? 0.0 : alpha[r];
+    double vn = sqrt(vnorm2[r]), fn = sqrt(fnorm2[r]);
+    scale[r] = fn > 0.0 ? mix * vn / fn : 0.0;
+    keep[r] = uphill ? 0.0 : 1.0 - mix;
+    dt[r] = uphill ? dt[r] * f_dec : (grow ? fmin(dt[r] * f_inc, dt_max) : dt[r]);
+    alpha[r] = uphill ? alpha_start : (grow ? alpha[r] * f_alpha : alpha[r]);
+    n_positive[r] = uphill ? 0 : n_positive[r] + 1;
+    step[r] = active[r] ? dt[r] : 0.0;
+}
+
+// Per vertex: mix, semi-implicit Euler, P_N re-projection and P_T velocity transport.
+extern "C" __global__ void fire_move(
+    double* __restrict__ pos, double* __restrict__ vel, const double* __restrict__ forces,
+    const int* __restrict__ vertex_replica, const double* __restrict__ radius, const bool* __restrict__ active,
+    const double* __restrict__ keep, const double* __restrict__ scale, const double* __restrict__ step,
+    int n_vertices)
+{
+    long i = (long)blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n_vertices) return;
+    int r = vertex_replica[i];
+    if (!active[r]) { store3(vel, i, v3(0.0, 0.0, 0.0)); return; }
+    vec3 f = load3(forces, i);
+    vec3 w = keep[r] * load3(vel, i) + scale[r] * f;
+    double h = step[r];
+    w = w + h * f;
+    vec3 x = load3(pos, i) + h * w;
+    vec3 n = normalize3(x);
+    x = radius[r] * n;
+    w = w - dot3(w, n) * n;
+    store3(pos, i, x);
+    store3(vel, i, w);
+}

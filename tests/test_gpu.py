@@ -46,10 +46,13 @@ def _fire_sim(state, device, t1=False, p0=3.7):
 
 
 def test_fire_steps_match_numpy():
+    # with T1s on, no edge collapses: without them the direction of a vanishing edge amplifies
+    # round-off (4.8e-8 after 200 steps at p0 = 4.6 was seen on an H200)
     state = svm.init.random_tiling(128, replicas=4, seed=5)
-    cpu, gpu = _fire_sim(state, "cpu", p0=4.6), _fire_sim(state, "gpu", p0=4.6)
+    cpu, gpu = _fire_sim(state, "cpu", t1=True, p0=3.8), _fire_sim(state, "gpu", t1=True, p0=3.8)
     cpu.run(200)
     gpu.run(200)
+    assert np.array_equal(gpu.log("t1_total_flips"), cpu.log("t1_total_flips"))
     assert np.abs(gpu.state.positions.get() - cpu.state.positions).max() <= 1e-9
     assert _rel(gpu.log("energy"), cpu.log("energy")) <= 1e-9
     assert np.allclose(gpu.log("fire_dt"), cpu.log("fire_dt"), rtol=1e-12)

@@ -150,9 +150,11 @@ class Simulation:
         """Summed forces ``(V, 3)`` and energy per replica on the device, cached until the state changes."""
         self._require_state()
         if self._cache is None:
-            if not self.operations.forces:
-                raise RuntimeError("no force in sim.operations.forces; append one, e.g. "
-                                   "spherevm.plugins.forces.VertexModel.dimensionless(kr=1, p0=3.8)")
+            if not self.operations.forces:   # free vertices: zero force, zero energy
+                xp = self.device.xp
+                zero = xp.zeros(self._state.n_replicas)
+                self._cache = (xp.zeros_like(self._state.positions), zero, xp.zeros(self._state.n_cells))
+                return self._cache[:2]
             results = [f.compute(self._state) for f in self.operations.forces]
             forces, energy = results[0].forces, results[0].energy
             for res in results[1:]:
@@ -221,20 +223,49 @@ class Simulation:
             if w.trigger(self.timestep):
                 w.write(self, self.timestep)
 
-    def run(self, steps: int):
-        """Advance ``steps`` timesteps: updaters, forces, integrator, writers on each."""
+    def run(self, steps: int, check_every=None, progress=None):
+        """Advance ``steps`` timesteps: updaters, forces, integrator, writers on each.
+
+        Every ``check_every`` steps (default: every step on the CPU, every 100 on the GPU, where a
+        check is a device-to-host read) the positions are checked: a NaN stops the run with
+        FloatingPointError naming the step, replica and vertex; writers have flushed every frame
+        before, so the last good frame stays on disk. ``progress(done, total)`` is called at checks.
+        """
         self._require_state()
         if int(steps) != steps or steps < 0:
             raise ValueError(f"steps must be a non-negative integer, got {steps!r}")
         if self.operations.integrator is None:
             raise RuntimeError("set sim.operations.integrator before run()")
+        if check_every is None:
+            check_every = 100 if self.device.is_gpu else 1
+        if int(check_every) != check_every or check_every < 1:
+            raise ValueError(f"check_every must be a positive integer, got {check_every!r}")
         if self.timestep == 0:
             self._write()
-        for _ in range(int(steps)):
-            self._update()
-            self._integrate()
-            self._write()
-        self.flush()
+        try:
+            for i in range(1, int(steps) + 1):
+                self._update()
+                self._integrate()
+                if i % check_every == 0 or i == steps:
+                    self.check_finite()
+                    if progress is not None:
+                        progress(i, int(steps))
+                self._write()
+        finally:
+            self.flush()
+
+    def check_finite(self):
+        """Raise FloatingPointError naming the first vertex with a non-finite position (or the
+        integrator's own error, such as an exploding step flagged on the GPU)."""
+        if self.operations.integrator is not None:
+            self.operations.integrator.check(self)
+        xp = self.device.xp
+        pos = self._state.positions
+        if not bool(xp.isfinite(pos).all()):
+            v = int(self.device.to_numpy(xp.flatnonzero(~xp.isfinite(pos).all(axis=1)))[0])
+            r = int(self._state.vertex_replica_np()[v])
+            raise FloatingPointError(f"non-finite position at timestep {self.timestep}: replica {r}, vertex {v}; "
+                                     "reduce dt or check the forces (the last good frame is on disk)")
 
     def flush(self):
         for w in self.operations.writers:
@@ -252,6 +283,9 @@ class Simulation:
         """
         from .plugins.integrators import FIRE
         self._require_state()
+        if not self.operations.forces:
+            raise RuntimeError("no force in sim.operations.forces; append one, e.g. "
+                               "spherevm.plugins.forces.VertexModel.dimensionless(kr=1, p0=3.8)")
         for name, val in (("force_tol", force_tol), ("energy_tol", energy_tol)):
             if not np.isfinite(val) or val < 0:
                 raise ValueError(f"{name} must be finite and >= 0, got {val!r}")

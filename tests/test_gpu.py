@@ -5,7 +5,7 @@ from gpu_support import requires_gpu
 
 import spherevm as svm
 from spherevm.plugins.forces import VertexModel
-from spherevm.plugins.integrators import FIRE
+from spherevm.plugins.integrators import FIRE, Active, Brownian
 from spherevm.plugins.updaters import T1
 
 pytestmark = [requires_gpu, pytest.mark.gpu]
@@ -74,3 +74,52 @@ def test_state_round_trip_between_devices():
     back = cpu.to("gpu").to("cpu")
     assert np.array_equal(back.positions, cpu.positions)
     assert np.array_equal(back.cell_vertices, cpu.cell_vertices)
+
+
+def _dyn_sim(state, device, integrator, seed=11):
+    sim = svm.Simulation(device=device, seed=seed)
+    sim.state = state
+    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.75))
+    sim.operations.updaters.append(T1())
+    sim.operations.integrator = integrator
+    return sim
+
+
+def test_brownian_with_t1_matches_numpy_for_1000_steps():
+    state = svm.init.random_tiling(128, replicas=2, seed=12)
+    cpu = _dyn_sim(state, "cpu", Brownian(dt=0.01, T=2e-3))
+    gpu = _dyn_sim(state, "gpu", Brownian(dt=0.01, T=2e-3))
+    cpu.run(1000)
+    gpu.run(1000)
+    flips = cpu.log("t1_total_flips")
+    assert flips.sum() > 0 and np.array_equal(gpu.log("t1_total_flips"), flips)
+    assert np.array_equal(gpu.state.cell_vertices.get(), cpu.state.cell_vertices)
+    assert np.abs(gpu.state.positions.get() - cpu.state.positions).max() <= 1e-9
+
+
+@pytest.mark.parametrize("directors", ["cell", "vertex"])
+def test_active_matches_numpy(directors):
+    state = svm.init.random_tiling(100, replicas=2, seed=13)
+    make = lambda: Active(dt=0.01, v0=0.1, Dr=1.0, T=1e-4, directors=directors)  # noqa: E731
+    cpu, gpu = _dyn_sim(state, "cpu", make()), _dyn_sim(state, "gpu", make())
+    cpu.run(300)
+    gpu.run(300)
+    assert np.abs(gpu.state.positions.get() - cpu.state.positions).max() <= 1e-9
+    assert np.abs(gpu.operations.integrator.directors.get() - cpu.operations.integrator.directors).max() <= 1e-9
+
+
+def test_gpu_exploding_step_is_reported_with_names():
+    sim = svm.Simulation(device="gpu")
+    sim.state = svm.init.random_tiling(32, seed=8)
+    sim.operations.integrator = Brownian(dt=10.0, T=1.0, max_step=0.5)
+    with pytest.raises(FloatingPointError, match=r"timestep 0: replica 0, vertex \d+"):
+        sim.run(5, check_every=5)
+
+
+def test_gsd_written_on_gpu_restores_on_cpu(tmp_path):
+    sim = _dyn_sim(svm.init.random_tiling(64, replicas=2, seed=14), "gpu", Brownian(dt=0.01, T=1e-3))
+    sim.operations.writers.append(svm.plugins.writers.GSD(tmp_path / "g.gsd", trigger=50))
+    sim.run(200)
+    back = svm.State.from_gsd(tmp_path / "g.gsd", device="cpu")
+    assert np.array_equal(back.positions, sim.state.positions.get())
+    assert np.array_equal(back.cell_vertices, sim.state.cell_vertices.get())

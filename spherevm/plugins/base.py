@@ -66,10 +66,17 @@ class Force(Operation):
 
 
 class Integrator(Operation):
-    """Moves the vertices one step: ``step(simulation, forces)`` with the summed forces."""
+    """Moves the vertices one step: ``step(simulation, forces)`` with the summed forces.
+
+    ``check(simulation)`` is called every few steps (where the GPU path reads back error flags)
+    and raises if the integration went wrong.
+    """
 
     def step(self, simulation, forces):
         raise NotImplementedError
+
+    def check(self, simulation):
+        pass
 
 
 class Updater(Operation):

@@ -1,4 +1,5 @@
 """Built-in integrators."""
+from .brownian import Active, Brownian
 from .fire import FIRE
 
-__all__ = ["FIRE"]
+__all__ = ["Active", "Brownian", "FIRE"]

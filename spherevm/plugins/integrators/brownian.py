@@ -1,0 +1,209 @@
+"""Overdamped Brownian and self-propelled (active) dynamics on the constraint surface."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ... import random as rng
+from ...device import launch, load_module
+from ..base import Integrator
+
+_KERNELS = Path(__file__).with_suffix(".cu")
+STREAM_DIRECTOR_INIT = 2   # Philox stream of the initial director angles (timestep 0)
+
+
+def _nonneg(name, value):
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim > 1 or not np.all(np.isfinite(arr)) or np.any(arr < 0):
+        raise ValueError(f"{name} must be finite and >= 0 (a scalar or one value per replica), got {value!r}")
+    return arr
+
+
+def _positive(name, value):
+    v = float(value)
+    if not np.isfinite(v) or v <= 0:
+        raise ValueError(f"{name} must be positive and finite, got {value!r}")
+    return v
+
+
+class Brownian(Integrator):
+    """Overdamped Brownian dynamics, the paper's Methods:
+
+    ``dr = P_T(r, mu dt F + eta)``, ``<eta_a eta_b> = 2 mu T dt delta_ab`` per Cartesian component,
+    then ``r <- P_N(r + dr)``. ``T`` may be one value per replica (a temperature series in one
+    ensemble). Noise is Philox (``spherevm.random``) keyed by (simulation seed, stream 0) and
+    counted by (timestep, global vertex id), so CPU and GPU draw the same numbers.
+
+    ``max_step`` (units of sqrt(<A>)) guards against exploding steps: a larger displacement of any
+    vertex stops the run with the step, replica and vertex named.
+    """
+
+    def __init__(self, dt, T=0.0, mu=1.0, max_step=0.5):
+        super().__init__()
+        self.dt = _positive("dt", dt)
+        self.T = _nonneg("T", T)
+        self.mu = float(_nonneg("mu", mu))
+        self.max_step = _positive("max_step", max_step)
+
+    def attach(self, simulation):
+        super().attach(simulation)
+        n = simulation.state.n_replicas
+        if self.T.ndim == 1 and len(self.T) != n:
+            raise ValueError(f"T has {len(self.T)} values but the state has {n} replicas")
+
+    def _noise_amplitude(self, state):
+        """sqrt(2 mu T dt) per vertex."""
+        T = np.broadcast_to(self.T, (state.n_replicas,))
+        return state.device.asarray(np.sqrt(2.0 * self.mu * T * self.dt))[state.vertex_replica]
+
+    def _drift(self, simulation, forces):
+        """Deterministic velocity of every vertex: mu F (Active adds self-propulsion)."""
+        return self.mu * forces
+
+    _mode = 0          # CUDA kernel: 0 no self-propulsion, 1 cell directors, 2 vertex directors
+
+    def step(self, simulation, forces):
+        state = simulation.state
+        if state.device.is_gpu:
+            return self._step_gpu(simulation, forces)
+        xp = state.device.xp
+        con = state.constraint
+        amp = self._noise_amplitude(state)
+        eta = xp.asarray(rng.normal(simulation.seed, rng.STREAM_BROWNIAN, simulation.timestep,
+                                    np.arange(state.n_vertices), 3))
+        dr = con.project_tangent(state.positions, self.dt * self._drift(simulation, forces) + amp[:, None] * eta)
+        self._guard(simulation, dr)
+        state.positions = con.project_normal(state.positions + dr, state.radius[state.vertex_replica])
+        self._after_move(simulation)
+        simulation.state_changed()
+
+    def _after_move(self, simulation):
+        pass
+
+    def _step_gpu(self, simulation, forces):
+        """One kernel per step (brownian.cu), plus one per cell for cell directors."""
+        import cupy as cp
+        state = simulation.state
+        if getattr(self, "_error", None) is None:
+            self._error = cp.full(1, np.iinfo(np.uint64).max, dtype=cp.uint64)
+        module = load_module(_KERNELS)
+        unit = state.device.asarray(np.sqrt(state.mean_cell_area))
+        amp = state.device.asarray(np.sqrt(2.0 * self.mu * np.broadcast_to(self.T, (state.n_replicas,)) * self.dt))
+        directors = self.directors if self._mode else cp.zeros((1, 3))
+        rot_amp = float(np.sqrt(2.0 * self.Dr * self.dt)) if self._mode else 0.0
+        launch(module.get_function("brownian_move"), state.n_vertices,
+               (state.positions, forces, state.vertex_replica, state.vertex_cells, state.radius, amp, unit,
+                directors, np.int32(self._mode), np.float64(self.mu), np.float64(self.dt),
+                np.float64(getattr(self, "v0", 0.0)), np.float64(rot_amp), np.float64(self.max_step),
+                np.uint32(simulation.seed), np.uint64(simulation.timestep), np.int32(state.n_vertices),
+                self._error))
+        if self._mode == 1:
+            launch(module.get_function("active_cell_directors"), state.n_cells,
+                   (state.positions, state.cell_vertices, state.cell_sides, self.directors, np.int32(state.n_cells),
+                    np.int32(state.max_sides), np.float64(rot_amp), np.uint32(simulation.seed),
+                    np.uint64(simulation.timestep)))
+        simulation.state_changed()
+
+    def check(self, simulation):
+        """Raise for the earliest exploding step the GPU kernel flagged (one small read-back)."""
+        err = getattr(self, "_error", None)
+        if err is None:
+            return
+        code = int(err.get()[0])
+        if code != np.iinfo(np.uint64).max:
+            step, v = code >> 32, code & 0xFFFFFFFF
+            r = int(simulation.state.vertex_replica_np()[v])
+            raise FloatingPointError(
+                f"exploding step at timestep {step}: replica {r}, vertex {v} moved more than max_step="
+                f"{self.max_step} sqrt(<A>) or became NaN; reduce dt (now {self.dt}) or check the forces")
+
+    def _guard(self, simulation, dr):
+        state = simulation.state
+        xp = state.device.xp
+        scale = xp.asarray(np.sqrt(state.mean_cell_area))[state.vertex_replica]
+        step = xp.sqrt((dr * dr).sum(axis=1)) / scale
+        bad = ~(step <= self.max_step)          # catches NaN too
+        if bool(bad.any()):
+            v = int(state.device.to_numpy(xp.flatnonzero(bad))[0])
+            r = int(state.vertex_replica_np()[v])
+            raise FloatingPointError(
+                f"exploding step at timestep {simulation.timestep}: replica {r}, vertex {v} would move "
+                f"{float(step[v]):.3g} sqrt(<A>) (max_step={self.max_step}); reduce dt (now {self.dt}) or "
+                "check the forces for NaN")
+
+    def __repr__(self):
+        return f"{type(self).__name__}(dt={self.dt}, T={self.T}, mu={self.mu})"
+
+
+class Active(Brownian):
+    """Self-propelled vertex-model dynamics: velocity ``mu F + v0 p`` plus optional noise T.
+
+    ``directors="cell"`` (default, the active vertex model of the planar GPU code): every cell
+    carries a unit director in the tangent plane at its centroid, and a vertex moves with the mean
+    of its three cells' directors, projected on its own tangent plane. ``directors="vertex"``:
+    each vertex carries its own director.
+
+    Each step a director rotates about the local surface normal by a Gaussian angle of variance
+    ``2 Dr dt`` (Philox stream 1, counted by cell or vertex id). Transport: after the vertices
+    move, each director is projected on the tangent plane at its new base point (the cell centroid
+    or the vertex) and renormalised; this is parallel transport to first order in the step.
+    Initial directors are uniform random angles in the tangent plane (stream 2, timestep 0).
+    """
+
+    def __init__(self, dt, v0, Dr, mu=1.0, T=0.0, directors="cell", max_step=0.5):
+        super().__init__(dt, T=T, mu=mu, max_step=max_step)
+        self.v0 = float(_nonneg("v0", v0))
+        self.Dr = float(_nonneg("Dr", Dr))
+        if directors not in ("cell", "vertex"):
+            raise ValueError(f"directors must be 'cell' or 'vertex', got {directors!r}")
+        self.mode = directors
+        self._mode = 1 if directors == "cell" else 2
+        self.directors = None
+
+    def _bases(self, state):
+        """Unit normals at the directors' base points: cell centroids or vertices."""
+        con = state.constraint
+        if self.mode == "cell":
+            return con.cell_geometry(state).apex
+        return con.normal(state.positions)
+
+    def attach(self, simulation):
+        super().attach(simulation)
+        state = simulation.state
+        xp = state.device.xp
+        normal = state.device.to_numpy(self._bases(state))
+        n = len(normal)
+        angle = rng.TWO_PI * rng.uniform(simulation.seed, STREAM_DIRECTOR_INIT, 0, np.arange(n), 1)[:, 0]
+        e1 = np.cross(normal, np.where(np.abs(normal[:, [0]]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
+        e1 /= np.linalg.norm(e1, axis=1)[:, None]
+        e2 = np.cross(normal, e1)
+        self.directors = xp.asarray(np.cos(angle)[:, None] * e1 + np.sin(angle)[:, None] * e2)
+
+    def _drift(self, simulation, forces):
+        state = simulation.state
+        p = self.directors
+        if self.mode == "cell":
+            p = p[state.vertex_cells].mean(axis=1)
+            p = state.constraint.project_tangent(state.positions, p)
+        return self.mu * forces + self.v0 * p
+
+    def _after_move(self, simulation):
+        state = simulation.state
+        xp = state.device.xp
+        normal = self._bases(state)
+        d = self.directors - (self.directors * normal).sum(axis=1)[:, None] * normal
+        d = d / xp.sqrt((d * d).sum(axis=1))[:, None]
+        if self.Dr > 0:
+            theta = np.sqrt(2.0 * self.Dr * self.dt) * xp.asarray(
+                rng.normal(simulation.seed, rng.STREAM_ACTIVE, simulation.timestep, np.arange(len(d)), 1))
+            d = xp.cos(theta) * d + xp.sin(theta) * xp.cross(normal, d)
+        self.directors = d
+
+    @property
+    def loggables(self):
+        return {}
+
+    def __repr__(self):
+        return (f"Active(dt={self.dt}, v0={self.v0}, Dr={self.Dr}, mu={self.mu}, T={self.T}, "
+                f"directors={self.mode!r})")

@@ -10,7 +10,7 @@ from ...device import launch, load_module
 from ..base import Integrator
 
 _KERNELS = Path(__file__).with_suffix(".cu")
-STREAM_DIRECTOR_INIT = 2   # Philox stream of the initial director angles (timestep 0)
+
 
 
 def _nonneg(name, value):
@@ -174,7 +174,7 @@ class Active(Brownian):
         xp = state.device.xp
         normal = state.device.to_numpy(self._bases(state))
         n = len(normal)
-        angle = rng.TWO_PI * rng.uniform(simulation.seed, STREAM_DIRECTOR_INIT, 0, np.arange(n), 1)[:, 0]
+        angle = rng.TWO_PI * rng.uniform(simulation.seed, rng.STREAM_DIRECTOR_INIT, 0, np.arange(n), 1)[:, 0]
         e1 = np.cross(normal, np.where(np.abs(normal[:, [0]]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
         e1 /= np.linalg.norm(e1, axis=1)[:, None]
         e2 = np.cross(normal, e1)

@@ -3,8 +3,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from pathlib import Path
+
 from ... import topology
+from ...device import launch, load_module
 from ..base import Updater
+
+_KERNELS = Path(__file__).with_suffix(".cu")
+_CAND_INTS, _LOG_INTS = 12, 6
 
 PRESETS = {
     # The rules of the paper's own code: threshold 0.1, new edge twice the old length.
@@ -83,6 +89,7 @@ class T1(Updater):
 
     def attach(self, simulation):
         super().attach(simulation)
+        self._gpu = None
         self._reset_counters(simulation.state.n_replicas)
 
     # ------------------------------------------------------------------ detection
@@ -120,6 +127,8 @@ class T1(Updater):
     # ------------------------------------------------------------------ the pass
     def update(self, simulation, timestep):
         state = simulation.state
+        if state.device.is_gpu:
+            return self._update_gpu(simulation)
         n_rep = state.n_replicas
         self.last_flips = np.zeros(n_rep, dtype=np.int64)
         self.last_refused = np.zeros(n_rep, dtype=np.int64)
@@ -149,6 +158,102 @@ class T1(Updater):
             integrator.reset_vertices(state.device.asarray(moved))
         simulation.state_changed()
 
+    # ------------------------------------------------------------------ the pass on the GPU
+    def _gpu_buffers(self, state):
+        import cupy as cp
+        buf = getattr(self, "_gpu", None)
+        if buf is None or buf["n_cells"] != state.n_cells or buf["state"] is not state:
+            cap = max(1024, state.n_vertices // 4)
+            buf = dict(state=state, n_cells=state.n_cells, capacity=cap,
+                       claim=cp.empty(state.n_cells, dtype=cp.int32), counters=cp.zeros(3, dtype=cp.int32),
+                       cand=cp.empty((cap, _CAND_INTS), dtype=cp.int32), cand_len=cp.empty(cap),
+                       log=cp.empty((cap, _LOG_INTS), dtype=cp.int32), flips=cp.zeros(state.n_replicas, cp.int32),
+                       refused=cp.zeros(state.n_replicas, cp.int32), active_host=None, active=None, passes=0,
+                       total_flips=cp.zeros(state.n_replicas, cp.int64),
+                       total_refused=cp.zeros(state.n_replicas, cp.int64))
+            self._gpu = buf
+        return buf
+
+    def _update_gpu(self, simulation):
+        """Detect, one small read-back (candidate count, full rows), apply: see t1.cu."""
+        import cupy as cp
+        state = simulation.state
+        buf = self._gpu_buffers(state)
+        module = load_module(_KERNELS)
+        active = simulation.active_replicas
+        if buf["active_host"] is None or not np.array_equal(buf["active_host"], active):
+            buf["active_host"] = active.copy()
+            buf["active"] = cp.asarray(active)
+        unit = np.sqrt(state.mean_cell_area)
+        threshold = cp.asarray(self.threshold * unit)
+        buf["flips"].fill(0)
+        buf["refused"].fill(0)
+        while True:
+            buf["claim"].fill(np.iinfo(np.int32).max)
+            buf["counters"][:2] = 0
+            launch(module.get_function("t1_detect"), state.n_vertices,
+                   (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_sides,
+                    state.vertex_replica, state.radius, threshold, buf["active"], np.int32(state.n_vertices),
+                    np.int32(state.max_sides), buf["claim"], buf["refused"], buf["counters"], buf["cand"],
+                    buf["cand_len"], np.int32(buf["capacity"])))
+            n_cand, widen, n_log = (int(x) for x in buf["counters"].get())   # the one read-back
+            if n_cand <= buf["capacity"]:
+                break
+            cap = 2 * n_cand   # rare: more candidates than room; grow and redo the pass
+            self._flush_log(state)
+            buf.update(capacity=cap, cand=cp.empty((cap, _CAND_INTS), cp.int32), cand_len=cp.empty(cap),
+                       log=cp.empty((cap, _LOG_INTS), cp.int32))
+            buf["refused"].fill(0)
+        buf["total_refused"] += buf["refused"]
+        if n_cand == 0:
+            return
+        if widen:
+            pad = cp.full((state.n_cells, 1), -1, dtype=cp.int32)
+            state.cell_vertices = cp.ascontiguousarray(cp.concatenate([state.cell_vertices, pad], axis=1))
+        if n_log + n_cand > len(buf["log"]):
+            self._flush_log(state)
+        if self.length_factor is not None:
+            new_length = cp.full(state.n_replicas, -1.0)
+        else:
+            new_length = cp.asarray(self.new_length * unit)
+        integrator = simulation.operations.integrator
+        velocities = getattr(integrator, "velocities", None) if self.reset_velocities else None
+        buf["passes"] += 1
+        launch(module.get_function("t1_apply"), n_cand,
+               (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_vertices, state.cell_sides,
+                buf["claim"], buf["cand"], buf["cand_len"], np.int32(n_cand), np.int32(state.max_sides),
+                state.radius, new_length, np.float64(self.length_factor or 0.0), buf["flips"],
+                velocities if velocities is not None else np.intp(0), buf["counters"], buf["log"],
+                np.int32(buf["passes"])))
+        buf["total_flips"] += buf["flips"]
+        simulation.state_changed()
+
+    def _flush_log(self, state):
+        """Replay the device's flip log, pass by pass, into the flip-back bookkeeping."""
+        buf = getattr(self, "_gpu", None)
+        if buf is None:
+            return
+        n = int(buf["counters"][2].get())
+        if n == 0:
+            return
+        log = buf["log"][:n].get()
+        buf["counters"][2] = 0
+        order = np.argsort(log[:, 0], kind="stable")
+        log = log[order]
+        for pass_rows in np.split(log, np.flatnonzero(np.diff(log[:, 0])) + 1):  # passes, not flips
+            self._count_flip_backs(state, pass_rows[:, 1:5].astype(np.int64), pass_rows[:, 5])
+
+    def _sync_counters(self):
+        """Bring the GPU counters to the host attributes (for logging and halting)."""
+        buf = getattr(self, "_gpu", None)
+        if buf is None:
+            return
+        self._flush_log(buf["state"])
+        self.last_flips = buf["flips"].get().astype(np.int64)
+        self.last_refused = buf["refused"].get().astype(np.int64)
+        self.total_flips = buf["total_flips"].get()
+        self.total_refused = buf["total_refused"].get()
+
     def _count_flip_backs(self, state, cells, rep):
         """Count re-joins: a flip making two cells neighbours again that an earlier flip separated."""
         n = state.n_cells
@@ -172,21 +277,26 @@ class T1(Updater):
     # ------------------------------------------------------------------ reporting
     def halted(self):
         """Per-replica mask of replicas caught flipping back and forth, for Simulation.minimize."""
+        self._sync_counters()
         return self.flip_backs >= self.max_flip_backs
 
     halt_reason = "t1_oscillation"
 
     def reset_halted(self):
+        self._sync_counters()
         self.flip_backs[:] = 0
         self._forget_pairs()
 
     @property
     def loggables(self):
-        return {"t1_flips": lambda s: self.last_flips.copy(),
-                "t1_refused": lambda s: self.last_refused.copy(),
-                "t1_total_flips": lambda s: self.total_flips.copy(),
-                "t1_total_refused": lambda s: self.total_refused.copy(),
-                "t1_flip_backs": lambda s: self.flip_backs.copy()}
+        def read(name):
+            def value(sim):
+                self._sync_counters()
+                return getattr(self, name).copy()
+            return value
+        return {"t1_flips": read("last_flips"), "t1_refused": read("last_refused"),
+                "t1_total_flips": read("total_flips"), "t1_total_refused": read("total_refused"),
+                "t1_flip_backs": read("flip_backs")}
 
     def __repr__(self):
         length = f"length_factor={self.length_factor}" if self.length_factor else f"new_length={self.new_length}"

@@ -1,0 +1,135 @@
+// T1 neighbour exchanges on the device: the CUDA path of t1.py, same rules and same geometry.
+// A pass is two kernels: t1_detect (one thread per vertex, its edges to higher-numbered
+// neighbours) lists the candidates and lets each claim its four cells (lowest edge index wins);
+// after one small read-back of the counters, t1_apply (one thread per candidate) flips the
+// winners. Winners touch disjoint cells and vertices, so they need no locks.
+#include "geometry/sphere.cuh"
+
+#define CAND_INTS 12   // u, k, v, a, b, c, d, C1, C2, C3, C4, replica
+#define LOG_INTS 6     // pass, C1, C2, C3, C4, replica
+
+// counters: [0] candidates, [1] a C3/C4 row is full (widen the table), [2] log entries
+extern "C" __global__ void t1_detect(
+    const double* __restrict__ pos, const int* __restrict__ vn, const int* __restrict__ vc,
+    const int* __restrict__ sides, const int* __restrict__ vertex_replica, const double* __restrict__ radius,
+    const double* __restrict__ threshold, const bool* __restrict__ active, int n_vertices, int max_sides,
+    int* __restrict__ claim, int* __restrict__ refused, int* __restrict__ counters, int* __restrict__ cand,
+    double* __restrict__ cand_len, int capacity)
+{
+    int u = blockIdx.x * blockDim.x + threadIdx.x;
+    if (u >= n_vertices) return;
+    int r = vertex_replica[u];
+    if (!active[r]) return;
+    vec3 xu = normalize3(load3(pos, u));
+    for (int k = 0; k < 3; ++k) {
+        int v = vn[3 * u + k];
+        if (v <= u) continue;
+        double L = radius[r] * geodesic_length(xu, normalize3(load3(pos, v)));
+        if (!(L < threshold[r])) continue;
+        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        int a = vn[3 * u + k1], b = vn[3 * u + k2];
+        int C1 = vc[3 * u + k], C3 = vc[3 * u + k1], C2 = vc[3 * u + k2];
+        int j = vn[3 * v] == u ? 0 : (vn[3 * v + 1] == u ? 1 : 2);
+        int c = vn[3 * v + (j + 1) % 3], d = vn[3 * v + (j + 2) % 3];
+        int C4 = vc[3 * v + (j + 1) % 3];
+        bool distinct = C1 != C2 && C1 != C3 && C1 != C4 && C2 != C3 && C2 != C4 && C3 != C4;
+        if (sides[C1] <= 3 || sides[C2] <= 3 || !distinct) {
+            atomicAdd(refused + r, 1);
+            continue;
+        }
+        int index = 3 * u + k;
+        atomicMin(claim + C1, index);
+        atomicMin(claim + C2, index);
+        atomicMin(claim + C3, index);
+        atomicMin(claim + C4, index);
+        if (sides[C3] >= max_sides || sides[C4] >= max_sides) counters[1] = 1;
+        int i = atomicAdd(counters, 1);
+        if (i < capacity) {
+            int* e = cand + (long)i * CAND_INTS;
+            e[0] = u; e[1] = k; e[2] = v; e[3] = a; e[4] = b; e[5] = c; e[6] = d;
+            e[7] = C1; e[8] = C2; e[9] = C3; e[10] = C4; e[11] = r;
+            cand_len[i] = L;
+        }
+    }
+}
+
+__device__ void replace_neighbor(int* vn, int w, int old_v, int new_v) {
+    for (int s = 0; s < 3; ++s)
+        if (vn[3 * w + s] == old_v) { vn[3 * w + s] = new_v; return; }
+}
+
+__device__ void remove_from_row(int* row, int* n, int x) {
+    int p = 0;
+    while (row[p] != x) ++p;
+    for (int j = p; j < *n - 1; ++j) row[j] = row[j + 1];
+    row[*n - 1] = -1;
+    *n -= 1;
+}
+
+__device__ void split_in_row(int* row, int* n, int x, int first, int second) {
+    int p = 0;
+    while (row[p] != x) ++p;
+    for (int j = *n; j > p + 1; --j) row[j] = row[j - 1];
+    row[p] = first;
+    row[p + 1] = second;
+    *n += 1;
+}
+
+// new_length[r] > 0: absolute new length per replica; else length_factor times the old length.
+extern "C" __global__ void t1_apply(
+    double* __restrict__ pos, int* __restrict__ vn, int* __restrict__ vc, int* __restrict__ cell_vertices,
+    int* __restrict__ sides, const int* __restrict__ claim, const int* __restrict__ cand,
+    const double* __restrict__ cand_len, int n_cand, int max_sides, const double* __restrict__ radius,
+    const double* __restrict__ new_length, double length_factor, int* __restrict__ flips,
+    double* __restrict__ velocities, int* __restrict__ counters, int* __restrict__ log, int pass_id)
+{
+    int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n_cand) return;
+    const int* e = cand + (long)i * CAND_INTS;
+    int u = e[0], k = e[1], v = e[2], a = e[3], b = e[4], c = e[5], d = e[6];
+    int C1 = e[7], C2 = e[8], C3 = e[9], C4 = e[10], r = e[11];
+    int index = 3 * u + k;
+    if (claim[C1] != index || claim[C2] != index || claim[C3] != index || claim[C4] != index) return;
+    if (sides[C3] >= max_sides || sides[C4] >= max_sides) return;   // cannot happen: the host widened
+    int X = v, Y = u;   // counter-clockwise rotation: v ends up on the C1 side
+    vn[3 * X] = Y; vn[3 * X + 1] = d; vn[3 * X + 2] = a;
+    vc[3 * X] = C4; vc[3 * X + 1] = C1; vc[3 * X + 2] = C3;
+    vn[3 * Y] = X; vn[3 * Y + 1] = b; vn[3 * Y + 2] = c;
+    vc[3 * Y] = C3; vc[3 * Y + 1] = C2; vc[3 * Y + 2] = C4;
+    replace_neighbor(vn, a, u, X);
+    replace_neighbor(vn, c, v, Y);
+    int n;
+    n = sides[C1]; remove_from_row(cell_vertices + (long)C1 * max_sides, &n, Y); sides[C1] = n;
+    n = sides[C2]; remove_from_row(cell_vertices + (long)C2 * max_sides, &n, X); sides[C2] = n;
+    n = sides[C3]; split_in_row(cell_vertices + (long)C3 * max_sides, &n, u, Y, X); sides[C3] = n;
+    n = sides[C4]; split_in_row(cell_vertices + (long)C4 * max_sides, &n, v, X, Y); sides[C4] = n;
+    // geometry: rotate the edge about the normal at its midpoint, exact geodesic offsets
+    double R = radius[r];
+    vec3 pu = load3(pos, u), pv = load3(pos, v);
+    vec3 mid = R * normalize3(0.5 * (pu + pv));
+    vec3 nrm = normalize3(mid);
+    vec3 w = pv - pu;
+    vec3 along = w - dot3(w, nrm) * nrm;
+    double len = norm3(along);
+    vec3 perp;
+    if (len <= 1e-12 * R) {
+        vec3 s = 0.5 * (load3(pos, a) + load3(pos, d)) - 0.5 * (load3(pos, b) + load3(pos, c));
+        perp = s - dot3(s, nrm) * nrm;
+    } else {
+        perp = cross3(nrm, v3(along.x / len, along.y / len, along.z / len));
+    }
+    perp = normalize3(perp);
+    double full = new_length[r] > 0.0 ? new_length[r] : length_factor * cand_len[i];
+    double phi = 0.5 * full / R;
+    vec3 m = normalize3(mid);
+    store3(pos, X, R * (cos(phi) * m + sin(phi) * perp));
+    store3(pos, Y, R * (cos(phi) * m + sin(phi) * (-perp)));
+    atomicAdd(flips + r, 1);
+    if (velocities) {
+        store3(velocities, u, v3(0.0, 0.0, 0.0));
+        store3(velocities, v, v3(0.0, 0.0, 0.0));
+    }
+    int slot = atomicAdd(counters + 2, 1);
+    int* entry = log + (long)slot * LOG_INTS;
+    entry[0] = pass_id; entry[1] = C1; entry[2] = C2; entry[3] = C3; entry[4] = C4; entry[5] = r;
+}

@@ -62,14 +62,30 @@ def fire_iteration(sim):
     sim.operations.integrator.step(sim, forces)
 
 
+def brownian_sim(n_cells, replicas, device):
+    sim = svm.Simulation(device=device, seed=1)
+    sim.state = svm.init.random_tiling(n_cells, replicas=replicas, seed=1)
+    sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=3.75))
+    sim.operations.updaters.append(svm.plugins.updaters.T1())
+    sim.operations.integrator = svm.plugins.integrators.Brownian(dt=0.01, T=5e-4)
+    return sim
+
+
+def brownian_step(sim):
+    sim._update()
+    sim._integrate()
+
+
 def measure(n_cells, replicas, gpu, numpy_max, bw):
     sim = build(n_cells, replicas, gpu)
     state = sim.state
     force = sim.operations.forces[0]
     t_force = median_time(lambda: force.compute(state), gpu)
     t_fire = median_time(lambda: fire_iteration(sim), gpu)
+    bsim = brownian_sim(n_cells, replicas, gpu)
+    t_brown = median_time(lambda: brownian_step(bsim), gpu, repeat=21)
     row = dict(system=f"{replicas} x {n_cells}" if replicas > 1 else f"{n_cells:.0e}",
-               cells=n_cells * replicas, force_ms=1e3 * t_force, fire_ms=1e3 * t_fire,
+               cells=n_cells * replicas, force_ms=1e3 * t_force, fire_ms=1e3 * t_fire, brown_ms=1e3 * t_brown,
                force_gbs=force_floor_bytes(state) / t_force / 1e9, fire_gbs=fire_floor_bytes(state) / t_fire / 1e9)
     row["fire_frac_bw"] = row["fire_gbs"] / bw
     if n_cells * replicas <= numpy_max:
@@ -79,6 +95,8 @@ def measure(n_cells, replicas, gpu, numpy_max, bw):
         reps = 3 if n_cells * replicas > 1e5 else 7
         row["numpy_force_ms"] = 1e3 * median_time(lambda: cf.compute(cs), None, repeat=reps, warmup=1)
         row["numpy_fire_ms"] = 1e3 * median_time(lambda: fire_iteration(cpu), None, repeat=reps, warmup=1)
+        bcpu = brownian_sim(n_cells, replicas, "cpu")
+        row["numpy_brown_ms"] = 1e3 * median_time(lambda: brownian_step(bcpu), None, repeat=reps, warmup=1)
     return row
 
 
@@ -96,7 +114,7 @@ def main(argv=None):
     print(f"# device-to-device copy bandwidth: {bw:.0f} GB/s; launches per step: force 2, FIRE iteration 6 "
           f"(2 force + 3 FIRE + 1 memset)")
     head = (f"{'system':>12} {'force ms':>9} {'GB/s':>6} {'FIRE it ms':>11} {'GB/s':>6} {'of copy':>8} "
-            f"{'NumPy force':>12} {'NumPy FIRE':>11} {'speed-up':>9}")
+            f"{'Brown+T1 ms':>12} {'NumPy force':>12} {'NumPy FIRE':>11} {'NumPy Brown':>12} {'speed-up':>9}")
     print(head)
     systems = [(int(n), 1) for n in args.cells]
     for e in args.ensembles:
@@ -106,9 +124,10 @@ def main(argv=None):
         row = measure(n, r, gpu, args.numpy_max, bw)
         npf = row.get("numpy_force_ms", np.nan)
         npi = row.get("numpy_fire_ms", np.nan)
+        npb = row.get("numpy_brown_ms", np.nan)
         print(f"{row['system']:>12} {row['force_ms']:9.4f} {row['force_gbs']:6.0f} {row['fire_ms']:11.4f} "
-              f"{row['fire_gbs']:6.0f} {row['fire_frac_bw']:8.2f} {npf:12.3f} {npi:11.3f} "
-              f"{npi / row['fire_ms']:9.1f}", flush=True)
+              f"{row['fire_gbs']:6.0f} {row['fire_frac_bw']:8.2f} {row['brown_ms']:12.4f} {npf:12.3f} {npi:11.3f} "
+              f"{npb:12.3f} {npi / row['fire_ms']:9.1f}", flush=True)
 
 
 if __name__ == "__main__":

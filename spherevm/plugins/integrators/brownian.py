@@ -88,8 +88,12 @@ class Brownian(Integrator):
         if getattr(self, "_error", None) is None:
             self._error = cp.full(1, np.iinfo(np.uint64).max, dtype=cp.uint64)
         module = load_module(_KERNELS)
-        unit = state.device.asarray(np.sqrt(state.mean_cell_area))
-        amp = state.device.asarray(np.sqrt(2.0 * self.mu * np.broadcast_to(self.T, (state.n_replicas,)) * self.dt))
+        if getattr(self, "_per_replica_for", None) is not state:   # per-replica constants, uploaded once
+            self._unit = state.device.asarray(np.sqrt(state.mean_cell_area))
+            T = np.broadcast_to(self.T, (state.n_replicas,))
+            self._amp = state.device.asarray(np.sqrt(2.0 * self.mu * T * self.dt))
+            self._per_replica_for = state
+        unit, amp = self._unit, self._amp
         directors = self.directors if self._mode else cp.zeros((1, 3))
         rot_amp = float(np.sqrt(2.0 * self.Dr * self.dt)) if self._mode else 0.0
         launch(module.get_function("brownian_move"), state.n_vertices,

@@ -184,8 +184,12 @@ class T1(Updater):
         if buf["active_host"] is None or not np.array_equal(buf["active_host"], active):
             buf["active_host"] = active.copy()
             buf["active"] = cp.asarray(active)
-        unit = np.sqrt(state.mean_cell_area)
-        threshold = cp.asarray(self.threshold * unit)
+        if "threshold" not in buf:   # per-replica lengths, uploaded once
+            unit = np.sqrt(state.mean_cell_area)
+            buf["threshold"] = cp.asarray(self.threshold * unit)
+            buf["new_length"] = cp.asarray(self.new_length * unit if self.length_factor is None
+                                           else np.full(state.n_replicas, -1.0))
+        threshold = buf["threshold"]
         buf["flips"].fill(0)
         buf["refused"].fill(0)
         while True:
@@ -212,10 +216,7 @@ class T1(Updater):
             state.cell_vertices = cp.ascontiguousarray(cp.concatenate([state.cell_vertices, pad], axis=1))
         if n_log + n_cand > len(buf["log"]):
             self._flush_log(state)
-        if self.length_factor is not None:
-            new_length = cp.full(state.n_replicas, -1.0)
-        else:
-            new_length = cp.asarray(self.new_length * unit)
+        new_length = buf["new_length"]
         integrator = simulation.operations.integrator
         velocities = getattr(integrator, "velocities", None) if self.reset_velocities else None
         buf["passes"] += 1

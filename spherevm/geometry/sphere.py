@@ -134,3 +134,171 @@ def regular_polygon(n_sides: int, circumradius_angle: float, radius: float = 1.0
     area = radius * radius * (n * alpha - (n - 2) * np.pi)
     side = 2.0 * half_side * radius
     return radius * verts, side, n * side, area
+
+
+# ---------------------------------------------------------------------------------------------
+# Alternative routes (documented in docs/numerics.md and measured by benchmarks/numerics_table.py).
+# The routes above are the ones the constraints and kernels use; the functions below are the
+# paper's textbook formulas, kept to show where they lose accuracy, and "difference" forms that
+# keep full relative accuracy where the defaults keep only absolute accuracy.
+# ---------------------------------------------------------------------------------------------
+
+def geodesic_length_difference(a, b):
+    """``atan2(|a x (b - a)|, a.b)``: the paper's atan2 route with the cross product taken of ``b - a``.
+
+    ``a x (b - a) == a x b`` exactly, but ``b - a`` is computed exactly for nearby points
+    (Sterbenz), so the cross product does not cancel: a few ulp relative error at every angle.
+    Unlike the default half-angle form it does not assume ``|a| == |b| == 1`` (the result is the
+    angle between the two directions), so it stays accurate below 1e-9 where the float64 norms of
+    the inputs (off 1 by ~1e-16) enter the chord ``|a - b|``.
+    """
+    xp = array_module(a, b)
+    return xp.arctan2(_norm(_cross(a, b - a)), _dot(a, b))
+
+
+def geodesic_length_gradient_acos(a, b):
+    """The naive gradient of ``acos(a.b)`` with respect to ``a``, projected on the tangent plane.
+
+    ``-(b - (a.b) a) / sqrt(1 - (a.b)^2)``: the Cartesian form of the paper's spherical-coordinate
+    expressions for ``d_a``. Both the numerator and ``1 - (a.b)^2`` cancel for short arcs (and for
+    nearly antipodal points); it returns NaN once ``a.b`` rounds to +-1 (arcs below ~1e-8).
+    Kept only as the reference for what the default avoids.
+    """
+    xp = array_module(a, b)
+    c = _dot(a, b)
+    t = b - c[..., None] * a
+    return -t / xp.sqrt(1.0 - c * c)[..., None]
+
+
+def geodesic_length_gradient_robust(a, b):
+    """Like :func:`geodesic_length_gradient`, also accurate for nearly antipodal points.
+
+    The tangent toward ``b`` is built from ``b - a`` when ``a.b >= 0`` (as the default does) and
+    from ``b + a`` otherwise: ``b + a`` is exact near the antipode, where ``b - a ~ -2a`` leaves a
+    tangent of size ``pi - theta`` after cancelling against its radial part. Coincident points give
+    0 (the minimal-norm subgradient), exactly antipodal points give an arbitrary unit tangent or 0.
+    """
+    xp = array_module(a, b)
+    near = (_dot(a, b) >= 0)[..., None]
+    d = xp.where(near, b - a, b + a)
+    t = d - _dot(d, a)[..., None] * a
+    n = _norm(t)
+    return -t / xp.where(n > 0, n, 1.0)[..., None]
+
+
+def _triple_difference(a, b, c):
+    # a.(b x c) == a.((b - a) x (c - a)): no cancellation for small triangles
+    return _dot(a, _cross(b - a, c - a))
+
+
+def triangle_angles(a, b, c):
+    """Interior angles at ``a``, ``b``, ``c`` of the geodesic triangle, by the spherical law of cosines.
+
+    ``alpha = acos((cos A - cos B cos C) / (sin B sin C))`` with ``A = |bc|``, ``B = |ca|``,
+    ``C = |ab|`` (the paper's formulas; sides from the default length route). Ill conditioned for
+    small triangles: the numerator is a difference of numbers near 1 whose result is of order the
+    squared side lengths.
+    """
+    xp = array_module(a, b, c)
+    A = geodesic_length(b, c)
+    B = geodesic_length(c, a)
+    C = geodesic_length(a, b)
+    cA, cB, cC = xp.cos(A), xp.cos(B), xp.cos(C)
+    sA, sB, sC = xp.sin(A), xp.sin(B), xp.sin(C)
+
+    def angle(num, den):
+        return xp.arccos(xp.clip(num / den, -1.0, 1.0))
+
+    return (angle(cA - cB * cC, sB * sC), angle(cB - cC * cA, sC * sA), angle(cC - cA * cB, sA * sB))
+
+
+def solid_angle_girard(a, b, c):
+    """Signed solid angle by Girard's theorem: angle excess ``alpha + beta + gamma - pi``.
+
+    Angles from :func:`triangle_angles`; the sign is that of ``a.(b x c)`` (so it agrees with
+    :func:`solid_angle`). Loses all accuracy for small triangles: absolute error ~ eps / (side)^2.
+    """
+    xp = array_module(a, b, c)
+    al, be, ga = triangle_angles(a, b, c)
+    return xp.sign(_triple_difference(a, b, c)) * (al + be + ga - np.pi)
+
+
+def solid_angle_lhuilier(a, b, c):
+    """Signed solid angle by L'Huilier's theorem from the three side lengths (default route).
+
+    ``tan(E/4) = sqrt(tan(s/2) tan((s-A)/2) tan((s-B)/2) tan((s-C)/2))``, ``s`` the half perimeter;
+    the sign is that of ``a.(b x c)``. Accurate for small well-shaped triangles; ``s - A`` cancels
+    for needle-like triangles and for triangles whose vertices lie near one great circle (area near
+    2 pi).
+    """
+    xp = array_module(a, b, c)
+    A = geodesic_length(b, c)
+    B = geodesic_length(c, a)
+    C = geodesic_length(a, b)
+    s = 0.5 * (A + B + C)
+    t = xp.tan(0.5 * s) * xp.tan(0.5 * (s - A)) * xp.tan(0.5 * (s - B)) * xp.tan(0.5 * (s - C))
+    return xp.sign(_triple_difference(a, b, c)) * 4.0 * xp.arctan(xp.sqrt(xp.maximum(t, 0.0)))
+
+
+def solid_angle_difference(a, b, c):
+    """:func:`solid_angle` with the numerator taken as ``a.((b - a) x (c - a))``.
+
+    Same value, but full relative accuracy for tiny triangles, where the default
+    ``a.(b x c)`` keeps only absolute accuracy ~eps (relative eps / Omega).
+    """
+    xp = array_module(a, b, c)
+    num = _triple_difference(a, b, c)
+    den = 1.0 + _dot(a, b) + _dot(b, c) + _dot(c, a)
+    return 2.0 * xp.arctan2(num, den)
+
+
+def solid_angle_gradient_difference(a, b, c):
+    """:func:`solid_angle_gradient` built from differences (full relative accuracy for tiny triangles).
+
+    Uses ``c x a == b x (a - c) + (c - b) x (a - b)`` and the difference numerator; like the default,
+    the result is not yet projected on the tangent plane at ``b``.
+    """
+    num = _triple_difference(a, b, c)
+    den = 1.0 + _dot(a, b) + _dot(b, c) + _dot(c, a)
+    ca = _cross(b, a - c) + _cross(c - b, a - b)
+    g = den[..., None] * ca - num[..., None] * (a + c)
+    return 2.0 * g / (num * num + den * den)[..., None]
+
+
+def tangent_project(x, v):
+    """``v - (x.v) x``: the component of ``v`` in the tangent plane at the unit vector ``x``."""
+    return v - _dot(x, v)[..., None] * x
+
+
+def polygon_perimeter(vertices, radius=1.0):
+    """Perimeter of one geodesic polygon given by its unit-vertex list ``(n, 3)`` (default route)."""
+    xp = array_module(vertices)
+    nxt = xp.roll(vertices, -1, axis=0)
+    return radius * geodesic_length(vertices, nxt).sum()
+
+
+def polygon_perimeter_gradient(vertices, radius=1.0):
+    """Gradient ``(n, 3)`` of :func:`polygon_perimeter` with respect to each unit vertex.
+
+    In the tangent plane at each vertex. For positions ``x = R u`` divide by ``R``.
+    """
+    xp = array_module(vertices)
+    nxt = xp.roll(vertices, -1, axis=0)
+    prv = xp.roll(vertices, 1, axis=0)
+    return radius * (geodesic_length_gradient(vertices, nxt) + geodesic_length_gradient(vertices, prv))
+
+
+def polygon_area_gradient(vertices, radius=1.0):
+    """Gradient ``(n, 3)`` of :func:`polygon_area` with respect to each unit vertex.
+
+    The fan apex (the normalised centroid) is held fixed: the area does not depend on the apex, so
+    the chain-rule term through the apex vanishes and this is the full gradient. Projected on the
+    tangent plane at each vertex; for positions ``x = R u`` divide by ``R``.
+    """
+    xp = array_module(vertices)
+    apex = xp.broadcast_to(normalize(vertices.sum(axis=0)), vertices.shape)
+    nxt = xp.roll(vertices, -1, axis=0)
+    prv = xp.roll(vertices, 1, axis=0)
+    # triangles (apex, v, next) and (apex, prev, v) == (prev, v, apex): v in the middle slot
+    g = solid_angle_gradient(apex, vertices, nxt) + solid_angle_gradient(prv, vertices, apex)
+    return radius * radius * tangent_project(vertices, g)

@@ -296,3 +296,38 @@ def t1_flip(state, u, slot, new_length, sense: int = 1):
     state.cell_sides = xp.asarray(sides)
     state.positions = xp.asarray(pos)
     return np.concatenate([u, v])
+
+
+# ---------------------------------------------------------------------- spatial order
+def _spread_bits(x):
+    """Insert two zero bits between the low 21 bits of x (uint64), for 3-D Morton codes."""
+    x = x & np.uint64(0x1FFFFF)
+    for shift, mask in ((32, 0x1F00000000FFFF), (16, 0x1F0000FF0000FF), (8, 0x100F00F00F00F00F),
+                        (4, 0x10C30C30C30C30C3), (2, 0x1249249249249249)):
+        x = (x | (x << np.uint64(shift))) & np.uint64(mask)
+    return x
+
+
+def morton_order(points, bits: int = 16):
+    """Indices that sort points (any scale) along a 3-D Z-order (Morton) curve of their directions.
+
+    Neighbouring cells and vertices then sit close in memory, so the gathers of the force kernels
+    hit cache lines that their neighbours also use.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    u = p / np.linalg.norm(p, axis=1)[:, None]
+    q = np.clip(((u + 1.0) * 0.5 * (2 ** bits - 1)).round(), 0, 2 ** bits - 1).astype(np.uint64)
+    code = _spread_bits(q[:, 0]) | (_spread_bits(q[:, 1]) << np.uint64(1)) | (_spread_bits(q[:, 2]) << np.uint64(2))
+    return np.argsort(code, kind="stable")
+
+
+def renumber(positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells, vertex_order, cell_order):
+    """Relabel one replica's vertices and cells: new vertex i is old ``vertex_order[i]``, likewise cells."""
+    inv_v = np.empty(len(vertex_order), dtype=np.int64)
+    inv_v[vertex_order] = np.arange(len(vertex_order))
+    inv_c = np.empty(len(cell_order), dtype=np.int64)
+    inv_c[cell_order] = np.arange(len(cell_order))
+    table = cell_vertices[cell_order]
+    table = np.where(table >= 0, inv_v[np.maximum(table, 0)], -1).astype(np.int32)
+    return (positions[vertex_order], table, cell_sides[cell_order],
+            inv_v[vertex_neighbors[vertex_order]].astype(np.int32), inv_c[vertex_cells[vertex_order]].astype(np.int32))

@@ -3,13 +3,14 @@
 #include "device_common.cuh"
 
 // One thread per cell: area, perimeter and fan apex (normalised vertex centroid), the cell's
-// energy, and the per-replica energy sum.
+// energy, the per-replica energy sum, and the two coefficients the vertex kernel needs:
+// coef = (2 kA (A - A0) R^2, 2 kP (P - P0) R), so it gathers 5 doubles per corner.
 extern "C" __global__ void vm_cell_geometry(
     const double* __restrict__ pos, const int* __restrict__ cell_vertices, const int* __restrict__ cell_sides,
     const int* __restrict__ cell_replica, const double* __restrict__ radius, int n_cells, int max_sides,
     const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
-    const double* __restrict__ P0, double* __restrict__ area, double* __restrict__ perimeter,
-    double* __restrict__ apex, double* __restrict__ cell_energy, double* __restrict__ replica_energy)
+    const double* __restrict__ P0, double* __restrict__ coef, double* __restrict__ apex,
+    double* __restrict__ cell_energy, double* __restrict__ replica_energy)
 {
     long c = (long)blockIdx.x * blockDim.x + threadIdx.x;
     int rep = -1;
@@ -35,8 +36,8 @@ extern "C" __global__ void vm_cell_geometry(
         P *= R;
         double dA = A - A0[c], dP = P - P0[c];
         e = kA[c] * dA * dA + kP[c] * dP * dP;
-        area[c] = A;
-        perimeter[c] = P;
+        coef[2 * c] = 2.0 * kA[c] * dA * (R * R);
+        coef[2 * c + 1] = 2.0 * kP[c] * dP * R;
         store3(apex, c, ap);
         cell_energy[c] = e;
     }
@@ -47,17 +48,14 @@ extern "C" __global__ void vm_cell_geometry(
 // atomics) and write minus the surface gradient of the energy.
 extern "C" __global__ void vm_vertex_forces(
     const double* __restrict__ pos, const int* __restrict__ vertex_neighbors, const int* __restrict__ vertex_cells,
-    const int* __restrict__ vertex_replica, const double* __restrict__ radius, int n_vertices,
-    const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
-    const double* __restrict__ P0, const double* __restrict__ area, const double* __restrict__ perimeter,
-    const double* __restrict__ apex, double* __restrict__ forces)
+    int n_vertices, const double* __restrict__ coef, const double* __restrict__ apex,
+    double* __restrict__ forces)
 {
     long v = (long)blockIdx.x * blockDim.x + threadIdx.x;
     if (v >= n_vertices) return;
     vec3 r = load3(pos, v);
     double rn = norm3(r);
     vec3 u = normalize3(r);
-    double R = radius[vertex_replica[v]];
     int nb[3] = {vertex_neighbors[3 * v], vertex_neighbors[3 * v + 1], vertex_neighbors[3 * v + 2]};
     vec3 un[3] = {normalize3(load3(pos, nb[0])), normalize3(load3(pos, nb[1])), normalize3(load3(pos, nb[2]))};
     vec3 g = v3(0.0, 0.0, 0.0);
@@ -68,8 +66,7 @@ extern "C" __global__ void vm_vertex_forces(
         vec3 gA = solid_angle_gradient(ap, u, nxt) + solid_angle_gradient(prv, u, ap);
         gA = gA - dot3(gA, u) * u;
         vec3 gP = geodesic_length_gradient(u, nxt) + geodesic_length_gradient(u, prv);
-        double tA = 2.0 * kA[c] * (area[c] - A0[c]) * (R * R / rn);
-        double tP = 2.0 * kP[c] * (perimeter[c] - P0[c]) * (R / rn);
+        double tA = coef[2 * c] / rn, tP = coef[2 * c + 1] / rn;
         g = g + (tA * gA + tP * gP);
     }
     store3(forces, v, -g);

@@ -17,8 +17,8 @@ extern "C" __global__ void fire_reduce(
         p = dot3(f, w);
         vv = dot3(w, w);
         ff = dot3(f, f);
-        atomic_max_nonneg(fmax + rep, sqrt(ff));
     }
+    segmented_block_max(sqrt(ff), rep, fmax);
     segmented_block_add(p, rep, power);
     segmented_block_add(vv, rep, vnorm2);
     segmented_block_add(ff, rep, fnorm2);

@@ -8,13 +8,13 @@
 #define CAND_INTS 12   // u, k, v, a, b, c, d, C1, C2, C3, C4, replica
 #define LOG_INTS 6     // pass, C1, C2, C3, C4, replica
 
-// counters: [0] candidates, [1] a C3/C4 row is full (widen the table), [2] log entries
+// counters: [0] candidates, [1] a C3/C4 row is full (widen the table)
 extern "C" __global__ void t1_detect(
     const double* __restrict__ pos, const int* __restrict__ vn, const int* __restrict__ vc,
     const int* __restrict__ sides, const int* __restrict__ vertex_replica, const double* __restrict__ radius,
     const double* __restrict__ threshold, const bool* __restrict__ active, int n_vertices, int max_sides,
-    int* __restrict__ claim, int* __restrict__ refused, int* __restrict__ counters, int* __restrict__ cand,
-    double* __restrict__ cand_len, int capacity)
+    int* __restrict__ claim, int* __restrict__ refused, unsigned long long* __restrict__ total_refused,
+    int* __restrict__ counters, int* __restrict__ cand, double* __restrict__ cand_len, int capacity)
 {
     int u = blockIdx.x * blockDim.x + threadIdx.x;
     if (u >= n_vertices) return;
@@ -35,6 +35,7 @@ extern "C" __global__ void t1_detect(
         bool distinct = C1 != C2 && C1 != C3 && C1 != C4 && C2 != C3 && C2 != C4 && C3 != C4;
         if (sides[C1] <= 3 || sides[C2] <= 3 || !distinct) {
             atomicAdd(refused + r, 1);
+            atomicAdd(total_refused + r, 1ull);
             continue;
         }
         int index = 3 * u + k;
@@ -81,7 +82,8 @@ extern "C" __global__ void t1_apply(
     int* __restrict__ sides, const int* __restrict__ claim, const int* __restrict__ cand,
     const double* __restrict__ cand_len, int n_cand, int max_sides, const double* __restrict__ radius,
     const double* __restrict__ new_length, double length_factor, int* __restrict__ flips,
-    double* __restrict__ velocities, int* __restrict__ counters, int* __restrict__ log, int pass_id)
+    unsigned long long* __restrict__ total_flips, double* __restrict__ velocities, int* __restrict__ log_count,
+    int* __restrict__ log, int pass_id)
 {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n_cand) return;
@@ -125,11 +127,22 @@ extern "C" __global__ void t1_apply(
     store3(pos, X, R * (cos(phi) * m + sin(phi) * perp));
     store3(pos, Y, R * (cos(phi) * m + sin(phi) * (-perp)));
     atomicAdd(flips + r, 1);
+    atomicAdd(total_flips + r, 1ull);
     if (velocities) {
         store3(velocities, u, v3(0.0, 0.0, 0.0));
         store3(velocities, v, v3(0.0, 0.0, 0.0));
     }
-    int slot = atomicAdd(counters + 2, 1);
+    int slot = atomicAdd(log_count, 1);
     int* entry = log + (long)slot * LOG_INTS;
     entry[0] = pass_id; entry[1] = C1; entry[2] = C2; entry[3] = C3; entry[4] = C4; entry[5] = r;
+}
+
+// After t1_apply: give the candidates' cells back (claims stay at INT_MAX between passes, so a
+// pass costs no sweep over all cells).
+extern "C" __global__ void t1_release(int* __restrict__ claim, const int* __restrict__ cand, int n_cand)
+{
+    int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n_cand) return;
+    const int* e = cand + (long)i * CAND_INTS;
+    for (int j = 7; j < 11; ++j) claim[e[j]] = 0x7fffffff;
 }

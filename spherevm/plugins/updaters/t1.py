@@ -163,19 +163,25 @@ class T1(Updater):
         import cupy as cp
         buf = getattr(self, "_gpu", None)
         if buf is None or buf["n_cells"] != state.n_cells or buf["state"] is not state:
-            cap = max(1024, state.n_vertices // 4)
+            cap, r = max(1024, state.n_vertices // 4), state.n_replicas
+            # per-pass counters in one buffer, zeroed by one memset: [candidates, widen | flips | refused]
+            scratch = cp.zeros(2 + 2 * r, dtype=cp.int32)
+            unit = np.sqrt(state.mean_cell_area)
             buf = dict(state=state, n_cells=state.n_cells, capacity=cap,
-                       claim=cp.empty(state.n_cells, dtype=cp.int32), counters=cp.zeros(3, dtype=cp.int32),
+                       claim=cp.full(state.n_cells, np.iinfo(np.int32).max, dtype=cp.int32), scratch=scratch,
+                       counters=scratch[:2], flips=scratch[2:2 + r], refused=scratch[2 + r:],
+                       log_count=cp.zeros(1, dtype=cp.int32), log_bound=0,
                        cand=cp.empty((cap, _CAND_INTS), dtype=cp.int32), cand_len=cp.empty(cap),
-                       log=cp.empty((cap, _LOG_INTS), dtype=cp.int32), flips=cp.zeros(state.n_replicas, cp.int32),
-                       refused=cp.zeros(state.n_replicas, cp.int32), active_host=None, active=None, passes=0,
-                       total_flips=cp.zeros(state.n_replicas, cp.int64),
-                       total_refused=cp.zeros(state.n_replicas, cp.int64))
+                       log=cp.empty((cap, _LOG_INTS), dtype=cp.int32), active_host=None, active=None, passes=0,
+                       total_flips=cp.zeros(r, cp.uint64), total_refused=cp.zeros(r, cp.uint64),
+                       threshold=cp.asarray(self.threshold * unit),
+                       new_length=cp.asarray(self.new_length * unit if self.length_factor is None
+                                             else np.full(r, -1.0)))
             self._gpu = buf
         return buf
 
     def _update_gpu(self, simulation):
-        """Detect, one small read-back (candidate count, full rows), apply: see t1.cu."""
+        """Detect, one small read-back (candidate count, full rows), apply, release: see t1.cu."""
         import cupy as cp
         state = simulation.state
         buf = self._gpu_buffers(state)
@@ -184,49 +190,43 @@ class T1(Updater):
         if buf["active_host"] is None or not np.array_equal(buf["active_host"], active):
             buf["active_host"] = active.copy()
             buf["active"] = cp.asarray(active)
-        if "threshold" not in buf:   # per-replica lengths, uploaded once
-            unit = np.sqrt(state.mean_cell_area)
-            buf["threshold"] = cp.asarray(self.threshold * unit)
-            buf["new_length"] = cp.asarray(self.new_length * unit if self.length_factor is None
-                                           else np.full(state.n_replicas, -1.0))
-        threshold = buf["threshold"]
-        buf["flips"].fill(0)
-        buf["refused"].fill(0)
         while True:
-            buf["claim"].fill(np.iinfo(np.int32).max)
-            buf["counters"][:2] = 0
+            scratch = buf["scratch"]
+            cp.cuda.runtime.memsetAsync(scratch.data.ptr, 0, scratch.nbytes, cp.cuda.get_current_stream().ptr)
             launch(module.get_function("t1_detect"), state.n_vertices,
                    (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_sides,
-                    state.vertex_replica, state.radius, threshold, buf["active"], np.int32(state.n_vertices),
-                    np.int32(state.max_sides), buf["claim"], buf["refused"], buf["counters"], buf["cand"],
-                    buf["cand_len"], np.int32(buf["capacity"])))
-            n_cand, widen, n_log = (int(x) for x in buf["counters"].get())   # the one read-back
+                    state.vertex_replica, state.radius, buf["threshold"], buf["active"], np.int32(state.n_vertices),
+                    np.int32(state.max_sides), buf["claim"], buf["refused"], buf["total_refused"], buf["counters"],
+                    buf["cand"], buf["cand_len"], np.int32(buf["capacity"])))
+            n_cand, widen = (int(x) for x in buf["counters"].get())   # the one read-back
             if n_cand <= buf["capacity"]:
                 break
-            cap = 2 * n_cand   # rare: more candidates than room; grow and redo the pass
-            self._flush_log(state)
-            buf.update(capacity=cap, cand=cp.empty((cap, _CAND_INTS), cp.int32), cand_len=cp.empty(cap),
-                       log=cp.empty((cap, _LOG_INTS), cp.int32))
-            buf["refused"].fill(0)
-        buf["total_refused"] += buf["refused"]
+            cap = 2 * n_cand   # rare: more candidates than room; undo this pass's claims, grow, redo
+            launch(module.get_function("t1_release"), buf["capacity"],
+                   (buf["claim"], buf["cand"], np.int32(buf["capacity"])))
+            buf["claim"].fill(np.iinfo(np.int32).max)
+            buf["total_refused"] -= buf["refused"].astype(cp.uint64)
+            buf.update(capacity=cap, cand=cp.empty((cap, _CAND_INTS), cp.int32), cand_len=cp.empty(cap))
         if n_cand == 0:
             return
         if widen:
             pad = cp.full((state.n_cells, 1), -1, dtype=cp.int32)
             state.cell_vertices = cp.ascontiguousarray(cp.concatenate([state.cell_vertices, pad], axis=1))
-        if n_log + n_cand > len(buf["log"]):
+        if buf["log_bound"] + n_cand > len(buf["log"]):   # the log might overflow: replay it first
             self._flush_log(state)
-        new_length = buf["new_length"]
+            if n_cand > len(buf["log"]):
+                buf["log"] = cp.empty((2 * n_cand, _LOG_INTS), cp.int32)
+        buf["log_bound"] += n_cand
         integrator = simulation.operations.integrator
         velocities = getattr(integrator, "velocities", None) if self.reset_velocities else None
         buf["passes"] += 1
         launch(module.get_function("t1_apply"), n_cand,
                (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_vertices, state.cell_sides,
                 buf["claim"], buf["cand"], buf["cand_len"], np.int32(n_cand), np.int32(state.max_sides),
-                state.radius, new_length, np.float64(self.length_factor or 0.0), buf["flips"],
-                velocities if velocities is not None else np.intp(0), buf["counters"], buf["log"],
+                state.radius, buf["new_length"], np.float64(self.length_factor or 0.0), buf["flips"],
+                buf["total_flips"], velocities if velocities is not None else np.intp(0), buf["log_count"], buf["log"],
                 np.int32(buf["passes"])))
-        buf["total_flips"] += buf["flips"]
+        launch(module.get_function("t1_release"), n_cand, (buf["claim"], buf["cand"], np.int32(n_cand)))
         simulation.state_changed()
 
     def _flush_log(self, state):
@@ -234,11 +234,12 @@ class T1(Updater):
         buf = getattr(self, "_gpu", None)
         if buf is None:
             return
-        n = int(buf["counters"][2].get())
+        n = int(buf["log_count"].get()[0])
+        buf["log_bound"] = 0
         if n == 0:
             return
         log = buf["log"][:n].get()
-        buf["counters"][2] = 0
+        buf["log_count"].fill(0)
         order = np.argsort(log[:, 0], kind="stable")
         log = log[order]
         for pass_rows in np.split(log, np.flatnonzero(np.diff(log[:, 0])) + 1):  # passes, not flips
@@ -252,8 +253,8 @@ class T1(Updater):
         self._flush_log(buf["state"])
         self.last_flips = buf["flips"].get().astype(np.int64)
         self.last_refused = buf["refused"].get().astype(np.int64)
-        self.total_flips = buf["total_flips"].get()
-        self.total_refused = buf["total_refused"].get()
+        self.total_flips = buf["total_flips"].get().astype(np.int64)
+        self.total_refused = buf["total_refused"].get().astype(np.int64)
 
     def _count_flip_backs(self, state, cells, rep):
         """Count re-joins: a flip making two cells neighbours again that an earlier flip separated."""

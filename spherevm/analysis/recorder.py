@@ -1,0 +1,177 @@
+"""Record cell centroids of a live Simulation (log-spaced or on any trigger) for the dynamics analysis."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from ..plugins.base import Writer
+from ..trigger import Trigger, as_trigger
+from .dynamics import CENTROID_METHODS, Trajectory, cell_centroids, log_spaced_times
+
+
+class OnTimesteps(Trigger):
+    """True exactly on the given timesteps (any iterable of non-negative integers), e.g. log-spaced ones."""
+
+    def __init__(self, timesteps):
+        arr = np.asarray(list(timesteps) if not isinstance(timesteps, np.ndarray) else timesteps)
+        if arr.ndim != 1 or arr.size == 0:
+            raise ValueError("timesteps must be a non-empty sequence of integers")
+        if not np.all(np.isfinite(arr.astype(np.float64))) or np.any(arr != np.round(arr)) or np.any(arr < 0):
+            raise ValueError(f"timesteps must be non-negative integers, got {timesteps!r}")
+        self.timesteps = np.unique(arr.astype(np.int64))
+        self._set = frozenset(int(t) for t in self.timesteps)
+
+    def __call__(self, timestep):
+        return int(timestep) in self._set
+
+    @property
+    def last(self) -> int:
+        return int(self.timesteps[-1])
+
+    def __repr__(self):
+        ts = self.timesteps
+        shown = ", ".join(str(int(t)) for t in ts[:6]) + (", ..." if len(ts) > 6 else "")
+        return f"OnTimesteps([{shown}] ({len(ts)} timesteps, last {self.last}))"
+
+
+class Recorder(Writer):
+    """A writer that keeps the cell centroids of a running Simulation in memory (and optionally a CSV).
+
+    Parameters
+    ----------
+    trigger : when to record: a :class:`~spherevm.trigger.Trigger`, an int period, or a sequence of
+        timesteps (made an :class:`OnTimesteps`). :meth:`log_spaced` builds the usual log-spaced one.
+    csv : optional path; every recorded frame appends rows ``timestep,cell,replica,x,y,z`` (the file
+        is overwritten at the first write and flushed after every frame).
+    method : centroid definition, ``"area"`` or ``"vertex"`` (see :func:`cell_centroids`).
+
+    ``trajectory()`` returns the recorded :class:`~spherevm.analysis.dynamics.Trajectory`.
+
+    The Simulation runs writers on timestep 0 and after each step, but not at the start of a run
+    that continues from timestep t > 0. So that such a run keeps its time origin, a Recorder
+    attached to a simulation already at t > 0 records the current configuration at once when its
+    trigger fires at t. Recording the same timestep twice is skipped. Cells must keep their number:
+    a Recorder belongs to one State (replace ``sim.state`` and it raises at the next write).
+    """
+
+    def __init__(self, trigger=None, csv=None, method: str = "area"):
+        if trigger is None:
+            raise ValueError("trigger is required: a Trigger, an int period, a sequence of timesteps, "
+                             "or use Recorder.log_spaced(t_max)")
+        if isinstance(trigger, np.integer):
+            trigger = int(trigger)
+        if not isinstance(trigger, (Trigger, int)) or isinstance(trigger, bool):
+            trigger = OnTimesteps(trigger)
+        super().__init__(as_trigger(trigger))
+        if method not in CENTROID_METHODS:
+            raise ValueError(f"method must be one of {CENTROID_METHODS}, got {method!r}")
+        if csv is not None and (not isinstance(csv, (str, os.PathLike)) or not os.fspath(csv)):
+            raise ValueError(f"csv must be a file path or None, got {csv!r}")
+        self.csv = None if csv is None else os.fspath(csv)
+        self.method = method
+        self._times, self._centroids = [], []
+        self._cell_replica = self._radius = self._cell_start = None
+        self._file = None
+
+    @classmethod
+    def log_spaced(cls, t_max: int, points_per_decade: int = 10, start: int = 0, **kwargs) -> "Recorder":
+        """Record at ``start`` and at ``start + t`` for ``t`` in :func:`log_spaced_times(t_max, points_per_decade)`."""
+        return cls(OnTimesteps(int(start) + log_spaced_times(t_max, points_per_decade)), **kwargs)
+
+    # ------------------------------------------------------------------ operation hooks
+    def attach(self, simulation):
+        super().attach(simulation)
+        t = simulation.timestep
+        if t > 0 and simulation.state is not None and self.trigger(t):
+            self.write(simulation, t)
+
+    def write(self, simulation, timestep):
+        timestep = int(timestep)
+        if self._times and self._times[-1] == timestep:
+            return
+        state = simulation.state
+        if self._cell_start is None:
+            self._cell_start = np.array(state.cell_start, copy=True)
+            self._cell_replica = state.cell_replica_np().copy()
+            self._radius = state.radius_np().copy()
+        elif not np.array_equal(self._cell_start, state.cell_start):
+            raise ValueError(f"Recorder: the state at timestep {timestep} has {state.n_cells} cells in "
+                             f"{state.n_replicas} replicas, not the {int(self._cell_start[-1])} cells recorded "
+                             "so far; use a new Recorder for a new State")
+        if self._times and timestep < self._times[-1]:
+            raise ValueError(f"Recorder: timestep {timestep} comes before the last recorded one "
+                             f"({self._times[-1]}); use a new Recorder after resetting the timestep")
+        c = cell_centroids(state, method=self.method)
+        self._times.append(timestep)
+        self._centroids.append(c)
+        if self.csv is not None:
+            self._write_csv(timestep, c)
+
+    def record(self, simulation):
+        """Record the current configuration now (at ``simulation.timestep``), whatever the trigger."""
+        self.write(simulation, simulation.timestep)
+
+    def _write_csv(self, timestep, c):
+        if self._file is None:
+            self._file = open(self.csv, "w")
+            self._file.write("timestep,cell,replica,x,y,z\n")
+        n = len(c)
+        block = np.column_stack([np.full(n, timestep), np.arange(n), self._cell_replica])
+        lines = [f"{int(t)},{int(i)},{int(r)},{x:.17g},{y:.17g},{z:.17g}"
+                 for (t, i, r), (x, y, z) in zip(block.tolist(), c.tolist())]  # formatting only
+        self._file.write("\n".join(lines) + "\n")
+        self._file.flush()
+
+    def flush(self):
+        if self._file is not None:
+            self._file.flush()
+
+    def close(self):
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+    def detach(self):
+        self.close()
+        super().detach()
+
+    # ------------------------------------------------------------------ results
+    @property
+    def timesteps(self) -> np.ndarray:
+        """Timesteps recorded so far."""
+        return np.array(self._times, dtype=np.int64)
+
+    def __len__(self):
+        return len(self._times)
+
+    def trajectory(self, dt: float = None) -> Trajectory:
+        """The recorded centroids as a Trajectory; times are timesteps, or ``timestep * dt`` if given."""
+        if not self._times:
+            raise RuntimeError("Recorder has recorded nothing yet: append it to sim.operations.writers and run")
+        times = self.timesteps.astype(np.float64)
+        if dt is not None:
+            if not np.isfinite(dt) or dt <= 0:
+                raise ValueError(f"dt must be positive and finite, got {dt!r}")
+            times = times * dt
+        return Trajectory(times, np.stack(self._centroids), self._cell_replica, self._radius)
+
+    @staticmethod
+    def read_csv(path) -> Trajectory:
+        """A Trajectory from a Recorder CSV (radius from the centroids' distance to the centre)."""
+        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+        times, first = np.unique(data[:, 0], return_index=True)
+        n_cells = int(data[:, 1].max()) + 1
+        if len(data) != len(times) * n_cells:
+            raise ValueError(f"{path!r}: expected {n_cells} rows per timestep, found {len(data)} rows for "
+                             f"{len(times)} timesteps")
+        order = np.lexsort((data[:, 1], data[:, 0]))
+        data = data[order]
+        cent = data[:, 3:6].reshape(len(times), n_cells, 3)
+        rep = data[:n_cells, 2].astype(np.int64)
+        r = np.linalg.norm(cent[0], axis=1)
+        radius = np.bincount(rep, weights=r) / np.bincount(rep)
+        return Trajectory(times, cent, rep, radius)
+
+    def __repr__(self):
+        return f"Recorder(trigger={self.trigger!r}, csv={self.csv!r}, method={self.method!r}, frames={len(self)})"

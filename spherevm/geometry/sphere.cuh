@@ -9,17 +9,14 @@ __device__ __forceinline__ vec3 operator+(vec3 a, vec3 b) { return v3(a.x + b.x,
 __device__ __forceinline__ vec3 operator-(vec3 a, vec3 b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
 __device__ __forceinline__ vec3 operator-(vec3 a) { return v3(-a.x, -a.y, -a.z); }
 __device__ __forceinline__ vec3 operator*(double s, vec3 a) { return v3(s * a.x, s * a.y, s * a.z); }
-// written out like the NumPy path (a0*b0 + a1*b1 + a2*b2) and without fused multiply-adds
-__device__ __forceinline__ double dot3(vec3 a, vec3 b) {
-    return __dadd_rn(__dadd_rn(__dmul_rn(a.x, b.x), __dmul_rn(a.y, b.y)), __dmul_rn(a.z, b.z));
-}
+// Same formulas as the NumPy path; the compiler may fuse multiply-adds and normalisation uses
+// rsqrt (about 1 ulp), so results agree with NumPy to rounding (the tests ask 1e-12 relative).
+__device__ __forceinline__ double dot3(vec3 a, vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
 __device__ __forceinline__ vec3 cross3(vec3 a, vec3 b) {
-    return v3(__dsub_rn(__dmul_rn(a.y, b.z), __dmul_rn(a.z, b.y)),
-              __dsub_rn(__dmul_rn(a.z, b.x), __dmul_rn(a.x, b.z)),
-              __dsub_rn(__dmul_rn(a.x, b.y), __dmul_rn(a.y, b.x)));
+    return v3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
 }
 __device__ __forceinline__ double norm3(vec3 a) { return sqrt(dot3(a, a)); }
-__device__ __forceinline__ vec3 normalize3(vec3 a) { double n = norm3(a); return v3(a.x / n, a.y / n, a.z / n); }
+__device__ __forceinline__ vec3 normalize3(vec3 a) { double s = rsqrt(dot3(a, a)); return s * a; }
 __device__ __forceinline__ vec3 load3(const double* p, long i) { return v3(p[3 * i], p[3 * i + 1], p[3 * i + 2]); }
 __device__ __forceinline__ void store3(double* p, long i, vec3 a) { p[3 * i] = a.x; p[3 * i + 1] = a.y; p[3 * i + 2] = a.z; }
 
@@ -32,9 +29,9 @@ __device__ __forceinline__ double geodesic_length(vec3 a, vec3 b) {
 __device__ __forceinline__ vec3 geodesic_length_gradient(vec3 a, vec3 b) {
     vec3 d = b - a;
     vec3 t = d - dot3(d, a) * a;
-    double n = norm3(t);
-    double s = n > 0.0 ? n : 1.0;
-    return v3(-t.x / s, -t.y / s, -t.z / s);
+    double n2 = dot3(t, t);
+    double s = n2 > 0.0 ? -rsqrt(n2) : 0.0;
+    return s * t;
 }
 
 // signed solid angle of the geodesic triangle (a, b, c): 2 atan2(a.(b x c), 1 + a.b + b.c + c.a)
@@ -42,6 +39,13 @@ __device__ __forceinline__ double solid_angle(vec3 a, vec3 b, vec3 c) {
     double num = dot3(a, cross3(b, c));
     double den = 1.0 + dot3(a, b) + dot3(b, c) + dot3(c, a);
     return 2.0 * atan2(num, den);
+}
+
+// numerator and denominator of solid_angle: Omega = 2 arg(den + i num); a fan's area is 2 arg of
+// the product of these complex numbers (one atan2 per cell instead of one per triangle)
+__device__ __forceinline__ void solid_angle_parts(vec3 a, vec3 b, vec3 c, double* num, double* den) {
+    *num = dot3(a, cross3(b, c));
+    *den = 1.0 + dot3(a, b) + dot3(b, c) + dot3(c, a);
 }
 
 // gradient of solid_angle(a, b, c) with respect to the middle vertex b (not projected):

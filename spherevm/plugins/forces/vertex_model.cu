@@ -24,13 +24,18 @@ extern "C" __global__ void vm_cell_geometry(
         vec3 ap = normalize3(sum);
         vec3 first = normalize3(load3(pos, row[0]));
         vec3 cur = first;
-        double A = 0.0, P = 0.0;
+        double P = 0.0, re = 1.0, im = 0.0;   // area = 2 arg(prod (den + i num)), valid below a hemisphere
         for (int i = 0; i < n; ++i) {
             vec3 nxt = i + 1 < n ? normalize3(load3(pos, row[i + 1])) : first;
             P += geodesic_length(cur, nxt);
-            A += solid_angle(ap, cur, nxt);
+            double num, den;
+            solid_angle_parts(ap, cur, nxt, &num, &den);
+            double t = re * den - im * num;
+            im = re * num + im * den;
+            re = t;
             cur = nxt;
         }
+        double A = 2.0 * atan2(im, re);
         double R = radius[rep];
         A *= R * R;
         P *= R;

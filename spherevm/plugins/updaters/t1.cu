@@ -12,7 +12,7 @@
 extern "C" __global__ void t1_detect(
     const double* __restrict__ pos, const int* __restrict__ vn, const int* __restrict__ vc,
     const int* __restrict__ sides, const int* __restrict__ vertex_replica, const double* __restrict__ radius,
-    const double* __restrict__ threshold, const bool* __restrict__ active, int n_vertices, int max_sides,
+    const double* __restrict__ chord2, const bool* __restrict__ active, int n_vertices, int max_sides,
     int* __restrict__ claim, int* __restrict__ refused, unsigned long long* __restrict__ total_refused,
     int* __restrict__ counters, int* __restrict__ cand, double* __restrict__ cand_len, int capacity)
 {
@@ -20,12 +20,14 @@ extern "C" __global__ void t1_detect(
     if (u >= n_vertices) return;
     int r = vertex_replica[u];
     if (!active[r]) return;
-    vec3 xu = normalize3(load3(pos, u));
+    vec3 pu = load3(pos, u);
     for (int k = 0; k < 3; ++k) {
         int v = vn[3 * u + k];
         if (v <= u) continue;
-        double L = radius[r] * geodesic_length(xu, normalize3(load3(pos, v)));
-        if (!(L < threshold[r])) continue;
+        vec3 pv = load3(pos, v);
+        vec3 chord = pu - pv;
+        if (!(dot3(chord, chord) < chord2[r])) continue;   // chord test: no trigonometry for the many long edges
+        double L = radius[r] * geodesic_length(normalize3(pu), normalize3(pv));
         int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
         int a = vn[3 * u + k1], b = vn[3 * u + k2];
         int C1 = vc[3 * u + k], C3 = vc[3 * u + k1], C2 = vc[3 * u + k2];

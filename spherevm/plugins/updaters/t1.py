@@ -93,19 +93,33 @@ class T1(Updater):
         self._reset_counters(simulation.state.n_replicas)
 
     # ------------------------------------------------------------------ detection
+    def chord_threshold2(self, state):
+        """Squared chord of the threshold per replica: an edge is short iff its chord is shorter.
+
+        On the sphere a geodesic ``L`` has chord ``2 R sin(L / 2R)``, monotonic in ``L``, so the test
+        needs no trigonometry for the many long edges; the GPU kernel uses the same test.
+        """
+        R = state.radius_np()
+        L = self.threshold * np.sqrt(state.mean_cell_area)
+        return (2.0 * R * np.sin(np.minimum(L / (2.0 * R), np.pi / 2))) ** 2
+
     def short_edges(self, state):
-        """Candidate edges ``(u, slot)`` shorter than the threshold, in increasing edge index."""
+        """Candidate edges ``(u, slot, geodesic length)`` shorter than the threshold, by edge index."""
         dev = state.device
         xp = dev.xp
         vn = state.vertex_neighbors
         u = xp.arange(state.n_vertices, dtype=xp.int32)[:, None]
         own = u < vn                                     # each undirected edge once
-        scale = xp.asarray(np.sqrt(state.mean_cell_area))[state.vertex_replica]
-        uu = xp.broadcast_to(u, vn.shape)
-        lengths = state.constraint.edge_lengths(state, uu, vn)
-        short = own & (lengths < (self.threshold * scale)[:, None])
+        d = state.positions[:, None, :] - state.positions[vn]
+        chord2 = (d * d).sum(axis=2)
+        limit = xp.asarray(self.chord_threshold2(state))[state.vertex_replica]
+        short = own & (chord2 < limit[:, None])
         flat = dev.to_numpy(xp.flatnonzero(short.reshape(-1)))
-        return flat // 3, flat % 3, dev.to_numpy(lengths.reshape(-1)[flat]) if len(flat) else np.zeros(0)
+        if len(flat) == 0:
+            return flat, flat, np.zeros(0)
+        uu, slot = flat // 3, flat % 3
+        lengths = state.constraint.edge_lengths(state, xp.asarray(uu), vn[xp.asarray(uu), xp.asarray(slot)])
+        return uu, slot, dev.to_numpy(lengths)
 
     def select(self, state, u, slot):
         """Apply the rules: returns (flip mask, refused mask) over the candidates, and their cells."""
@@ -174,7 +188,7 @@ class T1(Updater):
                        cand=cp.empty((cap, _CAND_INTS), dtype=cp.int32), cand_len=cp.empty(cap),
                        log=cp.empty((cap, _LOG_INTS), dtype=cp.int32), active_host=None, active=None, passes=0,
                        total_flips=cp.zeros(r, cp.uint64), total_refused=cp.zeros(r, cp.uint64),
-                       threshold=cp.asarray(self.threshold * unit),
+                       chord2=cp.asarray(self.chord_threshold2(state)),
                        new_length=cp.asarray(self.new_length * unit if self.length_factor is None
                                              else np.full(r, -1.0)))
             self._gpu = buf
@@ -195,7 +209,7 @@ class T1(Updater):
             cp.cuda.runtime.memsetAsync(scratch.data.ptr, 0, scratch.nbytes, cp.cuda.get_current_stream().ptr)
             launch(module.get_function("t1_detect"), state.n_vertices,
                    (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_sides,
-                    state.vertex_replica, state.radius, buf["threshold"], buf["active"], np.int32(state.n_vertices),
+                    state.vertex_replica, state.radius, buf["chord2"], buf["active"], np.int32(state.n_vertices),
                     np.int32(state.max_sides), buf["claim"], buf["refused"], buf["total_refused"], buf["counters"],
                     buf["cand"], buf["cand_len"], np.int32(buf["capacity"])))
             n_cand, widen = (int(x) for x in buf["counters"].get())   # the one read-back

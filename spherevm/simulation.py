@@ -91,11 +91,11 @@ class MinimizeResult:
 
     def table(self) -> str:
         """A plain-text table, one row per replica."""
-        rows = ["replica  energy/cell     <P/sqrt(A)>  max|F|      converged  reason     steps"]
+        rows = ["replica   energy/cell  <P/sqrt(A)>     max|F|  converged  reason          steps"]
         for r in range(len(self.converged)):
-            rows.append(f"{r:7d}  {self.energy_per_cell[r]:.6e}  {self.mean_shape_index[r]:11.6f}  "
-                        f"{self.max_force[r]:.3e}  {str(bool(self.converged[r])):9s}  {self.reason[r]:9s}  "
-                        f"{int(self.steps[r]):6d}")
+            rows.append(f"{r:7d}  {self.energy_per_cell[r]:12.6e}  {self.mean_shape_index[r]:11.6f}  "
+                        f"{self.max_force[r]:9.3e}  {'yes' if self.converged[r] else 'no':9s}  "
+                        f"{self.reason[r]:14s}  {int(self.steps[r]):5d}")
         return "\n".join(rows)
 
 

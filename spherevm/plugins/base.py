@@ -50,7 +50,8 @@ class Force(Operation):
     """A contribution to the potential energy; subclasses implement :meth:`compute`.
 
     ``compute(state)`` returns a :class:`ForceResult` whose forces are minus the surface
-    (tangent-plane) gradient of the energy, on the state's device.
+    (tangent-plane) gradient of the energy, on the state's device. Forces are evaluated whenever
+    the integrator needs them; their trigger is not used.
     """
 
     def compute(self, state) -> ForceResult:

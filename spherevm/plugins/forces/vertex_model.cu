@@ -59,20 +59,21 @@ extern "C" __global__ void vm_vertex_forces(
     long v = (long)blockIdx.x * blockDim.x + threadIdx.x;
     if (v >= n_vertices) return;
     vec3 r = load3(pos, v);
-    double rn = norm3(r);
-    vec3 u = normalize3(r);
-    int nb[3] = {vertex_neighbors[3 * v], vertex_neighbors[3 * v + 1], vertex_neighbors[3 * v + 2]};
-    vec3 un[3] = {normalize3(load3(pos, nb[0])), normalize3(load3(pos, nb[1])), normalize3(load3(pos, nb[2]))};
+    double inv_rn = rsqrt(dot3(r, r));
+    vec3 u = inv_rn * r;
     vec3 g = v3(0.0, 0.0, 0.0);
-    for (int k = 0; k < 3; ++k) {
-        int c = vertex_cells[3 * v + k];
-        vec3 nxt = un[k], prv = un[(k + 1) % 3];
-        vec3 ap = load3(apex, c);
-        vec3 gA = solid_angle_gradient(ap, u, nxt) + solid_angle_gradient(prv, u, ap);
+    // neighbour j follows v in cell j (slot j) and precedes it in cell j-1 (slot j+2 mod 3): each
+    // neighbour is loaded once and its edge's length gradient is shared by the two cells
+    for (int j = 0; j < 3; ++j) {
+        int c_next = vertex_cells[3 * v + j], c_prev = vertex_cells[3 * v + (j + 2) % 3];
+        vec3 w = normalize3(load3(pos, vertex_neighbors[3 * v + j]));
+        vec3 ap_n = load3(apex, c_next), ap_p = load3(apex, c_prev);
+        vec3 gA_n = solid_angle_gradient(ap_n, u, w);
+        vec3 gA_p = solid_angle_gradient(w, u, ap_p);
+        vec3 gA = coef[2 * c_next] * gA_n + coef[2 * c_prev] * gA_p;
         gA = gA - dot3(gA, u) * u;
-        vec3 gP = geodesic_length_gradient(u, nxt) + geodesic_length_gradient(u, prv);
-        double tA = coef[2 * c] / rn, tP = coef[2 * c + 1] / rn;
-        g = g + (tA * gA + tP * gP);
+        g = g + gA + (coef[2 * c_next + 1] + coef[2 * c_prev + 1]) * geodesic_length_gradient(u, w);
     }
+    g = inv_rn * g;
     store3(forces, v, -g);
 }

@@ -3,6 +3,7 @@
 Subcommands::
 
     spherevm minimize [--cells N] [--replicas R] [--p0 P] [--kr K] [--seed S] [--out run.gsd] ...
+    spherevm dynamics --cells N --p0 P --kr K --T T --dt DT --steps S [--out run.gsd] [--csv msd.csv]
     spherevm info [--json]
     spherevm plugins
 
@@ -19,8 +20,10 @@ import os
 import sys
 import time
 
+import numpy as np
+
 PROG = "spherevm"
-COMMANDS_METAVAR = "{minimize,info,plugins}"
+COMMANDS_METAVAR = "{minimize,dynamics,rigidity,info,plugins}"
 USAGE_ERROR = 2     # bad arguments or bad input
 RUNTIME_ERROR = 1   # something failed while running
 
@@ -124,6 +127,40 @@ def build_parser() -> argparse.ArgumentParser:
                    help="where to run; auto takes the GPU when CuPy sees one (default: %(default)s)")
     g.add_argument("--quiet", "-q", action="store_true", help="no progress or summary on standard error")
     m.set_defaults(func=cmd_minimize)
+
+    d = sub.add_parser("dynamics", help="Brownian dynamics: MSD, self-overlap and tau_alpha (the paper's Fig. 3)",
+                       description="Relax random tilings with FIRE + T1, equilibrate, then run overdamped Brownian "
+                                   "dynamics at temperature T with T1 exchanges; record cell centroids at log-spaced "
+                                   "times, and report MSD, self-overlap Q_s and tau_alpha (Q_s = 1/e) in the "
+                                   "co-rotating frame.")
+    g = d.add_argument_group("system")
+    g.add_argument("--cells", "-N", type=_integer(4), default=64, metavar="N", help="cells per replica (default: %(default)s)")
+    g.add_argument("--replicas", "-R", type=_integer(1), default=4, metavar="R",
+                   help="independent tissues, averaged (default: %(default)s)")
+    g.add_argument("--seed", type=_integer(0), default=0, help="random seed (default: %(default)s)")
+    g.add_argument("--p0", type=_real(0.0), default=3.775, metavar="P", help="target shape index (default: %(default)s)")
+    g.add_argument("--kr", type=_real(0.0), default=0.0, metavar="K", help="area stiffness (default: %(default)s)")
+    g = d.add_argument_group("dynamics")
+    g.add_argument("--T", "-T", dest="T", type=_real(0.0), default=0.01, help="temperature, >= 0 (default: %(default)s)")
+    g.add_argument("--dt", type=_real(0.0, strict=True), default=0.05, help="time step, > 0 (default: %(default)s)")
+    g.add_argument("--steps", type=_integer(1), default=5000, help="production steps (default: %(default)s)")
+    g.add_argument("--equilibrate", type=_integer(0), default=None, metavar="STEPS",
+                   help="equilibration steps before production (default: steps/10)")
+    g.add_argument("--relax", type=_integer(0), default=5000, metavar="STEPS",
+                   help="FIRE steps of the initial relaxation, 0 to skip (default: %(default)s)")
+    g.add_argument("--b", type=_real(0.0, strict=True), default=0.5, help="self-overlap window, sqrt(<A>) (default: %(default)s)")
+    g = d.add_argument_group("output")
+    g.add_argument("--out", "-o", default=None, metavar="FILE.gsd", help="GSD trajectory of the production run")
+    g.add_argument("--csv", default=None, metavar="FILE.csv", help="time, MSD and Q_s (default: next to --out, else none)")
+    g.add_argument("--device", choices=("cpu", "gpu", "auto"), default="auto", help="where to run (default: %(default)s)")
+    g.add_argument("--quiet", "-q", action="store_true", help="no progress on standard error")
+    d.set_defaults(func=cmd_dynamics)
+
+    try:
+        from .sweeps import add_cli as add_rigidity
+        add_rigidity(sub)
+    except ImportError:
+        pass
 
     i = sub.add_parser("info", help="versions, and the device that --device auto picks",
                        description="Print the versions of spherevm and its dependencies and what the "
@@ -276,6 +313,56 @@ def cmd_minimize(args) -> int:
             frames = _count_frames(args.out)
             msg += f"; wrote {args.out}" + ("" if frames is None else f" ({frames} frame{'s' * (frames != 1)})")
         err.write(msg + "\n")
+    return 0
+
+
+class _StageProgress:
+    """``progress(stage, done, total)`` for long runs: a line every few seconds on standard error."""
+
+    def __init__(self, stream, enabled=True):
+        self.stream, self.enabled = stream, enabled
+        self.start = self.last = time.monotonic()
+        self.stage = None
+
+    def __call__(self, stage, done, total):
+        now = time.monotonic()
+        if not self.enabled or (stage == self.stage and done < total and now - self.last < 5.0):
+            return
+        self.stage, self.last = stage, now
+        self.stream.write(f"dynamics: {stage:<11} {done:>8d}/{total}  {now - self.start:7.1f} s\n")
+        self.stream.flush()
+
+
+def cmd_dynamics(args) -> int:
+    from .protocols import glassy_dynamics
+    for path in (args.out, args.csv):
+        if path is not None:
+            _check_out_path(path)
+    csv_path = args.csv or (os.path.splitext(args.out)[0] + ".csv" if args.out else None)
+    err = sys.stderr
+    if not args.quiet:
+        err.write(f"spherevm: dynamics of {args.replicas} x {args.cells} cells, p0={args.p0:g} kr={args.kr:g} "
+                  f"T={args.T:g} dt={args.dt:g}, {args.steps} steps\n")
+    t0 = time.perf_counter()
+    try:
+        res = glassy_dynamics(args.cells, args.p0, args.kr, args.T, dt=args.dt, steps=args.steps,
+                              replicas=args.replicas, seed=args.seed, device=args.device, relax_steps=args.relax,
+                              equilibrate_steps=args.equilibrate, b=args.b, out=args.out,
+                              progress=_StageProgress(err, enabled=not args.quiet))
+    except (ValueError, TypeError) as exc:
+        raise CLIError(_one_line(exc), USAGE_ERROR) from exc
+    except Exception as exc:
+        raise CLIError(f"dynamics failed: {_one_line(exc)}", RUNTIME_ERROR) from exc
+    if csv_path:
+        res.write_csv(csv_path)
+    print(f"{'time':>12} {'MSD':>12} {'Q_s':>8}")
+    for t, m, q in zip(res.lag, res.msd, res.self_overlap):
+        print(f"{t:12.5g} {m:12.5g} {q:8.4f}")
+    tau = "not reached (Q_s stays above 1/e: run longer)" if not np.isfinite(res.tau_alpha) else f"{res.tau_alpha:.5g}"
+    print(f"tau_alpha = {tau}")
+    if not args.quiet:
+        err.write(f"spherevm: done in {time.perf_counter() - t0:.1f} s"
+                  f"{'' if csv_path is None else f'; wrote {csv_path}'}{'' if args.out is None else f' and {args.out}'}\n")
     return 0
 
 
@@ -433,7 +520,7 @@ def main(argv=None) -> int:
     except SystemExit as exc:  # --help, --version
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else USAGE_ERROR)
     if args.command is None:
-        _report("no command given; choose one of: minimize, info, plugins (see spherevm --help)")
+        _report("no command given; choose one of: minimize, dynamics, rigidity, info, plugins (see spherevm --help)")
         return USAGE_ERROR
     try:
         return int(args.func(args) or 0)

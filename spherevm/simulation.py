@@ -219,9 +219,12 @@ class Simulation:
         self.timestep += 1
 
     def _write(self):
+        """Run the writers whose trigger fires now, each at most once per timestep."""
+        ts = self.timestep
         for w in self.operations.writers:
-            if w.trigger(self.timestep):
-                w.write(self, self.timestep)
+            if w.trigger(ts) and getattr(w, "_last_written", None) != ts:
+                w.write(self, ts)
+                w._last_written = ts
 
     def run(self, steps: int, check_every=None, progress=None):
         """Advance ``steps`` timesteps: updaters, forces, integrator, writers on each.
@@ -240,8 +243,7 @@ class Simulation:
             check_every = 100 if self.device.is_gpu else 1
         if int(check_every) != check_every or check_every < 1:
             raise ValueError(f"check_every must be a positive integer, got {check_every!r}")
-        if self.timestep == 0:
-            self._write()
+        self._write()   # the frame a run starts from (writers skip timesteps they already wrote)
         try:
             for i in range(1, int(steps) + 1):
                 self._update()
@@ -308,9 +310,7 @@ class Simulation:
         reason = np.full(n_rep, "max_steps", dtype=object)
         steps = np.full(n_rep, int(max_steps), dtype=np.int64)
         to_np = self.device.to_numpy
-        start = self.timestep
-        if start == 0:
-            self._write()
+        self._write()
         k = 0
         while True:
             self._update()

@@ -1,0 +1,43 @@
+"""The finite-temperature protocol and the `spherevm dynamics` command."""
+import numpy as np
+import pytest
+
+from spherevm import cli
+from spherevm.protocols import glassy_dynamics
+
+
+def test_glassy_dynamics_hot_small_sphere_relaxes():
+    res = glassy_dynamics(16, 3.9, 0.0, T=[0.05, 0.05], dt=0.05, steps=3000, replicas=2, relax_steps=500,
+                          device="cpu")
+    assert res.lag[0] == 0 and np.all(np.diff(res.lag) > 0)
+    assert res.msd[0] == 0 and res.msd[-1] > res.msd[1] > 0
+    assert res.self_overlap[0] == 1.0 and res.self_overlap[-1] < 1 / np.e
+    assert 0 < res.tau_alpha < res.lag[-1]
+    assert res.msd_per_replica.shape == (len(res.lag), 2) and len(res.tau_alpha_per_replica) == 2
+
+
+def test_colder_is_slower():
+    hot, cold = (glassy_dynamics(16, 3.9, 0.0, T=T, dt=0.05, steps=1500, replicas=2, relax_steps=300, seed=1,
+                                 device="cpu") for T in (0.05, 0.005))
+    assert cold.msd[-1] < hot.msd[-1]
+
+
+def test_dynamics_cli_writes_csv_and_gsd(tmp_path, capsys):
+    out = tmp_path / "d.gsd"
+    code = cli.main(["dynamics", "--cells", "16", "--replicas", "2", "--steps", "300", "--relax", "200",
+                     "--T", "0.02", "--out", str(out), "-q"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "tau_alpha =" in text
+    rows = (tmp_path / "d.csv").read_text().splitlines()
+    assert rows[0] == "time,msd,self_overlap" and len(rows) > 10
+    import gsd.hoomd
+    with gsd.hoomd.open(out) as traj:
+        assert len(traj) > 3
+
+
+@pytest.mark.parametrize("argv", [["--T", "-1"], ["--dt", "0"], ["--steps", "0"], ["--cells", "3"]])
+def test_dynamics_cli_bad_input(argv, capsys):
+    assert cli.main(["dynamics", *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("spherevm: error:") and "Traceback" not in err[0]

@@ -91,7 +91,6 @@ def solid_angle_gradient(a, b, c):
     (apply ``(I - b b^T)`` for the surface gradient). Cyclic symmetry gives the other two slots:
     ``solid_angle(a, b, c) == solid_angle(b, c, a)``.
     """
-    xp = array_module(a, b, c)
     num = _dot(a, _cross(b, c))
     den = 1.0 + _dot(a, b) + _dot(b, c) + _dot(c, a)
     g = den[..., None] * _cross(c, a) - num[..., None] * (a + c)

@@ -6,6 +6,22 @@
 #define STREAM_BROWNIAN 0u
 #define STREAM_ACTIVE 1u
 
+// Carry director d to the tangent plane at the unit normal m (project, renormalise), then turn it
+// about m by a Gaussian angle of standard deviation rot_amp (stream 1, counted by id).
+__device__ vec3 transport_and_rotate(vec3 d, vec3 m, double rot_amp, unsigned int seed,
+                                     unsigned long long timestep, unsigned int id)
+{
+    d = d - dot3(d, m) * m;
+    d = normalize3(d);
+    if (rot_amp > 0.0) {
+        double t0, t1;
+        svm_normal2(seed, STREAM_ACTIVE, timestep, id, 0u, &t0, &t1);
+        double theta = rot_amp * t0;
+        d = cos(theta) * d + sin(theta) * cross3(m, d);
+    }
+    return d;
+}
+
 // mode: 0 no self-propulsion, 1 cell directors, 2 vertex directors.
 // error: earliest (timestep << 32 | vertex) whose step was not finite or above max_step.
 extern "C" __global__ void brownian_move(
@@ -44,18 +60,8 @@ extern "C" __global__ void brownian_move(
     vec3 y = x + dr;
     vec3 m = normalize3(y);
     store3(pos, i, radius[r] * m);
-    if (mode == 2) {   // transport the vertex director to the new tangent plane, then rotate it
-        vec3 d = load3(directors, i);
-        d = d - dot3(d, m) * m;
-        d = normalize3(d);
-        if (rot_amp > 0.0) {
-            double t0, t1;
-            svm_normal2(seed, STREAM_ACTIVE, timestep, (unsigned int)i, 0u, &t0, &t1);
-            double theta = rot_amp * t0;
-            d = cos(theta) * d + sin(theta) * cross3(m, d);
-        }
-        store3(directors, i, d);
-    }
+    if (mode == 2)
+        store3(directors, i, transport_and_rotate(load3(directors, i), m, rot_amp, seed, timestep, (unsigned int)i));
 }
 
 // Cell directors after the move: transport to the tangent plane at the new cell centroid, rotate.
@@ -70,14 +76,5 @@ extern "C" __global__ void active_cell_directors(
     vec3 sum = v3(0.0, 0.0, 0.0);
     for (int k = 0; k < cell_sides[c]; ++k) sum = sum + normalize3(load3(pos, row[k]));
     vec3 m = normalize3(sum);
-    vec3 d = load3(directors, c);
-    d = d - dot3(d, m) * m;
-    d = normalize3(d);
-    if (rot_amp > 0.0) {
-        double t0, t1;
-        svm_normal2(seed, STREAM_ACTIVE, timestep, (unsigned int)c, 0u, &t0, &t1);
-        double theta = rot_amp * t0;
-        d = cos(theta) * d + sin(theta) * cross3(m, d);
-    }
-    store3(directors, c, d);
+    store3(directors, c, transport_and_rotate(load3(directors, c), m, rot_amp, seed, timestep, (unsigned int)c));
 }

@@ -7,24 +7,10 @@ import numpy as np
 
 from ... import random as rng
 from ...device import launch, load_module
+from ...validation import non_negative, positive
 from ..base import Integrator
 
 _KERNELS = Path(__file__).with_suffix(".cu")
-
-
-
-def _nonneg(name, value):
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.ndim > 1 or not np.all(np.isfinite(arr)) or np.any(arr < 0):
-        raise ValueError(f"{name} must be finite and >= 0 (a scalar or one value per replica), got {value!r}")
-    return arr
-
-
-def _positive(name, value):
-    v = float(value)
-    if not np.isfinite(v) or v <= 0:
-        raise ValueError(f"{name} must be positive and finite, got {value!r}")
-    return v
 
 
 class Brownian(Integrator):
@@ -41,10 +27,10 @@ class Brownian(Integrator):
 
     def __init__(self, dt, T=0.0, mu=1.0, max_step=0.5):
         super().__init__()
-        self.dt = _positive("dt", dt)
-        self.T = _nonneg("T", T)
-        self.mu = float(_nonneg("mu", mu))
-        self.max_step = _positive("max_step", max_step)
+        self.dt = positive("dt", dt)
+        self.T = non_negative("T", T)
+        self.mu = float(non_negative("mu", mu))
+        self.max_step = positive("max_step", max_step)
 
     def attach(self, simulation):
         super().attach(simulation)
@@ -157,8 +143,8 @@ class Active(Brownian):
 
     def __init__(self, dt, v0, Dr, mu=1.0, T=0.0, directors="cell", max_step=0.5):
         super().__init__(dt, T=T, mu=mu, max_step=max_step)
-        self.v0 = float(_nonneg("v0", v0))
-        self.Dr = float(_nonneg("Dr", Dr))
+        self.v0 = float(non_negative("v0", v0))
+        self.Dr = float(non_negative("Dr", Dr))
         if directors not in ("cell", "vertex"):
             raise ValueError(f"directors must be 'cell' or 'vertex', got {directors!r}")
         self.mode = directors

@@ -6,16 +6,10 @@ from pathlib import Path
 import numpy as np
 
 from ...device import launch, load_module
+from ...validation import positive
 from ..base import Integrator
 
 _KERNELS = Path(__file__).with_suffix(".cu")
-
-
-def _positive(name, value):
-    v = float(value)
-    if not np.isfinite(v) or v <= 0:
-        raise ValueError(f"{name} must be positive and finite, got {value!r}")
-    return v
 
 
 class FIRE(Integrator):
@@ -36,19 +30,19 @@ class FIRE(Integrator):
 
     def __init__(self, dt=0.01, dt_max=None, n_min=5, f_inc=1.1, f_dec=0.5, alpha_start=0.1, f_alpha=0.99):
         super().__init__()
-        self.dt = _positive("dt", dt)
-        self.dt_max = _positive("dt_max", dt_max if dt_max is not None else 10 * self.dt)
+        self.dt = positive("dt", dt)
+        self.dt_max = positive("dt_max", dt_max if dt_max is not None else 10 * self.dt)
         if self.dt_max < self.dt:
             raise ValueError(f"dt_max must be >= dt={self.dt}, got {dt_max!r}")
         if int(n_min) != n_min or n_min < 0:
             raise ValueError(f"n_min must be a non-negative integer, got {n_min!r}")
         self.n_min = int(n_min)
-        self.f_inc = _positive("f_inc", f_inc)
+        self.f_inc = positive("f_inc", f_inc)
         if self.f_inc < 1:
             raise ValueError(f"f_inc must be >= 1, got {f_inc!r}")
-        self.f_dec = _positive("f_dec", f_dec)
-        self.alpha_start = _positive("alpha_start", alpha_start)
-        self.f_alpha = _positive("f_alpha", f_alpha)
+        self.f_dec = positive("f_dec", f_dec)
+        self.alpha_start = positive("alpha_start", alpha_start)
+        self.f_alpha = positive("f_alpha", f_alpha)
         if self.f_dec >= 1 or self.alpha_start >= 1 or self.f_alpha > 1:
             raise ValueError("FIRE needs f_dec < 1, alpha_start < 1 and f_alpha <= 1")
         self.velocities = None

@@ -34,6 +34,7 @@ class State:
         self.cell_start = np.asarray(cell_start, dtype=np.int64)
         self.radius = xp.asarray(np.broadcast_to(np.asarray(radius, dtype=np.float64),
                                                  (len(self.vertex_start) - 1,)).copy())
+        self.topology_version = 0   # bumped by every topology edit (T1 flips): caches key on it
         self._derive_layout()
         if validate:
             self.validate()
@@ -100,6 +101,10 @@ class State:
     def mean_cell_area(self):
         """<A> per replica: total surface area over the number of cells."""
         return self.constraint.total_area_np(self.radius_np()) / self.cells_per_replica
+
+    def topology_changed(self):
+        """Call after editing the index arrays by hand: cached corner maps are rebuilt."""
+        self.topology_version += 1
 
     # ------------------------------------------------------------------ checks and copies
     def validate(self, tol: float = 1e-9, orientation: bool = True):

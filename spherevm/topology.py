@@ -295,6 +295,7 @@ def t1_flip(state, u, slot, new_length, sense: int = 1):
     state.cell_vertices = xp.asarray(table)
     state.cell_sides = xp.asarray(sides)
     state.positions = xp.asarray(pos)
+    state.topology_version += 1
     return np.concatenate([u, v])
 
 

@@ -1,6 +1,8 @@
 """The sphere centred at the origin: geodesic perimeters and spherical-polygon areas."""
 from __future__ import annotations
 
+import os
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -12,12 +14,49 @@ from .base import Constraint
 
 @dataclass
 class CellGeometry:
-    """Per-cell area, perimeter and fan apex (unit centroid), plus the unit vertex directions."""
+    """Per-cell area, perimeter and fan apex (unit centroid), the unit vertex directions, and the
+    per-corner fan terms that the gradients reuse (components as separate contiguous arrays)."""
     area: object
     perimeter: object
     apex: object
     unit: object
-    radius: object  # per vertex
+    radius: object          # per vertex
+    corners: dict = None    # per-corner terms, see Sphere.cell_geometry
+
+
+def _cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+_POOL = None
+PARALLEL_MIN_VERTICES = 16384   # below this, one thread: the split costs more than it saves
+
+
+def _vertex_blocks(state):
+    """Contiguous vertex ranges, one per CPU core for large NumPy states (NumPy releases the GIL
+    inside its loops, so the blocks' array operations run on all cores at once)."""
+    nv = state.n_vertices
+    workers = os.cpu_count() or 1
+    if state.device.is_gpu or workers < 2 or nv < PARALLEL_MIN_VERTICES:
+        return [(0, nv)]
+    edges = np.linspace(0, nv, workers + 1).astype(int)
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+
+
+def _in_parallel(fn, blocks, xp, with_index=False):
+    """[fn(lo, hi[, i]) for each block], on a thread pool when there are several blocks."""
+    global _POOL
+    args = [(lo, hi, i) if with_index else (lo, hi) for i, (lo, hi) in enumerate(blocks)]
+    if len(blocks) == 1:
+        return [fn(*args[0])]
+    if _POOL is None:
+        from concurrent.futures import ThreadPoolExecutor
+        _POOL = ThreadPoolExecutor(max_workers=os.cpu_count(), thread_name_prefix="spherevm")
+    return [f.result() for f in [_POOL.submit(fn, *a) for a in args]]
 
 
 class Sphere(Constraint):
@@ -51,54 +90,190 @@ class Sphere(Constraint):
         return 4.0 * np.pi * np.asarray(radius, dtype=np.float64) ** 2
 
     # -------------------------------------------------------------- per-corner metric
-    @staticmethod
-    def _corners(state):
-        """Corner arrays (V, 3): cell, next vertex, previous vertex."""
-        xp = state.device.xp
-        vn = state.vertex_neighbors
-        return state.vertex_cells, vn, xp.roll(vn, -1, axis=1)
+    # -------------------------------------------------------------- per-corner metric
+    # Corner i = 3 v + k lies in cell c_i = vertex_cells[v, k]; its fan triangle is
+    # (apex_c, u_v, u_next) with next = vertex_neighbors[v, k]. Everything is computed on flat
+    # corner arrays, one contiguous array per Cartesian component, and summed per cell by bincount.
 
     def cell_geometry(self, state) -> CellGeometry:
+        """Areas, perimeters, apexes; keeps each corner's fan numerator N and denominator D."""
         xp = state.device.xp
-        pos = state.positions
-        rv = xp.sqrt((pos * pos).sum(axis=1))
-        unit = pos / rv[:, None]
-        radius_v = state.radius[state.vertex_replica]
-        cells, nxt, _ = self._corners(state)
-        flat_cells = cells.reshape(-1)
         n = state.n_cells
-        corner_unit = xp.repeat(unit, 3, axis=0)
-        summed = xp.stack([xp.bincount(flat_cells, weights=corner_unit[:, i], minlength=n) for i in range(3)], axis=1)
-        apex = geo.normalize(summed)
-        u_next = unit[nxt]
-        r3 = radius_v[:, None]
-        lengths = r3 * geo.geodesic_length(unit[:, None, :], u_next)
-        omegas = r3 * r3 * geo.solid_angle(apex[cells], unit[:, None, :], u_next)
-        perimeter = xp.bincount(flat_cells, weights=lengths.reshape(-1), minlength=n)
-        area = xp.bincount(flat_cells, weights=omegas.reshape(-1), minlength=n)
-        return CellGeometry(area=area, perimeter=perimeter, apex=apex, unit=unit, radius=radius_v)
+        comp = xp.ascontiguousarray(state.positions.T)
+        rv = xp.sqrt(_dot(comp, comp))
+        u = tuple(c / rv for c in comp)
+        cells = state.vertex_cells.reshape(-1)
+        nxt = state.vertex_neighbors.reshape(-1)
+        blocks = _vertex_blocks(state)
+
+        def apex_sums(lo, hi):
+            b = tuple(xp.repeat(c[lo:hi], 3) for c in u)              # the corners' own vertex
+            return b, [xp.bincount(cells[3 * lo:3 * hi], weights=c, minlength=n) for c in b]
+
+        parts = _in_parallel(apex_sums, blocks, xp)
+        summed = [sum(p[1][i] for p in parts) for i in range(3)]
+        norm = xp.sqrt(_dot(summed, summed))
+        apex_c = tuple(c / norm for c in summed)
+
+        def fan(block, part):
+            lo, hi = block
+            b = part[0]
+            cl = cells[3 * lo:3 * hi]
+            a = tuple(c[cl] for c in apex_c)                           # fan apex of the corner's cell
+            d = tuple(c[nxt[3 * lo:3 * hi]] for c in u)                # the next vertex
+            num = _dot(a, _cross(b, d))
+            den = 1.0 + _dot(a, b) + _dot(b, d) + _dot(d, a)
+            minus = tuple(x - y for x, y in zip(b, d))
+            m2 = _dot(minus, minus)
+            # |b + d|^2 = 4 - |b - d|^2 for unit vectors: exact enough, as the sum is never small here
+            lengths = 2.0 * xp.arctan2(xp.sqrt(m2), xp.sqrt(xp.maximum(4.0 - m2, 0.0)))
+            omegas = 2.0 * xp.arctan2(num, den)
+            sums = (xp.bincount(cl, weights=lengths, minlength=n), xp.bincount(cl, weights=omegas, minlength=n))
+            return dict(a=a, b=b, d=d, num=num, den=den, minus=minus, m2=m2), sums
+
+        fans = _in_parallel(lambda lo, hi, i: fan((lo, hi), parts[i]), blocks, xp, with_index=True)
+        R = state.radius[state.cell_replica]
+        perimeter = R * sum(f[1][0] for f in fans)
+        area = R * R * sum(f[1][1] for f in fans)
+        corner_blocks = [f[0] for f in fans]
+        num = corner_blocks[0]["num"] if len(fans) == 1 else xp.concatenate([c["num"] for c in corner_blocks])
+        den = corner_blocks[0]["den"] if len(fans) == 1 else xp.concatenate([c["den"] for c in corner_blocks])
+        return CellGeometry(area=area, perimeter=perimeter, apex=xp.stack(apex_c, axis=1), unit=xp.stack(u, axis=1),
+                            radius=state.radius[state.vertex_replica],
+                            corners=dict(blocks=blocks, parts=corner_blocks, num=num, den=den, rv=rv, u=u))
+
+    def _corner_terms(self, state, geometry, lo=0, hi=None, part=None):
+        """Per-corner area gradient (fan triangles on both sides of the vertex, apex held fixed,
+        projected on the tangent plane) and the unit-sphere length gradient toward the next vertex,
+        for the corners of vertices ``lo:hi`` (all by default)."""
+        xp = state.device.xp
+        g = geometry.corners
+        hi = state.n_vertices if hi is None else hi
+        if part is None:   # all corners, as one block
+            part = {k: (tuple(xp.concatenate([p[k][i] for p in g["parts"]]) for i in range(3))
+                        if isinstance(g["parts"][0][k], tuple) else xp.concatenate([p[k] for p in g["parts"]]))
+                    for k in ("a", "b", "d", "num", "den", "minus", "m2")}
+        a, b, d, num, den = part["a"], part["b"], part["d"], part["num"], part["den"]
+        prev, pc = self._previous_corners(state)
+        p = tuple(c[prev[3 * lo:3 * hi]] for c in g["u"])
+        num2, den2 = g["num"][pc[3 * lo:3 * hi]], g["den"][pc[3 * lo:3 * hi]]
+        # d Omega(a, b, d)/db = 2 (D (d x a) - N (a + d)) / (N^2 + D^2); likewise for (p, b, a)
+        s1 = 2.0 / (num * num + den * den)
+        s2 = 2.0 / (num2 * num2 + den2 * den2)
+        da, ap = _cross(d, a), _cross(a, p)
+        gA = tuple(s1 * (den * da[i] - num * (a[i] + d[i])) + s2 * (den2 * ap[i] - num2 * (p[i] + a[i]))
+                   for i in range(3))
+        radial = _dot(gA, b)
+        gA = tuple(gA[i] - radial * b[i] for i in range(3))
+        # d theta(b, d)/db = -t/|t|, t = (d - b) - ((d - b).b) b, |t|^2 = |d - b|^2 - ((d - b).b)^2;
+        # written with minus = b - d: -t = minus - (minus.b) b; 0 for a zero-length edge
+        minus = part["minus"]
+        mb = _dot(minus, b)
+        t2 = part["m2"] - mb * mb
+        inv = 1.0 / xp.sqrt(xp.where(t2 > 0, t2, 1.0)) * (t2 > 0)
+        gL = tuple(inv * (minus[i] - mb * b[i]) for i in range(3))
+        return gA, gL
+
+    def shape_gradient(self, state, geometry: CellGeometry, d_area, d_perimeter):
+        """Surface gradient (V, 3) of ``sum_c d_area[c] A_c + d_perimeter[c] P_c``.
+
+        With ``d_area = dE/dA`` and ``d_perimeter = dE/dP`` this is the gradient of any energy of the
+        cell areas and perimeters (chain rule); the vertex model's forces are minus it.
+        """
+        xp = state.device.xp
+        g = geometry.corners
+        out = xp.empty((state.n_vertices, 3))
+
+        def block(lo, hi, i):
+            gA, gL = self._corner_terms(state, geometry, lo, hi, g["parts"][i])
+            cells = state.vertex_cells[lo:hi]
+            wA = d_area[cells].reshape(-1)
+            wP = d_perimeter[cells]
+            wL = (wP + xp.roll(wP, 1, axis=1)).reshape(-1)   # edge v -> n_k borders cells k and k-1
+            rv = g["rv"][lo:hi]
+            radius = geometry.radius[lo:hi]
+            sA, sP = radius * radius / rv, radius / rv
+
+            def per_vertex(x):
+                x = x.reshape(hi - lo, 3)
+                return x[:, 0] + x[:, 1] + x[:, 2]
+
+            for k in range(3):
+                out[lo:hi, k] = sA * per_vertex(wA * gA[k]) + sP * per_vertex(wL * gL[k])
+
+        _in_parallel(block, g["blocks"], xp, with_index=True)
+        return out
 
     def corner_gradients(self, state, geometry: CellGeometry):
         """Surface gradients (with respect to positions) of each corner's cell area and perimeter.
 
         Returns ``(dA, dP)``, both ``(V, 3, 3)``: ``dA[v, k]`` is the gradient of the area of cell
-        ``vertex_cells[v, k]`` with respect to ``positions[v]``; likewise ``dP``.
+        ``vertex_cells[v, k]`` with respect to ``positions[v]``; likewise ``dP``. (The forces use
+        :meth:`shape_gradient`, which sums these without building them.)
         """
         xp = state.device.xp
-        cells, nxt, prv = self._corners(state)
-        u = geometry.unit
-        a = u[:, None, :]
-        apex = geometry.apex[cells]
-        u_next, u_prev = u[nxt], u[prv]
-        # fan triangles (apex, v, next) and (apex, prev, v) == (prev, v, apex): v in the middle slot
-        g_area = geo.solid_angle_gradient(apex, a, u_next) + geo.solid_angle_gradient(u_prev, a, apex)
-        g_per = geo.geodesic_length_gradient(a, u_next) + geo.geodesic_length_gradient(a, u_prev)
-        # chain rule to positions: d(unit)/dr = (I - a a^T)/|r|, with |r| = R on the surface
-        rv = xp.sqrt((state.positions ** 2).sum(axis=1))
-        g_area = g_area - (g_area * a).sum(axis=-1)[..., None] * a
-        scale_a = (geometry.radius ** 2 / rv)[:, None, None]
-        scale_p = (geometry.radius / rv)[:, None, None]
-        return scale_a * g_area, scale_p * g_per
+        gA, gL = self._corner_terms(state, geometry)
+        nv = state.n_vertices
+        rv = geometry.corners["rv"]
+        dA = xp.stack(gA, axis=1).reshape(nv, 3, 3) * (geometry.radius ** 2 / rv)[:, None, None]
+        lg = xp.stack(gL, axis=1).reshape(nv, 3, 3)
+        dP = (lg + xp.roll(lg, -1, axis=1)) * (geometry.radius / rv)[:, None, None]
+        return dA, dP
+
+    def _previous_corners(self, state):
+        """For every corner (v, k): the previous vertex p and the index of p's corner in the same
+        cell (whose next is v), whose fan triangle (apex, p, v) is v's other one in that cell.
+        Cached per State and topology version (T1 flips bump it)."""
+        cache = getattr(self, "_prev_cache", None)
+        if cache is not None and cache[0]() is state and cache[1] == state.topology_version:
+            return cache[2]
+        xp = state.device.xp
+        vn = state.vertex_neighbors
+        prev = xp.roll(vn, -1, axis=1)
+        v_ids = xp.arange(state.n_vertices, dtype=vn.dtype)[:, None]
+        slot = (vn[prev] == v_ids[..., None]).argmax(axis=2)
+        result = (prev.reshape(-1), (3 * prev + slot).reshape(-1))
+        self._prev_cache = (weakref.ref(state), state.topology_version, result)
+        return result
+
+    def shape_gradient(self, state, geometry: CellGeometry, d_area, d_perimeter):
+        """Surface gradient (V, 3) of ``sum_c d_area[c] A_c + d_perimeter[c] P_c``.
+
+        With ``d_area = dE/dA`` and ``d_perimeter = dE/dP`` this is the gradient of any energy of the
+        cell areas and perimeters (chain rule); the vertex model's forces are minus it.
+        """
+        xp = state.device.xp
+        gA, gL = self._corner_terms(state, geometry)
+        nv = state.n_vertices
+        cells = state.vertex_cells
+        wA = d_area[cells].reshape(-1)
+        wP = d_perimeter[cells]
+        wL = (wP + xp.roll(wP, 1, axis=1)).reshape(-1)   # edge v -> n_k borders cells k and k-1
+        rv = geometry.corners["rv"]
+        sA = geometry.radius ** 2 / rv
+        sP = geometry.radius / rv
+
+        def per_vertex(x):
+            x = x.reshape(nv, 3)
+            return x[:, 0] + x[:, 1] + x[:, 2]
+
+        return xp.stack([sA * per_vertex(wA * gA[i]) + sP * per_vertex(wL * gL[i]) for i in range(3)], axis=1)
+
+    def corner_gradients(self, state, geometry: CellGeometry):
+        """Surface gradients (with respect to positions) of each corner's cell area and perimeter.
+
+        Returns ``(dA, dP)``, both ``(V, 3, 3)``: ``dA[v, k]`` is the gradient of the area of cell
+        ``vertex_cells[v, k]`` with respect to ``positions[v]``; likewise ``dP``. (The forces use
+        :meth:`shape_gradient`, which sums these without building them.)
+        """
+        xp = state.device.xp
+        gA, gL = self._corner_terms(state, geometry)
+        nv = state.n_vertices
+        rv = geometry.corners["rv"]
+        dA = xp.stack(gA, axis=1).reshape(nv, 3, 3) * (geometry.radius ** 2 / rv)[:, None, None]
+        lg = xp.stack(gL, axis=1).reshape(nv, 3, 3)
+        dP = (lg + xp.roll(lg, -1, axis=1)) * (geometry.radius / rv)[:, None, None]
+        return dA, dP
 
     def edge_lengths(self, state, u, v):
         """Geodesic lengths of the edges (u[i], v[i])."""

@@ -25,8 +25,8 @@ class VertexModel(Force):
     """Area and perimeter elasticity of every cell, measured on the constraint surface.
 
     ``E = sum_c kA (A_c - A0)^2 + kP (P_c - P0)^2`` with scalar or per-cell (length ``n_cells``)
-    parameters. Forces are minus the surface gradient, computed per vertex from its three corners
-    (see :meth:`spherevm.constraints.Sphere.corner_gradients`), so they are tangent by construction.
+    parameters. Forces are minus the surface gradient, gathered per vertex from its three corners
+    (:meth:`spherevm.constraints.Sphere.shape_gradient`), so they are tangent by construction.
 
     :meth:`dimensionless` gives the paper's form ``E/(kP <A>) = sum kr (a - a0)^2 + (p - p0)^2`` in
     the unit of length ``sqrt(<A>)`` of each replica.
@@ -84,11 +84,7 @@ class VertexModel(Force):
         dP_cell = geometry.perimeter - P0
         cell_energy = kA * dA_cell ** 2 + kP * dP_cell ** 2
         energy = xp.bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)
-        dA, dP = state.constraint.corner_gradients(state, geometry)
-        cells = state.vertex_cells
-        tA = (2.0 * kA * dA_cell)[cells][..., None]
-        tP = (2.0 * kP * dP_cell)[cells][..., None]
-        forces = -(tA * dA + tP * dP).sum(axis=1)
+        forces = -state.constraint.shape_gradient(state, geometry, 2.0 * kA * dA_cell, 2.0 * kP * dP_cell)
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
 
     def __repr__(self):

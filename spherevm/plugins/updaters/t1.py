@@ -241,6 +241,7 @@ class T1(Updater):
                 buf["total_flips"], velocities if velocities is not None else np.intp(0), buf["log_count"], buf["log"],
                 np.int32(buf["passes"])))
         launch(module.get_function("t1_release"), n_cand, (buf["claim"], buf["cand"], np.int32(n_cand)))
+        state.topology_version += 1
         simulation.state_changed()
 
     def _flush_log(self, state):

@@ -45,7 +45,7 @@ CHUNK_DIR = "chunks"
 #: cells per batch on the CPU: the NumPy cost per cell and step is flat from ~500 cells up (and
 #: rises slowly beyond ~2000, out of cache), while a smaller batch wastes fewer steps waiting for
 #: its slowest replica (docs/rigidity.md, "Chunking").
-CPU_BATCH_CELLS = 1024
+CPU_BATCH_CELLS = 512
 #: cells per batch on a GPU: large, so each kernel launch serves many replicas; ~0.3 GB.
 GPU_BATCH_CELLS = 1 << 18
 
@@ -90,7 +90,9 @@ class RigiditySweep:
       ``force_tol``, its energy per cell below ``energy_tol`` (a zero-energy state), after
       ``max_steps`` steps, or when T1 flips oscillate (``t1_max_flip_backs`` re-joins of one pair);
       T1 exchanges of edges shorter than ``t1_threshold`` (new edges ``t1_new_length``), units
-      sqrt(<A>). Defaults from docs/rigidity.md.
+      sqrt(<A>); ``t1_length_factor`` instead makes a new edge that many times the old one (the
+      paper code's rule is ``t1_threshold=0.1, t1_length_factor=2``, :meth:`reference_t1`).
+      Defaults from docs/rigidity.md.
 
     The energy is ``E = sum_c kr/<A> (A_c - <A>)^2 + (P_c - p0 sqrt(<A>))^2`` per tiling (kP = 1), so
     that ``energy_per_cell`` is in units of kP <A>^2 (<A> = 1 at the default radius sqrt(N/4 pi)).
@@ -108,7 +110,8 @@ class RigiditySweep:
     check_every: int = 10
     t1_threshold: float = 0.04
     t1_new_length: float = 0.06
-    t1_max_flip_backs: int = 10
+    t1_max_flip_backs: int = 100
+    t1_length_factor: float = None
 
     def __post_init__(self):
         set_ = object.__setattr__
@@ -153,9 +156,16 @@ class RigiditySweep:
         set_(self, "check_every", _int("check_every", self.check_every, 1))
         set_(self, "t1_threshold", _pos("t1_threshold", self.t1_threshold))
         set_(self, "t1_new_length", _pos("t1_new_length", self.t1_new_length))
-        if self.t1_new_length <= self.t1_threshold:
+        if self.t1_length_factor is None and self.t1_new_length <= self.t1_threshold:
             raise ValueError(f"t1_new_length must be > t1_threshold = {self.t1_threshold}, got {self.t1_new_length}")
         set_(self, "t1_max_flip_backs", _int("t1_max_flip_backs", self.t1_max_flip_backs, 1))
+        if self.t1_length_factor is not None:
+            set_(self, "t1_length_factor", _pos("t1_length_factor", self.t1_length_factor))
+
+    @staticmethod
+    def reference_t1() -> dict:
+        """The T1 rules of the paper's own code (``T1(preset="reference")``), as sweep parameters."""
+        return {"t1_threshold": 0.1, "t1_length_factor": 2.0}
 
     def parameters(self) -> dict:
         """JSON-ready parameters (what the manifest stores and a resumed sweep must match)."""
@@ -280,11 +290,16 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     sim.state = state
     sim.operations.forces.append(VertexModel(kA=sweep.kr / area, kP=1.0, A0=area,
                                              P0=p0[cell_rep] * np.sqrt(area)))
-    t1 = T1(threshold=sweep.t1_threshold, new_length=sweep.t1_new_length, max_flip_backs=sweep.t1_max_flip_backs)
+    if sweep.t1_length_factor is not None:
+        t1 = T1(threshold=sweep.t1_threshold, new_length=None, length_factor=sweep.t1_length_factor,
+                max_flip_backs=sweep.t1_max_flip_backs)
+    else:
+        t1 = T1(threshold=sweep.t1_threshold, new_length=sweep.t1_new_length, max_flip_backs=sweep.t1_max_flip_backs)
     sim.operations.updaters.append(t1)
     sim.operations.integrator = FIRE(dt=sweep.dt)
     res = sim.minimize(force_tol=sweep.force_tol, energy_tol=sweep.energy_tol, max_steps=sweep.max_steps,
                        check_every=sweep.check_every)
+    flips = np.asarray(sim.log("t1_total_flips"))          # the loggable syncs the GPU counters
     elapsed = time.perf_counter() - t0
     n = chunk.size
     return {"n_cells": [chunk.n_cells] * n, "p0": p0.tolist(), "p0_index": list(p0_index), "replica": list(replica),
@@ -292,7 +307,7 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
             "max_force": [float(f) for f in res.max_force],
             "mean_shape_index": [float(q) for q in res.mean_shape_index],
             "steps": [int(s) for s in res.steps], "reason": [str(r) for r in res.reason],
-            "t1_flips": [int(f) for f in t1.total_flips], "chunk": [chunk.id] * n,
+            "t1_flips": [int(f) for f in flips], "chunk": [chunk.id] * n,
             "chunk_seconds": [round(elapsed, 4)] * n}
 
 
@@ -435,11 +450,12 @@ def open_sweep_folder(sweep: RigiditySweep, out, create: bool = True) -> str:
     return path
 
 
-def scan_chunks(sweep: RigiditySweep, path: str):
+def scan_chunks(sweep: RigiditySweep, path: str, clean: bool = False):
     """Finished chunk files of a sweep folder: ``(done, records, bad)``.
 
     ``done`` maps N to a bool array over its units; ``records`` lists the parsed files; ``bad``
     lists files that could not be read or do not match the sweep (they are recomputed).
+    ``clean=True`` (run_sweep) removes temporary files an interrupted write left behind.
     """
     folder = os.path.join(path, CHUNK_DIR)
     done = {n: np.zeros(sweep.units_per_size, dtype=bool) for n in sweep.cells}
@@ -449,10 +465,11 @@ def scan_chunks(sweep: RigiditySweep, path: str):
     for name in sorted(os.listdir(folder)):
         full = os.path.join(folder, name)
         if ".tmp" in name:          # left over by an interrupted write
-            try:
-                os.remove(full)
-            except OSError:
-                pass
+            if clean:
+                try:
+                    os.remove(full)
+                except OSError:
+                    pass
             continue
         if not name.endswith(".csv"):
             continue
@@ -527,11 +544,15 @@ class SweepProgress:
     units_reused: int      # found on disk at the start
     elapsed: float
     last_chunk: str = ""
+    cells_done: int = 0    # the same counts weighted by N (the cost of a minimisation grows with N)
+    cells_total: int = 0
+    cells_reused: int = 0
 
     @property
     def eta(self) -> float:
-        new = self.units_done - self.units_reused
-        left = self.units_total - self.units_done
+        """Seconds left, extrapolated from the cells minimised so far in this run (NaN at first)."""
+        new = self.cells_done - self.cells_reused
+        left = self.cells_total - self.cells_done
         return math.nan if new <= 0 else self.elapsed * left / new
 
 
@@ -595,12 +616,15 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         batch_cells = GPU_BATCH_CELLS if device_name == "gpu" else CPU_BATCH_CELLS
     try:
         path = open_sweep_folder(sweep, out, create=True)
-        done, parts, bad = scan_chunks(sweep, path)
+        done, parts, bad = scan_chunks(sweep, path, clean=True)
         chunks = plan_chunks(sweep, batch_cells, done)
         reused_units = int(sum(d.sum() for d in done.values()))
+        reused_cells = int(sum(n * d.sum() for n, d in done.items()))
         t0 = time.perf_counter()
         state = SweepProgress(chunks_done=0, chunks_total=len(chunks), units_done=reused_units,
-                              units_total=sweep.total_units, units_reused=reused_units, elapsed=0.0)
+                              units_total=sweep.total_units, units_reused=reused_units, elapsed=0.0,
+                              cells_done=reused_cells, cells_total=sweep.units_per_size * sum(sweep.cells),
+                              cells_reused=reused_cells)
         if progress is not None:
             progress(state)
         params = sweep.parameters()
@@ -632,13 +656,20 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
                 computed.append(c.id)
                 state.chunks_done += 1
                 state.units_done += c.size
+                state.cells_done += c.size * c.n_cells
                 state.elapsed = time.perf_counter() - t0
                 state.last_chunk = c.id
                 if progress is not None:
                     progress(state)
+    except BaseException:
+        # a failed chunk or Ctrl-C: do not wait for the chunks still running (finished ones are on disk)
+        if owned:
+            owned = False
+            executor.shutdown(wait=False, cancel_futures=True)
+        raise
     finally:
         if owned:
-            executor.shutdown(wait=True, cancel_futures=True)
+            executor.shutdown(wait=True)
     return SweepResult(sweep=sweep, out=path, records=_sorted_records(_merge(parts)), computed=computed,
                        reused=len(parts) - len(computed), recomputed_bad=[b for b, _ in bad],
                        elapsed=time.perf_counter() - t0, executor=type(executor).__name__)
@@ -772,7 +803,7 @@ class TextProgress:
         if not self.tty and not final and p.chunks_done and now - self.last < 5.0:
             return
         self.last = now
-        frac = p.units_done / p.units_total if p.units_total else 1.0
+        frac = p.cells_done / p.cells_total if p.cells_total else 1.0
         fill = int(round(self.width * frac))
         eta = "" if not math.isfinite(p.eta) or final else f"  eta {p.eta:5.0f} s"
         reused = f" ({p.units_reused} on disk)" if p.units_reused else ""
@@ -789,39 +820,9 @@ class TextProgress:
             self.stream.flush()
 
 
-def _cli_int(lo):
-    import argparse
-
-    def parse(text):
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be an integer >= {lo}, got {text!r}") from None
-        if v < lo:
-            raise argparse.ArgumentTypeError(f"must be an integer >= {lo}, got {text!r}")
-        return v
-    parse.__name__ = f"integer >= {lo}"
-    return parse
-
-
-def _cli_real(lo=0.0, strict=False):
-    import argparse
-
-    def parse(text):
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
-        if not math.isfinite(v) or v < lo or (strict and v == lo):
-            raise argparse.ArgumentTypeError(f"must be a finite number {'>' if strict else '>='} {lo:g}, got {text!r}")
-        return v
-    parse.__name__ = "number"
-    return parse
-
-
 DEFAULT_CELLS = (16, 32)
-DEFAULT_P0 = "3.5:4.0:0.05"
-DEFAULT_REPLICAS = 8
+DEFAULT_P0 = "3.5:4.0:0.025"
+DEFAULT_REPLICAS = 12
 
 
 def add_cli(subparsers):
@@ -830,13 +831,14 @@ def add_cli(subparsers):
     In spherevm/cli.py: ``from .sweeps import add_cli as add_rigidity`` then ``add_rigidity(sub)``
     inside ``build_parser`` (and add ``rigidity`` to ``COMMANDS_METAVAR``).
     """
+    from .cli import _integer as _cli_int, _real as _cli_real
     r = subparsers.add_parser(
         "rigidity", help="sweep p0 and N: F(p0, N), p0* distributions and p0*(N) (Fig. 2 and 4)",
         description="Minimise REPLICAS random tilings at every (N, p0) with FIRE and T1s, classify every "
                     "inherent state as zero energy or rigid, and write F(p0, N), the distributions of p0* "
                     "and p0*(N) beside the regular-pentagon bound (CSV, and PNG with matplotlib) to --out. "
                     "Chunks are saved as they finish: rerun the same command to resume. The default sweep "
-                    "takes about a minute on a 2-core laptop. See docs/rigidity.md.")
+                    "takes under a minute on a 2-core laptop. See docs/rigidity.md.")
     g = r.add_argument_group("sweep")
     g.add_argument("--cells", "-N", type=_cli_int(4), nargs="+", default=list(DEFAULT_CELLS), metavar="N",
                    help="system sizes, cells per tiling (default: %(default)s)")
@@ -859,6 +861,12 @@ def add_cli(subparsers):
                    help="step limit; replicas reaching it are reported as not converged (default: %(default)s)")
     g.add_argument("--t1", type=_cli_real(0.0, strict=True), default=RigiditySweep.t1_threshold, metavar="THRESHOLD",
                    help="T1 edge-length threshold in sqrt(<A>), new edges 1.5 x as long (default: %(default)s)")
+    g.add_argument("--t1-reference", action="store_true",
+                   help="the paper code's T1 rule instead: threshold 0.1, new edge twice the old length "
+                        "(more floppy states near the transition: p0* lower by ~0.02 at N = 32)")
+    g.add_argument("--max-flip-backs", type=_cli_int(1), default=RigiditySweep.t1_max_flip_backs,
+                   help="stop a replica as 't1_oscillation' after this many re-joins of one cell pair "
+                        "(default: %(default)s)")
     g = r.add_argument_group("analysis")
     g.add_argument("--zero-tol", type=_cli_real(0.0, strict=True), default=None,
                    help="energy per cell below which a state counts as zero energy (default: 1e-12)")
@@ -894,13 +902,21 @@ def _dask_client(address):
     return Client(address)
 
 
+def sweep_from_args(args) -> RigiditySweep:
+    """The RigiditySweep that ``spherevm rigidity`` arguments describe (ValueError on bad input)."""
+    t1 = {"t1_threshold": args.t1, "t1_new_length": 1.5 * args.t1}
+    if args.t1_reference:
+        t1 = RigiditySweep.reference_t1()
+    return RigiditySweep(cells=args.cells, p0=parse_p0_grid(args.p0), replicas=args.replicas, kr=args.kr,
+                         seed=args.seed, shared_tilings=args.shared_tilings, dt=args.dt, force_tol=args.force_tol,
+                         energy_tol=args.energy_tol, max_steps=args.max_steps, t1_max_flip_backs=args.max_flip_backs,
+                         **t1)
+
+
 def cmd_rigidity(args) -> int:
     """The handler of ``spherevm rigidity``."""
     err = sys.stderr
-    sweep = RigiditySweep(cells=args.cells, p0=parse_p0_grid(args.p0), replicas=args.replicas, kr=args.kr,
-                          seed=args.seed, shared_tilings=args.shared_tilings, dt=args.dt, force_tol=args.force_tol,
-                          energy_tol=args.energy_tol, max_steps=args.max_steps, t1_threshold=args.t1,
-                          t1_new_length=1.5 * args.t1)
+    sweep = sweep_from_args(args)
     if args.zero_tol is not None and args.zero_tol <= 0:
         raise ValueError("--zero-tol must be > 0")
     _check_out_folder(args.out)

@@ -32,8 +32,8 @@ from .shapes import pentagon_perimeter
 
 #: Energy per cell (units kP <A>^2) below which a minimised state counts as zero energy. The
 #: measured distribution is bimodal with a gap of many decades: floppy states stop at
-#: MINIMIZE_ENERGY_TOL (1e-16, well below this), rigid ones have 1e-8 or more even within 0.005
-#: of the transition (docs/rigidity.md). Anything in between is reported, not hidden.
+#: the sweep's energy_tol (1e-16, well below this), rigid ones had 1.6e-7 or more even close to
+#: the transition (docs/rigidity.md, "Zero energy or rigid").
 ZERO_ENERGY_TOL = 1e-12
 #: sigma = SIGMA_FRACTION x (width of the transition measured from the data), see smoothing_width.
 SIGMA_FRACTION = 0.5
@@ -86,6 +86,7 @@ def wilson_interval(k, n, z: float = 1.0):
         centre = (f + z * z / (2 * n)) / denom
         half = z * np.sqrt(f * (1 - f) / n + z * z / (4 * n * n)) / denom
         lo, hi = np.clip(centre - half, 0, 1), np.clip(centre + half, 0, 1)
+        lo, hi = np.where(k == 0, 0.0, lo), np.where(k == n, 1.0, hi)   # exact at the ends
     return np.where(n > 0, lo, np.nan), np.where(n > 0, hi, np.nan)
 
 
@@ -315,7 +316,7 @@ def summarize(n_cells, p0, status, sigma=None, grid_points: int = 401, resamples
                          ("n_unconverged", int(frac["n_unconverged"][sel].sum()))):
             rows[col].append(val)
         if np.isfinite(est.sigma) and np.isfinite(est.mean):
-            pad = 3 * est.sigma
+            pad = est.sigma         # F is constant outside the data: the density decays within ~2 sigma
             grid = np.linspace(lo - pad, hi + pad, grid_points)
             dens["n_cells"].append(np.full(grid_points, int(n)))
             dens["p0"].append(grid)
@@ -328,12 +329,13 @@ def summarize(n_cells, p0, status, sigma=None, grid_points: int = 401, resamples
 # ---------------------------------------------------------------------------------------- plots
 def size_colors(sizes):
     """The paper's colours: darker red (small N) to lighter blue (large N)."""
-    import matplotlib
-    cmap = matplotlib.colormaps["RdYlBu"]
+    from matplotlib.colors import LinearSegmentedColormap
+    cmap = LinearSegmentedColormap.from_list("red_to_light_blue",
+                                             ["#7f0000", "#d7301f", "#c06c84", "#4a7fc1", "#8ec5ea"])
     sizes = list(sizes)
     if len(sizes) == 1:
-        return {sizes[0]: cmap(0.1)}
-    return {n: cmap(0.02 + 0.88 * i / (len(sizes) - 1)) for i, n in enumerate(sizes)}
+        return {sizes[0]: cmap(0.0)}
+    return {n: cmap(i / (len(sizes) - 1)) for i, n in enumerate(sizes)}
 
 
 def plot_transition(fractions, p0star, density, ax=None, inset=True):
@@ -357,18 +359,20 @@ def plot_transition(fractions, p0star, density, ax=None, inset=True):
                 mec="k", mew=0.5, ls="none", clip_on=False)
     ax.set_xlabel(r"$p_0^*$")
     ax.set_ylabel(r"$P(p_0^*) = \partial F / \partial p_0$")
-    ax.axhline(0, color="0.6", lw=0.6)
+    ax.axhline(0, color="0.6", lw=0.6, zorder=0)
     ax.legend(fontsize=8, loc="upper right", frameon=False)
     if inset:
-        ins = ax.inset_axes([0.07, 0.52, 0.36, 0.42])
+        ax.set_ylim(-0.06 * max(ymax, 1.0), 1.8 * max(ymax, 1e-9))   # room for the inset above the curves
+        ins = ax.inset_axes([0.08, 0.6, 0.34, 0.36])
         for n in sizes:
             sel = fractions["n_cells"] == n
             x, f = fractions["p0"][sel], fractions["F"][sel]
             lo, hi = fractions["F_low"][sel], fractions["F_high"][sel]
             ins.errorbar(x, f, yerr=[np.clip(f - lo, 0, None), np.clip(hi - f, 0, None)], color=colors[n],
                          marker="o", ms=2.5, lw=1, capsize=0)
-        ins.set_xlabel(r"$p_0$", fontsize=8)
-        ins.set_ylabel(r"$F(p_0)$", fontsize=8)
+        ins.set_xlabel(r"$p_0$", fontsize=8, labelpad=1)
+        ins.set_ylabel(r"$F(p_0)$", fontsize=8, labelpad=1)
+        ins.set_yticks([0, 0.5, 1])
         ins.tick_params(labelsize=7)
         ins.set_ylim(-0.03, 1.03)
     return fig
@@ -405,13 +409,17 @@ def plot_p0_star(p0star, ax=None):
     else:
         fig = ax.figure
     n = np.asarray(p0star["n_cells"], dtype=np.float64)
-    nn = np.geomspace(max(min(n.min(), 16) * 0.8, 12), max(n.max(), 1024) * 1.25, 200)
-    ax.plot(nn, pentagon_perimeter(nn.round().astype(int)), color="k", lw=1, ls="--",
+    nn = np.geomspace(max(n.min() / 1.3, 8), n.max() * 1.3, 200)
+    ax.plot(nn, pentagon_perimeter(nn), color="k", lw=1, ls="--",
             label="regular pentagon, unit area")
     ax.errorbar(n, p0star["p0_star"], yerr=p0star["std"], fmt="none", ecolor="0.55", lw=1, capsize=3)
     ax.errorbar(n, p0star["p0_star"], yerr=p0star["p0_star_err"], fmt="o", color="C3", lw=2.5, ms=5,
                 label=r"$p_0^*(N)$: mean (bars: spread, error of mean)")
     ax.set_xscale("log")
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
+    ax.set_xticks(n)
+    ax.xaxis.set_major_formatter(ScalarFormatter())
+    ax.xaxis.set_minor_formatter(NullFormatter())
     ax.set_xlabel("N (cells)")
     ax.set_ylabel(r"$p_0^*$")
     ax.legend(fontsize=8, frameon=False, loc="lower right")

@@ -47,7 +47,7 @@ class T1(Updater):
     """
 
     def __init__(self, threshold=0.04, new_length=0.06, length_factor=None, preset=None, trigger=1,
-                 reset_velocities=True, max_flip_backs=10):
+                 reset_velocities=True, max_flip_backs=100):
         super().__init__(trigger)
         if preset is not None:
             if preset not in PRESETS:

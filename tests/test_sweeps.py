@@ -1,0 +1,388 @@
+"""Rigidity sweeps: F(p0, N), p0* distributions, chunked resumable runs on any executor."""
+import argparse
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+
+from spherevm import sweeps
+from spherevm.analysis import pentagon_perimeter, rigidity
+
+# Tiny sweeps: N = 16 far from the transition (p0 = 3.3 rigid, 4.2 floppy) converge in a few
+# hundred steps; the comparisons below are exact, since results do not depend on the chunking.
+TINY = dict(cells=[16], p0=[3.3, 4.2], replicas=2)
+
+
+def _same_records(a, b):
+    for col in sweeps.RECORD_COLUMNS:
+        if col in ("chunk", "chunk_seconds"):
+            continue
+        assert np.array_equal(np.asarray(a[col]), np.asarray(b[col])), col
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("tiny") / "sweep"
+    seen = []
+    result = sweeps.run_sweep(sweeps.RigiditySweep(**TINY), out, executor=sweeps.InProcessExecutor(),
+                              device="cpu", batch_cells=32, progress=lambda p: seen.append(p.units_done))
+    return out, result, seen
+
+
+# ------------------------------------------------------------------------------------ statistics
+def test_binomial_error_and_wilson_interval():
+    assert sweeps  # the module imports without dask or matplotlib being used
+    err = rigidity.binomial_error([0, 5, 10, 3], [10, 10, 10, 0])
+    assert err[0] == 0 and err[2] == 0 and math.isnan(err[3])
+    assert err[1] == pytest.approx(math.sqrt(0.25 / 10))
+    lo, hi = rigidity.wilson_interval([0, 5, 10], [10, 10, 10])
+    assert lo[0] == 0 and 0 < hi[0] < 0.2          # F = 0 still gets an upper error bar
+    assert lo[1] < 0.5 < hi[1] and hi[1] - 0.5 == pytest.approx(0.5 - lo[1])
+    assert hi[2] == 1 and 0.8 < lo[2] < 1
+
+
+def test_classify_separates_unconverged():
+    e = [1e-20, 3e-3, 1e-20, 2e-2, 1e-9, 5e-13]
+    reason = ["energy", "force", "max_steps", "t1_oscillation", "force", "force"]
+    status = rigidity.classify(e, reason, zero_tol=1e-12)
+    assert list(status) == ["zero", "rigid", "max_steps", "t1_oscillation", "rigid", "zero"]
+    with pytest.raises(ValueError, match="zero_tol"):
+        rigidity.classify(e, reason, zero_tol=0)
+    with pytest.raises(ValueError, match="same shape"):
+        rigidity.classify(e, reason[:2])
+
+
+def test_zero_fraction_counts_unconverged_separately():
+    n = [16] * 6 + [32] * 2
+    p0 = [3.7, 3.7, 3.7, 3.7, 3.8, 3.8, 3.7, 3.7]
+    status = ["zero", "rigid", "max_steps", "t1_oscillation", "zero", "zero", "rigid", "rigid"]
+    f = rigidity.zero_fraction(n, p0, status)
+    assert list(f["n_cells"]) == [16, 16, 32] and list(f["p0"]) == [3.7, 3.8, 3.7]
+    assert list(f["F"]) == [0.5, 1.0, 0.0]                   # unconverged not in the denominator
+    assert list(f["n_unconverged"]) == [2, 0, 0]
+    assert list(f["n_max_steps"]) == [1, 0, 0] and list(f["n_t1_oscillation"]) == [1, 0, 0]
+    assert f["F_unconverged_rigid"][0] == 0.25 and f["F_unconverged_zero"][0] == 0.75
+    assert f["F_err"][0] == pytest.approx(math.sqrt(0.25 / 2))
+
+
+def _logistic(x, p0c, w):
+    return 1 / (1 + np.exp(-(x - p0c) / w))
+
+
+def test_p0_star_of_a_logistic_step():
+    x = np.round(np.arange(3.55, 4.0501, 0.01), 10)
+    w = 0.02
+    F = _logistic(x, 3.8, w)
+    est = rigidity.p0_star(x, F)
+    assert est.mean == pytest.approx(3.8, abs=2e-4)
+    assert est.p0_half == pytest.approx(3.8, abs=1e-3)
+    assert est.bracketed
+    true_std = math.pi * w / math.sqrt(3)                    # the logistic distribution's
+    assert est.std_unsmoothed == pytest.approx(true_std, rel=0.03)
+    assert est.sigma == pytest.approx(0.5 * est.std_unsmoothed, rel=0.05)   # the documented rule
+    assert est.std == pytest.approx(math.hypot(est.std_unsmoothed, est.sigma), rel=1e-9)
+    # the smoothed density is normalised, and its numerical moments match the exact ones
+    grid = np.linspace(3.3, 4.3, 4001)
+    d = rigidity.transition_density(x, F, est.sigma, grid)
+    h = grid[1] - grid[0]
+    assert d.sum() * h == pytest.approx(1, abs=1e-3)
+    mean = (grid * d).sum() * h
+    assert mean == pytest.approx(est.mean, abs=1e-4)
+    assert math.sqrt(((grid - mean) ** 2 * d).sum() * h) == pytest.approx(est.std, rel=1e-3)
+    # the mean does not depend on sigma; the peak sits at p0c
+    assert grid[np.argmax(d)] == pytest.approx(3.8, abs=5e-3)
+    assert rigidity.p0_star(x, F, sigma=0.05).mean == pytest.approx(est.mean, abs=1e-12)
+
+
+def test_p0_star_with_binomial_noise_and_sharp_step():
+    rng = np.random.default_rng(3)
+    x = np.round(np.arange(3.6, 4.0001, 0.02), 10)
+    n = np.full(len(x), 200)
+    k = rng.binomial(n, _logistic(x, 3.78, 0.03))
+    est = rigidity.p0_star(x, k / n, n)
+    assert est.mean == pytest.approx(3.78, abs=3 * est.mean_err + 1e-3)
+    assert 0 < est.mean_err < 0.01
+    # a step inside one interval: sigma falls back to half the spacing, mean at the interval centre
+    F = (x > 3.79).astype(float)
+    est = rigidity.p0_star(x, F)
+    assert est.sigma == pytest.approx(0.01) and est.mean == pytest.approx(3.79)
+    # F not reaching 1 in the grid is flagged
+    assert not rigidity.p0_star(x, 0.5 * _logistic(x, 3.8, 0.03)).bracketed
+    with pytest.raises(ValueError, match="two or more"):
+        rigidity.p0_star([3.7], [0.5])
+
+
+def test_summarize_and_critical_perimeter():
+    x = np.round(np.arange(3.6, 3.9001, 0.02), 10)
+    n_cells, p0, status = [], [], []
+    for N, pc in ((32, 3.72), (64, 3.76)):
+        for p in x:
+            k = int(round(20 * _logistic(p, pc, 0.01)))
+            n_cells += [N] * 20
+            p0 += [p] * 20
+            status += ["zero"] * k + ["rigid"] * (20 - k)
+    frac, p0star, density = rigidity.summarize(n_cells, p0, status, resamples=50)
+    assert list(p0star["n_cells"]) == [32, 64]
+    assert p0star["p0_star"][0] == pytest.approx(3.72, abs=0.005)
+    assert p0star["p0_star"][1] == pytest.approx(3.76, abs=0.005)
+    assert list(p0star["pentagon_perimeter"]) == pytest.approx(list(pentagon_perimeter([32, 64])))
+    assert set(density["n_cells"]) == {32, 64}
+    assert rigidity.critical_perimeter(3.8, 4.0) == pytest.approx(7.6)
+    assert np.allclose(rigidity.critical_perimeter(np.array([3.7]), np.array([0.25, 1.0])), [1.85, 3.7])
+
+
+# ------------------------------------------------------------------------------------ bad input
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(p0=[]), "empty"),
+    (dict(p0=[3.8, 3.7]), "strictly increasing"),
+    (dict(p0=[3.7, 3.7]), "strictly increasing"),
+    (dict(p0=[3.7, float("nan")]), "finite"),
+    (dict(replicas=0), "replicas"),
+    (dict(replicas=1.5), "replicas"),
+    (dict(cells=[3]), "cells"),
+    (dict(cells=[]), "cells"),
+    (dict(cells=[16, 16]), "repeat"),
+    (dict(kr=-1), "kr"),
+    (dict(dt=0), "dt"),
+    (dict(seed=-1), "seed"),
+])
+def test_bad_sweep_parameters(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        sweeps.RigiditySweep(**{**TINY, **kwargs})
+
+
+def test_unwritable_or_foreign_output_folder(tmp_path):
+    sweep = sweeps.RigiditySweep(**TINY)
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    before = sorted(os.listdir(tmp_path))
+    for out in (afile, afile / "sub" / "sweep", ""):
+        with pytest.raises(ValueError, match="folder|path"):
+            sweeps.run_sweep(sweep, out, executor=sweeps.InProcessExecutor(), device="cpu")
+    assert sorted(os.listdir(tmp_path)) == before          # nothing created
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine")
+    with pytest.raises(ValueError, match="not a rigidity sweep folder"):
+        sweeps.run_sweep(sweep, foreign, executor=sweeps.InProcessExecutor(), device="cpu")
+    assert os.listdir(foreign) == ["notes.txt"]
+    with pytest.raises(ValueError, match="device"):
+        sweeps.run_sweep(sweep, tmp_path / "new", device="tpu")
+    with pytest.raises(ValueError, match="workers"):
+        sweeps.run_sweep(sweep, tmp_path / "new", workers=0)
+    assert not (tmp_path / "new").exists()
+
+
+@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0, reason="root can write anywhere")
+def test_read_only_folder(tmp_path):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        with pytest.raises(ValueError, match="not writable"):
+            sweeps.run_sweep(sweeps.RigiditySweep(**TINY), ro / "sweep", executor=sweeps.InProcessExecutor())
+    finally:
+        ro.chmod(0o700)
+
+
+# ------------------------------------------------------------------------------------ running
+def test_tiny_sweep_records_and_manifest(tiny_run):
+    out, result, seen = tiny_run
+    rec = result.records
+    assert len(rec["n_cells"]) == 4 and result.reused == 0
+    assert sorted(result.computed) == ["N00016_u000000-000002", "N00016_u000002-000004"]
+    assert seen == [0, 2, 4]
+    status = rigidity.classify(rec["energy_per_cell"], rec["reason"])
+    assert list(status) == ["rigid", "rigid", "zero", "zero"]     # p0 = 3.3 rigid, 4.2 floppy at N = 16
+    assert np.all(rec["energy_per_cell"][:2] > 1e-3) and np.all(rec["energy_per_cell"][2:] < 1e-15)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["parameters"] == sweeps.RigiditySweep(**TINY).parameters()
+    assert sorted(os.listdir(out / "chunks")) == ["N00016_u000000-000002.csv", "N00016_u000002-000004.csv"]
+    # the tiling of (N, p0, replica) depends on those numbers only
+    assert rec["tiling_seed"][0] == sweeps.tiling_seed(0, 16, 3.3, 0)
+    assert rec["tiling_seed"][0] != rec["tiling_seed"][2]
+
+
+def test_resume_recomputes_only_the_missing_chunk(tiny_run, tmp_path):
+    out, first, _ = tiny_run
+    sweep = sweeps.RigiditySweep(**TINY)
+    again = sweeps.run_sweep(sweep, out, executor=sweeps.InProcessExecutor(), device="cpu", batch_cells=32)
+    assert again.computed == [] and again.reused == 2
+    _same_records(first.records, again.records)
+    victim = out / "chunks" / "N00016_u000002-000004.csv"
+    keep = out / "chunks" / "N00016_u000000-000002.csv"
+    stamp = keep.stat().st_mtime_ns
+    victim.unlink()
+    (out / "chunks" / "N00016_u000002-000004.csv.tmp123").write_text("half-written")   # a crash's leftover
+    resumed = sweeps.run_sweep(sweep, out, executor=sweeps.InProcessExecutor(), device="cpu", batch_cells=32)
+    assert resumed.computed == ["N00016_u000002-000004"] and resumed.reused == 1
+    assert keep.stat().st_mtime_ns == stamp                 # the finished chunk was not rewritten
+    assert sorted(os.listdir(out / "chunks")) == ["N00016_u000000-000002.csv", "N00016_u000002-000004.csv"]
+    _same_records(first.records, resumed.records)
+
+
+def test_parameter_mismatch_is_a_clear_error(tiny_run):
+    out, _, _ = tiny_run
+    listing = sorted(os.listdir(out / "chunks"))
+    with pytest.raises(ValueError, match=r"different parameters \(replicas: 2 in the folder, 3 requested"):
+        sweeps.run_sweep(sweeps.RigiditySweep(**{**TINY, "replicas": 3}), out, executor=sweeps.InProcessExecutor())
+    with pytest.raises(ValueError, match="kr: 0.0 in the folder, 1.0 requested"):
+        sweeps.run_sweep(sweeps.RigiditySweep(**{**TINY, "kr": 1.0}), out, executor=sweeps.InProcessExecutor())
+    assert sorted(os.listdir(out / "chunks")) == listing
+
+
+def test_results_do_not_depend_on_chunking(tiny_run, tmp_path):
+    _, first, _ = tiny_run
+    one = sweeps.run_sweep(sweeps.RigiditySweep(**TINY), tmp_path / "one", executor=sweeps.InProcessExecutor(),
+                           device="cpu", batch_cells=1000)
+    assert one.computed == ["N00016_u000000-000004"]
+    _same_records(first.records, one.records)
+
+
+def test_dask_cluster_gives_the_same_table(tiny_run, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    _, first, _ = tiny_run
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        result = sweeps.run_sweep(sweeps.RigiditySweep(**TINY), tmp_path / "dask", executor=client,
+                                  device="cpu", batch_cells=32)
+    assert result.executor == "ClientExecutor" and len(result.computed) == 2
+    _same_records(first.records, result.records)
+    a = rigidity.zero_fraction(first.records["n_cells"], first.records["p0"],
+                               rigidity.classify(first.records["energy_per_cell"], first.records["reason"]))
+    b = rigidity.zero_fraction(result.records["n_cells"], result.records["p0"],
+                               rigidity.classify(result.records["energy_per_cell"], result.records["reason"]))
+    for col in a:
+        assert np.array_equal(a[col], b[col], equal_nan=True), col
+
+
+def test_process_pool_default_on_cpu(tiny_run, tmp_path):
+    _, first, _ = tiny_run
+    result = sweeps.run_sweep(sweeps.RigiditySweep(**TINY), tmp_path / "pool", device="cpu", workers=2,
+                              batch_cells=32)
+    assert result.executor == "ProcessPoolExecutor"
+    _same_records(first.records, result.records)
+
+
+def test_unconverged_replicas_reported_not_folded_in(tmp_path):
+    sweep = sweeps.RigiditySweep(cells=[16], p0=[3.3], replicas=2, max_steps=20)
+    result = sweeps.run_sweep(sweep, tmp_path / "s", executor=sweeps.InProcessExecutor(), device="cpu")
+    assert list(result.records["reason"]) == ["max_steps", "max_steps"]
+    frac, p0star, _ = result.summarize()
+    assert frac["n_max_steps"][0] == 2 and frac["n_rigid"][0] == 0 and math.isnan(frac["F"][0])
+    assert frac["F_unconverged_rigid"][0] == 0 and frac["F_unconverged_zero"][0] == 1
+
+
+def test_chunk_failure_names_the_chunk_and_keeps_finished_ones(tmp_path, monkeypatch):
+    calls = []
+    real = sweeps.run_chunk
+
+    def flaky(params, n, start, stop, device):
+        calls.append(start)
+        if len(calls) == 2:
+            raise FloatingPointError("NaN energy")
+        return real(params, n, start, stop, device)
+
+    monkeypatch.setattr(sweeps, "run_chunk", flaky)
+    out = tmp_path / "s"
+    with pytest.raises(RuntimeError, match=r"chunk N00016_u00000\d-00000\d .*failed: FloatingPointError"):
+        sweeps.run_sweep(sweeps.RigiditySweep(**TINY), out, executor=sweeps.InProcessExecutor(), device="cpu",
+                         batch_cells=32)
+    assert len(os.listdir(out / "chunks")) == 1
+
+
+# ------------------------------------------------------------------------------------ command line
+def test_parse_p0_grid():
+    assert sweeps.parse_p0_grid(["3.60:3.90:0.01"]) == pytest.approx(np.arange(31) * 0.01 + 3.6)
+    assert len(sweeps.parse_p0_grid(["3.60:3.90:0.01"])) == 31
+    assert sweeps.parse_p0_grid(["3.5:4.0:0.05"])[-1] == 4.0
+    assert sweeps.parse_p0_grid(["3.7", "3.8"]) == [3.7, 3.8]
+    for bad in (["3.9:3.6:0.1"], ["3.6:3.9"], ["3.6:3.9:0"], ["x"]):
+        with pytest.raises(ValueError, match="p0"):
+            sweeps.parse_p0_grid(bad)
+
+
+def _parser():
+    parser = argparse.ArgumentParser(prog="spherevm")
+    sweeps.add_cli(parser.add_subparsers(dest="command"))
+    return parser
+
+
+def test_cli_runs_a_tiny_sweep_and_writes_tables(tmp_path, capsys):
+    out = tmp_path / "cli"
+    args = _parser().parse_args(["rigidity", "--cells", "16", "--p0", "3.3", "4.2", "--replicas", "2",
+                                 "--device", "cpu", "--workers", "1", "--out", str(out)])
+    assert args.func is sweeps.cmd_rigidity
+    assert args.func(args) == 0
+    captured = capsys.readouterr()
+    assert "pentagon" in captured.out and "16" in captured.out
+    assert "rigidity: [" in captured.err and "minimisations 4/4" in captured.err
+    names = set(os.listdir(out))
+    assert {"manifest.json", "chunks", "replicas.csv", "fraction.csv", "p0star.csv", "p0star_density.csv"} <= names
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        assert {"fraction.png", "p0star_distribution.png", "p0star_vs_N.png", "critical_perimeter.png"} <= names
+    lines = (out / "fraction.csv").read_text().splitlines()
+    assert lines[0].startswith("n_cells,p0,n_replicas,n_zero,n_rigid,n_unconverged")
+    assert lines[1].startswith("16,3.3,2,0,2,0") and lines[2].startswith("16,4.2,2,2,0,0")
+    # a mismatching rerun fails before any work
+    args = _parser().parse_args(["rigidity", "--cells", "16", "--p0", "3.3", "4.2", "--replicas", "3",
+                                 "--device", "cpu", "--out", str(out)])
+    with pytest.raises(ValueError, match="different parameters"):
+        args.func(args)
+
+
+def test_cli_defaults_are_the_small_sweep():
+    args = _parser().parse_args(["rigidity"])
+    assert args.cells == [16, 32] and args.replicas == 12
+    assert sweeps.parse_p0_grid(args.p0) == pytest.approx(np.round(np.arange(3.5, 4.0001, 0.025), 10))
+    assert args.kr == 0.0 and args.device == "auto"
+    sweep = sweeps.sweep_from_args(args)
+    assert sweep == sweeps.RigiditySweep(cells=[16, 32], p0=sweeps.parse_p0_grid(["3.5:4.0:0.025"]), replicas=12)
+    ref = sweeps.sweep_from_args(_parser().parse_args(["rigidity", "--t1-reference"]))
+    assert ref.t1_threshold == 0.1 and ref.t1_length_factor == 2.0
+    for bad in (["--p0", "3.9", "3.8"], ["--p0", "3.6:3.5:0.1"]):
+        with pytest.raises(ValueError, match="p0"):
+            sweeps.sweep_from_args(_parser().parse_args(["rigidity", *bad]))
+
+
+def test_reference_t1_rule_runs():
+    sweep = sweeps.RigiditySweep(cells=[16], p0=[4.2], replicas=1, **sweeps.RigiditySweep.reference_t1())
+    rec = sweeps.run_chunk(sweep.parameters(), 16, 0, 1, "cpu")
+    assert rec["reason"] == ["energy"] and rec["energy_per_cell"][0] < 1e-15
+
+
+# ------------------------------------------------------------------------------------ physics
+@pytest.mark.slow
+def test_p0_star_increases_with_n(tmp_path):
+    """The paper's finite-size effect: p0*(N) grows with N, tracking the pentagon perimeter."""
+    sweep = sweeps.RigiditySweep(cells=[16, 64], p0=sweeps.parse_p0_grid(["3.50:3.95:0.025"]), replicas=16)
+    result = sweeps.run_sweep(sweep, tmp_path / "slow", device="cpu")
+    _, p0star, _ = result.summarize()
+    p16, p64 = p0star["p0_star"]
+    err = math.hypot(*p0star["p0_star_err"])
+    assert p64 - p16 > 3 * err and p64 - p16 > 0.05
+    assert all(p0star["bracketed"])
+    # close to (not equal to) the regular-pentagon perimeter
+    assert np.all(np.abs(p0star["p0_star"] - p0star["pentagon_perimeter"]) < 0.1)
+
+
+@pytest.mark.gpu
+def test_gpu_sweep_matches_cpu(tiny_run, tmp_path):
+    """Same classification and steps on the GPU; energies agree to round-off (not run here: no GPU)."""
+    from gpu_support import HAS_GPU
+    if not HAS_GPU:
+        pytest.skip("needs CuPy and a working NVIDIA GPU")
+    _, first, _ = tiny_run
+    result = sweeps.run_sweep(sweeps.RigiditySweep(**TINY), tmp_path / "gpu", device="gpu")
+    assert result.executor == "InProcessExecutor"          # the default on a GPU
+    assert list(result.records["reason"]) == list(first.records["reason"])
+    status = rigidity.classify(result.records["energy_per_cell"], result.records["reason"])
+    assert list(status) == list(rigidity.classify(first.records["energy_per_cell"], first.records["reason"]))
+    rigid = status == "rigid"
+    assert np.allclose(result.records["energy_per_cell"][rigid], first.records["energy_per_cell"][rigid], rtol=1e-6)

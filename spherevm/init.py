@@ -95,7 +95,7 @@ def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, v
     ensemble of small-N tilings; at N >= 32 it practically never happens.
 
     ``sort=True`` numbers cells and vertices along a Morton curve on the sphere
-    (:func:`spherevm.topology.morton_order`), so that neighbours are close in memory; the GPU force
+    (:func:`spherevm.topology.morton_codes`), so that neighbours are close in memory; the GPU force
     kernels gather several times faster at large N.
     """
     n = int(n_cells)
@@ -106,29 +106,73 @@ def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, v
     if int(seed) != seed or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed}")
     R = _check_radius(radius, n)
-    states = []
-    for r in range(int(replicas)):  # initialisation only, not a per-step path
-        for attempt in range(MAX_ATTEMPTS):
-            rng = np.random.default_rng([int(seed), r] + ([attempt] if attempt else []))
-            pts = rng.normal(size=(n, 3))
-            pts /= np.linalg.norm(pts, axis=1)[:, None]
-            tri, origin_inside = _oriented_hull(pts)
-            if not origin_inside:
-                continue
-            pos, table, sides, vn, vc = dual_of_triangulation(pts, tri, R, vertices)
-            if sort:
-                pos, table, sides, vn, vc = topology.renumber(pos, table, sides, vn, vc, topology.morton_order(pos),
-                                                              topology.morton_order(pts))
-            one = State(pos, table, sides, vn, vc, [0, len(pos)], [0, n], R, constraint=Sphere(), validate=False)
-            if np.all(one.constraint.cell_areas_np(one) > 0):
-                states.append(one)
-                break
-        else:
-            raise RuntimeError(f"no valid random tiling of {n} cells in {MAX_ATTEMPTS} draws (seed {seed}, "
-                               f"replica {r}); use more cells or vertices='circumcenter'")
-    state = State.concatenate(states, device=device)
+    return _tilings(n, [(int(seed), r) for r in range(int(replicas))], R, vertices, sort, device)
+
+
+def random_tilings(n_cells: int, seeds, radius=None, vertices="centroid", sort: bool = True, device=CPU) -> State:
+    """One random tiling per seed, as an ensemble: replica ``i`` equals ``random_tiling(n_cells, seed=seeds[i])``.
+
+    Sweeps give every (N, p0, replica) its own seed; building them together costs one convex hull
+    per tiling and one vectorised pass for everything else.
+    """
+    n = int(n_cells)
+    if n != n_cells or n < 4:
+        raise ValueError(f"n_cells must be an integer >= 4, got {n_cells}")
+    seeds = [int(x) for x in seeds]
+    if not seeds or min(seeds) < 0:
+        raise ValueError("seeds must be a non-empty list of non-negative integers")
+    return _tilings(n, [(x, 0) for x in seeds], _check_radius(radius, n), vertices, sort, device)
+
+
+def _draw_hull(n, key, attempt):
+    """Points of stream ``key`` (+ attempt) and their hull; None if the origin lies outside it."""
+    rng = np.random.default_rng(list(key) + ([attempt] if attempt else []))
+    pts = rng.normal(size=(n, 3))
+    pts /= np.linalg.norm(pts, axis=1)[:, None]
+    tri, origin_inside = _oriented_hull(pts)
+    return (pts, tri) if origin_inside else None
+
+
+def _tilings(n, keys, R, vertices, sort, device):
+    """Build the tilings of the given streams: a convex hull each, then one batched dual."""
+    attempts = np.zeros(len(keys), dtype=int)
+    hulls = [None] * len(keys)
+    todo = list(range(len(keys)))
+    while todo:
+        for i in todo:  # initialisation only, not a per-step path: one Qhull call per tiling
+            while True:
+                if attempts[i] >= MAX_ATTEMPTS:
+                    raise RuntimeError(f"no valid random tiling of {n} cells in {MAX_ATTEMPTS} draws (stream "
+                                       f"{keys[i]}); use more cells or vertices='circumcenter'")
+                hulls[i] = _draw_hull(n, keys[i], attempts[i])
+                if hulls[i] is not None:
+                    break
+                attempts[i] += 1
+        state = _batched_dual(n, hulls, R, vertices, sort)
+        area = state.constraint.cell_areas_np(state)
+        folded = np.unique(state.cell_replica_np()[area <= 0])   # a very obtuse facet folded a cell
+        attempts[folded] += 1
+        todo = folded.tolist()
+    state = state.to(device) if device is not CPU else state
     state.validate()
     return state
+
+
+def _batched_dual(n, hulls, R, vertices, sort):
+    """The dual tilings of several hulls at once, stored back to back as replicas."""
+    n_tri = 2 * n - 4
+    pts = np.concatenate([h[0] for h in hulls])
+    tri = np.concatenate([h[1] + k * n for k, h in enumerate(hulls)])
+    pos, table, sides, vn, vc = dual_of_triangulation(pts, tri, R, vertices)
+    reps = len(hulls)
+    if sort:   # Morton order inside each replica; replicas stay back to back
+        vrep = np.repeat(np.arange(reps), n_tri)
+        crep = np.repeat(np.arange(reps), n)
+        vorder = np.lexsort((topology.morton_codes(pos), vrep))
+        corder = np.lexsort((topology.morton_codes(pts), crep))
+        pos, table, sides, vn, vc = topology.renumber(pos, table, sides, vn, vc, vorder, corder)
+    return State(pos, table, sides, vn, vc, np.arange(reps + 1) * n_tri, np.arange(reps + 1) * n, R,
+                 constraint=Sphere(), validate=False)
 
 
 def from_polygons(vertices, cells, radius, device=CPU, validate=True) -> State:

@@ -252,17 +252,10 @@ def plan_chunks(sweep: RigiditySweep, batch_cells: int, done=None) -> list:
 
 def build_chunk_state(sweep: RigiditySweep, chunk: Chunk):
     """The batched State of a chunk and its per-replica (p0, p0_index, replica, tiling_seed)."""
-    from .init import random_tiling
-    from .state import State
+    from .init import random_tilings
     units = [sweep.unit(u) for u in range(chunk.start, chunk.stop)]
     seeds = [tiling_seed(sweep.seed, chunk.n_cells, sweep.p0[k], r, sweep.shared_tilings) for k, r in units]
-    cache = {}
-    states = []
-    for s in seeds:  # with shared tilings the same tiling serves several p0 values
-        if s not in cache:
-            cache[s] = random_tiling(chunk.n_cells, replicas=1, seed=s)
-        states.append(cache[s])
-    state = State.concatenate(states) if len(states) > 1 else states[0].copy()
+    state = random_tilings(chunk.n_cells, seeds)   # shared tilings: a repeated seed gives the same tiling
     p0 = np.array([sweep.p0[k] for k, _ in units])
     return state, p0, [k for k, _ in units], [r for _, r in units], seeds
 

@@ -309,17 +309,16 @@ def _spread_bits(x):
     return x
 
 
-def morton_order(points, bits: int = 16):
-    """Indices that sort points (any scale) along a 3-D Z-order (Morton) curve of their directions.
+def morton_codes(points, bits: int = 16):
+    """3-D Z-order (Morton) codes of the points' directions (any scale), uint64.
 
-    Neighbouring cells and vertices then sit close in memory, so the gathers of the force kernels
-    hit cache lines that their neighbours also use.
+    Sorting cells and vertices by them puts neighbours close in memory, so the gathers of the force
+    kernels hit cache lines that their neighbours also use.
     """
     p = np.asarray(points, dtype=np.float64)
     u = p / np.linalg.norm(p, axis=1)[:, None]
     q = np.clip(((u + 1.0) * 0.5 * (2 ** bits - 1)).round(), 0, 2 ** bits - 1).astype(np.uint64)
-    code = _spread_bits(q[:, 0]) | (_spread_bits(q[:, 1]) << np.uint64(1)) | (_spread_bits(q[:, 2]) << np.uint64(2))
-    return np.argsort(code, kind="stable")
+    return _spread_bits(q[:, 0]) | (_spread_bits(q[:, 1]) << np.uint64(1)) | (_spread_bits(q[:, 2]) << np.uint64(2))
 
 
 def renumber(positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells, vertex_order, cell_order):

@@ -236,45 +236,6 @@ class Sphere(Constraint):
         self._prev_cache = (weakref.ref(state), state.topology_version, result)
         return result
 
-    def shape_gradient(self, state, geometry: CellGeometry, d_area, d_perimeter):
-        """Surface gradient (V, 3) of ``sum_c d_area[c] A_c + d_perimeter[c] P_c``.
-
-        With ``d_area = dE/dA`` and ``d_perimeter = dE/dP`` this is the gradient of any energy of the
-        cell areas and perimeters (chain rule); the vertex model's forces are minus it.
-        """
-        xp = state.device.xp
-        gA, gL = self._corner_terms(state, geometry)
-        nv = state.n_vertices
-        cells = state.vertex_cells
-        wA = d_area[cells].reshape(-1)
-        wP = d_perimeter[cells]
-        wL = (wP + xp.roll(wP, 1, axis=1)).reshape(-1)   # edge v -> n_k borders cells k and k-1
-        rv = geometry.corners["rv"]
-        sA = geometry.radius ** 2 / rv
-        sP = geometry.radius / rv
-
-        def per_vertex(x):
-            x = x.reshape(nv, 3)
-            return x[:, 0] + x[:, 1] + x[:, 2]
-
-        return xp.stack([sA * per_vertex(wA * gA[i]) + sP * per_vertex(wL * gL[i]) for i in range(3)], axis=1)
-
-    def corner_gradients(self, state, geometry: CellGeometry):
-        """Surface gradients (with respect to positions) of each corner's cell area and perimeter.
-
-        Returns ``(dA, dP)``, both ``(V, 3, 3)``: ``dA[v, k]`` is the gradient of the area of cell
-        ``vertex_cells[v, k]`` with respect to ``positions[v]``; likewise ``dP``. (The forces use
-        :meth:`shape_gradient`, which sums these without building them.)
-        """
-        xp = state.device.xp
-        gA, gL = self._corner_terms(state, geometry)
-        nv = state.n_vertices
-        rv = geometry.corners["rv"]
-        dA = xp.stack(gA, axis=1).reshape(nv, 3, 3) * (geometry.radius ** 2 / rv)[:, None, None]
-        lg = xp.stack(gL, axis=1).reshape(nv, 3, 3)
-        dP = (lg + xp.roll(lg, -1, axis=1)) * (geometry.radius / rv)[:, None, None]
-        return dA, dP
-
     def edge_lengths(self, state, u, v):
         """Geodesic lengths of the edges (u[i], v[i])."""
         pos = state.positions

@@ -76,6 +76,19 @@ def brownian_step(sim):
     sim._integrate()
 
 
+def device_bytes_per_cell(n_cells, replicas, gpu):
+    """GPU memory held by a FIRE + T1 minimisation, per cell (memory pool, after a few steps)."""
+    pool = gpu.xp.get_default_memory_pool()
+    pool.free_all_blocks()
+    before = pool.used_bytes()
+    sim = build(n_cells, replicas, gpu)
+    sim.operations.updaters.append(svm.plugins.updaters.T1())
+    sim.run(3)
+    used = pool.used_bytes() - before
+    del sim
+    return used / (n_cells * replicas)
+
+
 def measure(n_cells, replicas, gpu, numpy_max, bw):
     sim = build(n_cells, replicas, gpu)
     state = sim.state
@@ -111,10 +124,13 @@ def main(argv=None):
     bw = copy_bandwidth(gpu)
     print(f"# spherevm GPU benchmark, {datetime.date.today()}, GPU: {facts.get('gpus')}, CuPy {facts.get('cupy')}, "
           f"CUDA runtime {facts.get('cuda_runtime')}")
-    print(f"# device-to-device copy bandwidth: {bw:.0f} GB/s; launches per step: force 2, FIRE iteration 6 "
-          f"(2 force + 3 FIRE + 1 memset)")
+    print(f"# device-to-device copy bandwidth: {bw:.0f} GB/s")
+    print("# launches per step: force 2 kernels + 1 memset; FIRE iteration = force + 3 kernels + 1 memset; "
+          "Brownian step with T1 check = T1 pass (1 memset + 1 kernel + 1 read-back of 8 bytes) + force + 1 kernel")
+    print("# GB/s: bytes each kernel must move at least (every array once) over the measured time")
     head = (f"{'system':>12} {'force ms':>9} {'GB/s':>6} {'FIRE it ms':>11} {'GB/s':>6} {'of copy':>8} "
-            f"{'Brown+T1 ms':>12} {'NumPy force':>12} {'NumPy FIRE':>11} {'NumPy Brown':>12} {'speed-up':>9}")
+            f"{'Brown+T1 ms':>12} {'NumPy force':>12} {'NumPy FIRE':>11} {'NumPy Brown':>12} {'speed-up':>9} "
+            f"{'B/cell':>7}")
     print(head)
     systems = [(int(n), 1) for n in args.cells]
     for e in args.ensembles:
@@ -122,12 +138,13 @@ def main(argv=None):
         systems.append((int(n), int(r)))
     for n, r in systems:
         row = measure(n, r, gpu, args.numpy_max, bw)
+        row["bytes_per_cell"] = device_bytes_per_cell(n, r, gpu)
         npf = row.get("numpy_force_ms", np.nan)
         npi = row.get("numpy_fire_ms", np.nan)
         npb = row.get("numpy_brown_ms", np.nan)
         print(f"{row['system']:>12} {row['force_ms']:9.4f} {row['force_gbs']:6.0f} {row['fire_ms']:11.4f} "
               f"{row['fire_gbs']:6.0f} {row['fire_frac_bw']:8.2f} {row['brown_ms']:12.4f} {npf:12.3f} {npi:11.3f} "
-              f"{npb:12.3f} {npi / row['fire_ms']:9.1f}", flush=True)
+              f"{npb:12.3f} {npi / row['fire_ms']:9.1f} {row['bytes_per_cell']:7.0f}", flush=True)
 
 
 if __name__ == "__main__":

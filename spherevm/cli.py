@@ -106,16 +106,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="area stiffness kr = kA <A>/kP, >= 0 (default: %(default)s)")
     g.add_argument("--t1", type=_real(0.0, strict=True), default=0.04, metavar="THRESHOLD",
                    help="T1 neighbour exchanges of edges shorter than THRESHOLD (units of sqrt(<A>)), "
-                        "new edges 1.5 x THRESHOLD long (default: %(default)s)")
+                        "new edges 3 x THRESHOLD long (default: %(default)s)")
     g.add_argument("--no-t1", dest="t1", action="store_const", const=None,
                    help="no T1 exchanges (edges may then collapse and stall the minimisation)")
     g = m.add_argument_group("minimiser")
-    g.add_argument("--dt", type=_real(0.0, strict=True), default=0.05, help="FIRE time step, > 0 (default: %(default)s)")
+    g.add_argument("--dt", type=_real(0.0, strict=True), default=0.02, help="FIRE time step, > 0 (default: %(default)s)")
     g.add_argument("--force-tol", type=_real(0.0), default=1e-8,
                    help="a replica converges when its largest vertex force is below this (default: %(default)s)")
     g.add_argument("--energy-tol", type=_real(0.0), default=1e-14,
                    help="... or its energy per cell below this (default: %(default)s)")
-    g.add_argument("--max-steps", type=_integer(0), default=5000, help="step limit (default: %(default)s)")
+    g.add_argument("--max-steps", type=_integer(0), default=20000, help="step limit (default: %(default)s)")
     g.add_argument("--check-every", type=_integer(1), default=10,
                    help="steps between convergence checks and progress updates (default: %(default)s)")
     g = m.add_argument_group("output")
@@ -265,7 +265,7 @@ def cmd_minimize(args) -> int:
         sim.state = svm.init.random_tiling(args.cells, replicas=args.replicas, seed=args.seed)
         sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=args.kr, p0=args.p0))
         if args.t1 is not None:
-            sim.operations.updaters.append(svm.plugins.updaters.T1(threshold=args.t1, new_length=1.5 * args.t1))
+            sim.operations.updaters.append(svm.plugins.updaters.T1(threshold=args.t1, new_length=3.0 * args.t1))
         sim.operations.integrator = svm.plugins.integrators.FIRE(dt=args.dt)
         writer = None
         if args.out is not None:

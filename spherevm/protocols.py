@@ -65,7 +65,7 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
     if t1:
         sim.operations.updaters.append(T1())
     if relax_steps:
-        sim.operations.integrator = FIRE(dt=0.05)
+        sim.operations.integrator = FIRE(dt=0.02)
         sim.minimize(force_tol=1e-8, max_steps=relax_steps,
                      progress=None if progress is None else lambda k, d, n: progress("relax", k, relax_steps))
     sim.operations.integrator = Brownian(dt=dt, T=T)

@@ -109,7 +109,7 @@ class RigiditySweep:
     max_steps: int = 20000
     check_every: int = 10
     t1_threshold: float = 0.04
-    t1_new_length: float = 0.06
+    t1_new_length: float = 0.12
     t1_max_flip_backs: int = 100
     t1_length_factor: float = None
 
@@ -853,7 +853,7 @@ def add_cli(subparsers):
     g.add_argument("--max-steps", type=_cli_int(1), default=RigiditySweep.max_steps,
                    help="step limit; replicas reaching it are reported as not converged (default: %(default)s)")
     g.add_argument("--t1", type=_cli_real(0.0, strict=True), default=RigiditySweep.t1_threshold, metavar="THRESHOLD",
-                   help="T1 edge-length threshold in sqrt(<A>), new edges 1.5 x as long (default: %(default)s)")
+                   help="T1 edge-length threshold in sqrt(<A>), new edges 3 x as long (default: %(default)s)")
     g.add_argument("--t1-reference", action="store_true",
                    help="the paper code's T1 rule instead: threshold 0.1, new edge twice the old length "
                         "(more floppy states near the transition: p0* lower by ~0.02 at N = 32)")
@@ -897,7 +897,7 @@ def _dask_client(address):
 
 def sweep_from_args(args) -> RigiditySweep:
     """The RigiditySweep that ``spherevm rigidity`` arguments describe (ValueError on bad input)."""
-    t1 = {"t1_threshold": args.t1, "t1_new_length": 1.5 * args.t1}
+    t1 = {"t1_threshold": args.t1, "t1_new_length": 3.0 * args.t1}
     if args.t1_reference:
         t1 = RigiditySweep.reference_t1()
     return RigiditySweep(cells=args.cells, p0=parse_p0_grid(args.p0), replicas=args.replicas, kr=args.kr,

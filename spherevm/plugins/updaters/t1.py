@@ -42,11 +42,11 @@ class T1(Updater):
     largest re-join count of any pair.
 
     ``preset="reference"`` reproduces the paper's code: threshold 0.1, new edge twice the old length.
-    Defaults: threshold 0.04 and new_length 0.06 (1.5 x threshold, so a fresh edge is not
+    Defaults: threshold 0.04 and new_length 0.12 (3 x threshold, so a fresh edge is not
     immediately short again). See docs/t1.md.
     """
 
-    def __init__(self, threshold=0.04, new_length=0.06, length_factor=None, preset=None, trigger=1,
+    def __init__(self, threshold=0.04, new_length=0.12, length_factor=None, preset=None, trigger=1,
                  reset_velocities=True, max_flip_backs=100):
         super().__init__(trigger)
         if preset is not None:

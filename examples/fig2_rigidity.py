@@ -23,7 +23,7 @@ from spherevm import sweeps
 
 PAPER_CELLS = [32, 48, 64, 96, 128, 192, 256, 512, 1024]
 PAPER_REPLICAS = 100
-PAPER_P0 = "3.55:3.95:0.01"
+PAPER_P0 = "3.60:3.95:0.01"
 SMALL_CELLS = [16, 32, 64, 128]
 SMALL_REPLICAS = 12
 SMALL_P0 = "3.55:3.95:0.025"
@@ -39,6 +39,8 @@ def parse_args(argv=None):
     p.add_argument("--replicas", type=int, default=None, help=f"tilings per (N, p0) (default: {SMALL_REPLICAS})")
     p.add_argument("--kr", type=float, default=0.0)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--t1-reference", action="store_true",
+                   help="T1 rules of the paper's own code (threshold 0.1, new edge twice the old one)")
     p.add_argument("--device", default="auto", choices=("cpu", "gpu", "auto"))
     p.add_argument("--workers", type=int, default=None, help="CPU processes (default: all cores)")
     p.add_argument("--out", default="rigidity_sweep", help="output folder (default: %(default)s)")
@@ -49,7 +51,8 @@ def sweep_from_args(args) -> sweeps.RigiditySweep:
     cells = args.cells or (PAPER_CELLS if args.paper else SMALL_CELLS)
     replicas = args.replicas or (PAPER_REPLICAS if args.paper else SMALL_REPLICAS)
     p0 = sweeps.parse_p0_grid(args.p0 or [PAPER_P0 if args.paper else SMALL_P0])
-    return sweeps.RigiditySweep(cells=cells, p0=p0, replicas=replicas, kr=args.kr, seed=args.seed)
+    t1 = sweeps.RigiditySweep.reference_t1() if args.t1_reference else {}
+    return sweeps.RigiditySweep(cells=cells, p0=p0, replicas=replicas, kr=args.kr, seed=args.seed, **t1)
 
 
 def main(argv=None):

@@ -33,7 +33,7 @@ def _dot(a, b):
 
 
 _POOL = None
-PARALLEL_MIN_VERTICES = 16384   # below this, one thread: the split costs more than it saves
+PARALLEL_MIN_VERTICES = 16384   # below this, one thread; blocks hold at least half as many vertices
 BLOCK_VERTICES = 32768          # per block: its per-corner temporaries (~0.8 MB each) stay in cache
 
 
@@ -45,7 +45,7 @@ def _vertex_blocks(state):
     workers = os.cpu_count() or 1
     if state.device.is_gpu or nv < PARALLEL_MIN_VERTICES:
         return [(0, nv)]
-    count = max(workers, -(-nv // BLOCK_VERTICES))
+    count = max(min(workers, nv // (PARALLEL_MIN_VERTICES // 2)), -(-nv // BLOCK_VERTICES))
     edges = np.linspace(0, nv, count + 1).astype(int)
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
 

@@ -24,8 +24,11 @@ class CellGeometry:
     corners: dict = None    # per-corner terms, see Sphere.cell_geometry
 
 
+# Vectors are (3, n) arrays, one contiguous row per Cartesian component: elementwise vector
+# arithmetic is one NumPy call over all components; dot and cross products work on row views.
 def _cross(a, b):
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+    xp = array_module(a, b)
+    return xp.stack((a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]))
 
 
 def _dot(a, b):
@@ -104,29 +107,28 @@ class Sphere(Constraint):
         n = state.n_cells
         comp = xp.ascontiguousarray(state.positions.T)
         rv = xp.sqrt(_dot(comp, comp))
-        u = tuple(c / rv for c in comp)
+        u = comp / rv
         cells = state.vertex_cells.reshape(-1)
         nxt = state.vertex_neighbors.reshape(-1)
         blocks = _vertex_blocks(state)
 
         def apex_sums(lo, hi):
-            b = tuple(xp.repeat(c[lo:hi], 3) for c in u)              # the corners' own vertex
+            b = xp.repeat(u[:, lo:hi], 3, axis=1)                      # the corners' own vertex
             return b, [xp.bincount(cells[3 * lo:3 * hi], weights=c, minlength=n) for c in b]
 
         parts = _in_parallel(apex_sums, blocks, xp)
-        summed = [sum(p[1][i] for p in parts) for i in range(3)]
-        norm = xp.sqrt(_dot(summed, summed))
-        apex_c = tuple(c / norm for c in summed)
+        summed = xp.stack([sum(p[1][i] for p in parts) for i in range(3)])
+        apex_c = summed / xp.sqrt(_dot(summed, summed))
 
         def fan(block, part):
             lo, hi = block
             b = part[0]
             cl = cells[3 * lo:3 * hi]
-            a = tuple(c[cl] for c in apex_c)                           # fan apex of the corner's cell
-            d = tuple(c[nxt[3 * lo:3 * hi]] for c in u)                # the next vertex
+            a = apex_c[:, cl]                                          # fan apex of the corner's cell
+            d = u[:, nxt[3 * lo:3 * hi]]                               # the next vertex
             num = _dot(a, _cross(b, d))
-            den = 1.0 + _dot(a, tuple(x + y for x, y in zip(b, d))) + _dot(b, d)   # 1 + a.b + b.d + d.a
-            minus = tuple(x - y for x, y in zip(b, d))
+            den = 1.0 + _dot(a, b + d) + _dot(b, d)                    # 1 + a.b + b.d + d.a
+            minus = b - d
             m2 = _dot(minus, minus)
             # half-angles (the factors 2 are applied per cell): theta/2 = atan2(|b - d|, |b + d|), with
             # |b + d|^2 = 4 - |b - d|^2 for unit vectors (exact enough: the sum is never small here)
@@ -142,7 +144,7 @@ class Sphere(Constraint):
         corner_blocks = [f[0] for f in fans]
         num = corner_blocks[0]["num"] if len(fans) == 1 else xp.concatenate([c["num"] for c in corner_blocks])
         den = corner_blocks[0]["den"] if len(fans) == 1 else xp.concatenate([c["den"] for c in corner_blocks])
-        return CellGeometry(area=area, perimeter=perimeter, apex=xp.stack(apex_c, axis=1), unit=xp.stack(u, axis=1),
+        return CellGeometry(area=area, perimeter=perimeter, apex=apex_c.T, unit=u.T,
                             radius=state.radius[state.vertex_replica],
                             corners=dict(blocks=blocks, parts=corner_blocks, num=num, den=den, rv=rv, u=u))
 
@@ -154,26 +156,24 @@ class Sphere(Constraint):
         g = geometry.corners
         hi = state.n_vertices if hi is None else hi
         if part is None:   # all corners, as one block
-            part = {k: (tuple(xp.concatenate([p[k][i] for p in g["parts"]]) for i in range(3))
-                        if isinstance(g["parts"][0][k], tuple) else xp.concatenate([p[k] for p in g["parts"]]))
+            part = {k: xp.concatenate([p[k] for p in g["parts"]], axis=-1)
                     for k in ("a", "b", "d", "num", "den", "minus", "m2")}
         a, b, d, num, den = part["a"], part["b"], part["d"], part["num"], part["den"]
         prev, pc = self._previous_corners(state)
-        p = tuple(c[prev[3 * lo:3 * hi]] for c in g["u"])
+        p = g["u"][:, prev[3 * lo:3 * hi]]
         num2, den2 = g["num"][pc[3 * lo:3 * hi]], g["den"][pc[3 * lo:3 * hi]]
         # d Omega(a, b, d)/db = 2 (D (d x a) - N (a + d)) / (N^2 + D^2); likewise for (p, b, a)
         s1 = 2.0 / (num * num + den * den)
         s2 = 2.0 / (num2 * num2 + den2 * den2)
         k1, k2, k3, k4 = s1 * den, s1 * num, s2 * den2, s2 * num2
-        da, ap = _cross(d, a), _cross(a, p)
-        gA = tuple(k1 * da[i] - k2 * (a[i] + d[i]) + k3 * ap[i] - k4 * (p[i] + a[i]) for i in range(3))
+        gA = k1 * _cross(d, a) - k2 * (a + d) + k3 * _cross(a, p) - k4 * (p + a)
         # d theta(b, d)/db = -t/|t|, t = (d - b) - ((d - b).b) b, |t|^2 = |d - b|^2 - ((d - b).b)^2;
         # written with minus = b - d: -t = minus - (minus.b) b; 0 for a zero-length edge
         minus = part["minus"]
         mb = _dot(minus, b)
         t2 = part["m2"] - mb * mb
         inv = 1.0 / xp.sqrt(xp.where(t2 > 0, t2, 1.0)) * (t2 > 0)
-        gL = tuple(inv * (minus[i] - mb * b[i]) for i in range(3))
+        gL = inv * (minus - mb * b)
         return gA, gL
 
     def shape_gradient(self, state, geometry: CellGeometry, d_area, d_perimeter):
@@ -196,15 +196,14 @@ class Sphere(Constraint):
             radius = geometry.radius[lo:hi]
             sA, sP = radius * radius / rv, radius / rv
 
-            def per_vertex(x):
-                x = x.reshape(hi - lo, 3)
-                return x[:, 0] + x[:, 1] + x[:, 2]
+            def per_vertex(x):   # (3, 3n) corner values -> (3, n): the sum over each vertex's corners
+                x = x.reshape(3, hi - lo, 3)
+                return x[:, :, 0] + x[:, :, 1] + x[:, :, 2]
 
-            area = [per_vertex(wA * gA[k]) for k in range(3)]
-            u = [c[lo:hi] for c in g["u"]]
-            radial = _dot(area, u)                    # project the area part on the tangent plane
-            for k in range(3):
-                out[lo:hi, k] = sA * (area[k] - radial * u[k]) + sP * per_vertex(wL * gL[k])
+            area = per_vertex(wA * gA)
+            u = g["u"][:, lo:hi]
+            area -= _dot(area, u) * u                # project the area part on the tangent plane
+            out[lo:hi] = (sA * area + sP * per_vertex(wL * gL)).T
 
         _in_parallel(block, g["blocks"], xp, with_index=True)
         return out
@@ -220,10 +219,10 @@ class Sphere(Constraint):
         gA, gL = self._corner_terms(state, geometry)
         nv = state.n_vertices
         rv = geometry.corners["rv"]
-        b = xp.stack(geometry.corners["u"], axis=1)[:, None, :]
-        dA = xp.stack(gA, axis=1).reshape(nv, 3, 3)
+        b = geometry.corners["u"].T[:, None, :]
+        dA = gA.T.reshape(nv, 3, 3)
         dA = (dA - (dA * b).sum(axis=2)[..., None] * b) * (geometry.radius ** 2 / rv)[:, None, None]
-        lg = xp.stack(gL, axis=1).reshape(nv, 3, 3)
+        lg = gL.T.reshape(nv, 3, 3)
         dP = (lg + xp.roll(lg, -1, axis=1)) * (geometry.radius / rv)[:, None, None]
         return dA, dP
 

@@ -1,6 +1,8 @@
 """Triggers decide on which timesteps an operation runs (as in HOOMD-blue)."""
 from __future__ import annotations
 
+import numpy as np
+
 
 class Trigger:
     """Base class: ``trigger(timestep) -> bool``. Combine with ``&``, ``|`` and ``~``."""
@@ -124,6 +126,31 @@ class Not(Trigger):
         return f"Not({self.trigger!r})"
 
 
+class OnTimesteps(Trigger):
+    """True exactly on the given timesteps (any iterable of non-negative integers), e.g. log-spaced ones."""
+
+    def __init__(self, timesteps):
+        arr = np.asarray(list(timesteps) if not isinstance(timesteps, np.ndarray) else timesteps)
+        if arr.ndim != 1 or arr.size == 0:
+            raise ValueError("timesteps must be a non-empty sequence of integers")
+        if not np.all(np.isfinite(arr.astype(np.float64))) or np.any(arr != np.round(arr)) or np.any(arr < 0):
+            raise ValueError(f"timesteps must be non-negative integers, got {timesteps!r}")
+        self.timesteps = np.unique(arr.astype(np.int64))
+        self._set = frozenset(int(t) for t in self.timesteps)
+
+    def __call__(self, timestep):
+        return int(timestep) in self._set
+
+    @property
+    def last(self) -> int:
+        return int(self.timesteps[-1])
+
+    def __repr__(self):
+        ts = self.timesteps
+        shown = ", ".join(str(int(t)) for t in ts[:6]) + (", ..." if len(ts) > 6 else "")
+        return f"OnTimesteps([{shown}] ({len(ts)} timesteps, last {self.last}))"
+
+
 class Always(Trigger):
     """Every timestep."""
 
@@ -135,9 +162,13 @@ class Always(Trigger):
 
 
 def as_trigger(value) -> Trigger:
-    """A Trigger from a Trigger, or from an int period (``100`` means ``Periodic(100)``)."""
+    """A Trigger from a Trigger, an int period (``100`` means ``Periodic(100)``) or a sequence of
+    timesteps (``OnTimesteps``)."""
     if isinstance(value, Trigger):
         return value
-    if isinstance(value, int) and not isinstance(value, bool):
-        return Periodic(value)
-    raise ValueError(f"trigger must be a spherevm.trigger.Trigger or a positive int period, got {value!r}")
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        return Periodic(int(value))
+    if isinstance(value, (list, tuple, np.ndarray, range)):
+        return OnTimesteps(value)
+    raise ValueError(f"trigger must be a spherevm.trigger.Trigger, a positive int period or a sequence of "
+                     f"timesteps, got {value!r}")

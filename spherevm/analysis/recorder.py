@@ -6,33 +6,8 @@ import os
 import numpy as np
 
 from ..plugins.base import Writer
-from ..trigger import Trigger, as_trigger
+from ..trigger import OnTimesteps, as_trigger
 from .dynamics import CENTROID_METHODS, Trajectory, cell_centroids, log_spaced_times
-
-
-class OnTimesteps(Trigger):
-    """True exactly on the given timesteps (any iterable of non-negative integers), e.g. log-spaced ones."""
-
-    def __init__(self, timesteps):
-        arr = np.asarray(list(timesteps) if not isinstance(timesteps, np.ndarray) else timesteps)
-        if arr.ndim != 1 or arr.size == 0:
-            raise ValueError("timesteps must be a non-empty sequence of integers")
-        if not np.all(np.isfinite(arr.astype(np.float64))) or np.any(arr != np.round(arr)) or np.any(arr < 0):
-            raise ValueError(f"timesteps must be non-negative integers, got {timesteps!r}")
-        self.timesteps = np.unique(arr.astype(np.int64))
-        self._set = frozenset(int(t) for t in self.timesteps)
-
-    def __call__(self, timestep):
-        return int(timestep) in self._set
-
-    @property
-    def last(self) -> int:
-        return int(self.timesteps[-1])
-
-    def __repr__(self):
-        ts = self.timesteps
-        shown = ", ".join(str(int(t)) for t in ts[:6]) + (", ..." if len(ts) > 6 else "")
-        return f"OnTimesteps([{shown}] ({len(ts)} timesteps, last {self.last}))"
 
 
 class Recorder(Writer):
@@ -59,10 +34,6 @@ class Recorder(Writer):
         if trigger is None:
             raise ValueError("trigger is required: a Trigger, an int period, a sequence of timesteps, "
                              "or use Recorder.log_spaced(t_max)")
-        if isinstance(trigger, np.integer):
-            trigger = int(trigger)
-        if not isinstance(trigger, (Trigger, int)) or isinstance(trigger, bool):
-            trigger = OnTimesteps(trigger)
         super().__init__(as_trigger(trigger))
         if method not in CENTROID_METHODS:
             raise ValueError(f"method must be one of {CENTROID_METHODS}, got {method!r}")

@@ -185,8 +185,10 @@ class _Progress:
     """
 
     def __init__(self, sim, max_steps, stream, enabled=True):
-        self.sim, self.max_steps, self.stream, self.enabled = sim, max_steps, stream, enabled
-        self.tty = enabled and hasattr(stream, "isatty") and stream.isatty()
+        from .progress import StatusLine
+        self.sim, self.max_steps, self.enabled = sim, max_steps, enabled
+        self.status = StatusLine(stream)
+        self.tty = enabled and self.status.tty
         self.start = self.last = time.monotonic()
         self.last_done = None
         self.drawn = False
@@ -207,17 +209,11 @@ class _Progress:
         fmax = float(self.sim.device.to_numpy(self.sim.max_force()).max())  # forces are cached: cheap
         line = (f"minimize: step {step:>{len(str(self.max_steps))}d}/{self.max_steps}  "
                 f"done {n_done}/{n_replicas}  max|F| {fmax:.2e}  {now - self.start:6.1f} s")
-        if self.tty:
-            self.stream.write("\r" + line + "\x1b[K")
-        else:
-            self.stream.write(line + "\n")
-        self.stream.flush()
+        self.status.show(line)
         self.drawn = True
 
     def close(self):
-        if self.tty and self.drawn:
-            self.stream.write("\n")
-            self.stream.flush()
+        self.status.close()
 
 
 def _check_out_path(path):

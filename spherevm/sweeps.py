@@ -784,11 +784,11 @@ class TextProgress:
     otherwise one line per finished chunk at most every 5 seconds (and the last)."""
 
     def __init__(self, stream=None, width=28, label="rigidity"):
-        self.stream = sys.stderr if stream is None else stream
+        from .progress import StatusLine
+        self.status = StatusLine(stream)
+        self.tty = self.status.tty
         self.width, self.label = width, label
-        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
         self.last = -math.inf
-        self.drawn = False
 
     def __call__(self, p: SweepProgress):
         now = time.monotonic()
@@ -803,14 +803,10 @@ class TextProgress:
         line = (f"{self.label}: [{'#' * fill}{'.' * (self.width - fill)}] {100 * frac:5.1f}%  "
                 f"chunks {p.chunks_done}/{p.chunks_total}  minimisations {p.units_done}/{p.units_total}{reused}  "
                 f"{p.elapsed:6.1f} s{eta}")
-        self.stream.write(("\r" + line + "\x1b[K") if self.tty else line + "\n")
-        self.stream.flush()
-        self.drawn = True
+        self.status.show(line)
 
     def close(self):
-        if self.tty and self.drawn:
-            self.stream.write("\n")
-            self.stream.flush()
+        self.status.close()
 
 
 DEFAULT_CELLS = (16, 32)

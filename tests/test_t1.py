@@ -217,19 +217,8 @@ def test_reference_preset():
         assert sim.log("t1_flips").sum() >= 1
 
 
-@pytest.mark.parametrize("n_cells", [32, 64, 128])
+@pytest.mark.parametrize("n_cells", [32, 64, 128] + [pytest.param(n, marks=pytest.mark.slow) for n in (256, 512, 1024)])
 def test_fire_with_t1_converges(n_cells):
-    sim = _sim_with_t1(svm.init.random_tiling(n_cells, replicas=2, seed=n_cells), T1(),
-                       VertexModel.dimensionless(kr=1.0, p0=3.7))
-    sim.operations.integrator = FIRE(dt=0.02)
-    res = sim.minimize(force_tol=1e-10, max_steps=20000)
-    assert res.all_converged, res.table()
-    _check_invariants(sim.state)
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("n_cells", [256, 512, 1024])
-def test_fire_with_t1_converges_large(n_cells):
     sim = _sim_with_t1(svm.init.random_tiling(n_cells, replicas=2, seed=n_cells), T1(),
                        VertexModel.dimensionless(kr=1.0, p0=3.7))
     sim.operations.integrator = FIRE(dt=0.02)

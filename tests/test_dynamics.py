@@ -98,7 +98,7 @@ def test_cell_directors_drive_vertices():
     assert np.linalg.norm(sim.state.positions - x0, axis=1).max() > 0
     d = sim.operations.integrator.directors
     assert d.shape == (64, 3)
-    apex = sim.state.constraint.cell_geometry(sim.state).apex
+    apex = sim.state.constraint.cell_centers(sim.state)
     assert np.abs((d * apex).sum(axis=1)).max() < 1e-12
 
 

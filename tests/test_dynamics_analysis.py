@@ -50,7 +50,7 @@ def test_centroids_on_sphere_and_methods_agree_on_symmetric_cells():
         assert c.shape == (state.n_cells, 3)
         np.testing.assert_allclose(np.linalg.norm(c, axis=1), state.radius_np()[state.cell_replica_np()],
                                    rtol=1e-13)
-    apex = state.constraint.cell_geometry(state).apex
+    apex = state.constraint.cell_centers(state)
     radius = state.radius_np()[state.cell_replica_np()][:, None]
     np.testing.assert_allclose(cell_centroids(state, "vertex"), apex * radius, atol=1e-12)
     # random cells: the two definitions differ, but by much less than a cell size
@@ -74,7 +74,7 @@ def test_area_centroid_matches_numerical_integration():
     c = cell_centroids(state, "area") / R
     cv, sides = state.cell_vertices, state.cell_sides
     unit = state.positions / np.linalg.norm(state.positions, axis=1)[:, None]
-    apex = state.constraint.cell_geometry(state).apex
+    apex = state.constraint.cell_centers(state)
     m = 60  # subdivisions of each fan triangle
     i, j = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
     up = i + j <= m - 1                # triangles (i, j), (i+1, j), (i, j+1)

@@ -50,6 +50,17 @@ def ref_angle(a, b):
     return mp.atan2(mp.sqrt(sum(s * s for s in cr)), sum(x * y for x, y in zip(A, B)))
 
 
+def exact_polygon_area(verts):
+    """50-digit signed area of the unit-sphere polygon through the (normalised) float64 vertices."""
+    vs = [mpvec(v)[0] for v in verts]
+    dot = lambda x, y: sum(p * r for p, r in zip(x, y))  # noqa: E731
+    a, total = vs[0], mp.mpf(0)
+    for b, c in zip(vs, vs[1:] + vs[:1]):
+        cross = [b[1] * c[2] - b[2] * c[1], b[2] * c[0] - b[0] * c[2], b[0] * c[1] - b[1] * c[0]]
+        total += 2 * mp.atan2(dot(a, cross), 1 + dot(a, b) + dot(b, c) + dot(c, a))
+    return total
+
+
 def exact_regular_polygon(n, rho):
     """Area and perimeter of the regular spherical n-gon of circumradius rho (unit sphere), 50 digits."""
     rho = mp.mpf(rho)
@@ -103,9 +114,10 @@ def mod_4pi(x):
     return -((-x + 2 * np.pi) % FOUR_PI - 2 * np.pi)
 
 
-def fan_error_bound(verts):
-    """First-order rounding bound of polygon_area: sum over the fan of eps (20 / |(N, D)| + 2 pi)."""
-    apex = unit(verts.sum(axis=0))
+def fan_error_bound(verts, apex=None):
+    """First-order rounding bound of a fan about ``apex`` (default: the normalised centroid, as in
+    polygon_area): sum over the fan of eps (20 / |(N, D)| + 2 pi)."""
+    apex = unit(verts.sum(axis=0)) if apex is None else apex
     b, c = verts, np.roll(verts, -1, axis=0)
     num = (apex * np.cross(b, c)).sum(1)
     den = 1 + b @ apex + (b * c).sum(1) + c @ apex
@@ -541,6 +553,26 @@ def test_polygon_gradients_match_finite_differences(verts):
 
 
 @PROPS
+@given(perturbed_polygons())
+def test_edge_area_gradient_is_the_polygon_area_gradient(verts):
+    """The apex-free edge form equals the fan gradient: w(v, prev) - w(v, next), tangent at v."""
+    prv, nxt = np.roll(verts, 1, axis=0), np.roll(verts, -1, axis=0)
+    edge = geo.edge_area_gradient(verts, prv) - geo.edge_area_gradient(verts, nxt)
+    fan = geo.polygon_area_gradient(verts)
+    assert np.abs(edge - fan).max() <= 1e-12 * np.abs(fan).max()
+    assert np.abs((edge * verts).sum(axis=1)).max() <= 1e-15 * np.abs(edge).max() + 1e-16
+
+
+def test_edge_area_gradient_of_a_short_edge():
+    """tan(theta/2) along the arc normal, to a few ulp for an edge of 1e-9."""
+    b = np.array([0.0, 0.0, 1.0])
+    d = np.array([np.sin(1e-9), 0.0, np.cos(1e-9)])
+    w = geo.edge_area_gradient(b, d)
+    assert w[1] == pytest.approx(np.tan(0.5e-9), rel=4 * EPS)          # z x x = +y
+    assert abs(w[0]) + abs(w[2]) == 0.0
+
+
+@PROPS
 @given(perturbed_polygons(), st.floats(0.0, 0.5), st.floats(0.0, 2 * np.pi))
 def test_polygon_area_independent_of_apex(verts, r, phi):
     area = float(geo.polygon_area(verts))
@@ -566,8 +598,15 @@ def test_random_tiling_area_sum_and_euler(n_cells, seed):
     area = np.array([float(geo.polygon_area(v)) for v in cells]) * radius_c ** 2
     per = np.array([float(geo.polygon_perimeter(v)) for v in cells]) * radius_c
     assert np.all(g.area > 0)
-    assert np.allclose(g.area, area, rtol=1e-13, atol=0)
+    # polygon_area (centroid fan, absolute accuracy) within its own rounding bound
+    bound = np.array([fan_error_bound(v) for v in cells]) * radius_c ** 2
+    assert np.all(np.abs(g.area - area) <= bound + 4 * EPS * area)
     assert np.allclose(g.perimeter, per, rtol=1e-14, atol=0)
+    # the constraint's fan (about a vertex, difference numerator) has relative accuracy: the
+    # smallest cells against 50-digit areas of the very unit vectors it used
+    for c in np.argsort(area)[:5]:
+        verts = g.unit[s.cell_vertices[c, :s.cell_sides[c]]]
+        assert abs(g.area[c] - float(exact_polygon_area(verts)) * radius_c[c] ** 2) <= 4 * EPS * g.area[c]
 
 
 def test_random_tiling_ensemble_radius():
@@ -604,8 +643,9 @@ def test_small_voronoi_tilings_cover_the_sphere(n_cells, seed):
     area = s.constraint.cell_geometry(s).area
     # each fan triangle is backward stable: error ~ eps (|dN| + |dD|) / |(N, D)|, which grows when a
     # cell has two nearly antipodal vertices (then N and D both vanish); that happens only when all
-    # points lie in one hemisphere (the origin outside their hull), the draws random_tiling rejects
-    bound = np.array([fan_error_bound(v) for v in unit_cells(s)])
+    # points lie in one hemisphere (the origin outside their hull), the draws random_tiling rejects;
+    # the constraint fans each cell about its first vertex
+    bound = np.array([fan_error_bound(v, apex=v[0]) for v in unit_cells(s)])
     assert np.all(np.abs(area - R ** 2 * scipy_areas) <= R ** 2 * (bound + 1e-14))
     err = abs(tiling_area_sums(s)[0])
     assert err <= bound.sum() / FOUR_PI

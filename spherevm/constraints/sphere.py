@@ -3,8 +3,6 @@ from __future__ import annotations
 
 import os
 import weakref
-from dataclasses import dataclass
-
 import numpy as np
 
 from ..device import array_module
@@ -12,16 +10,21 @@ from ..geometry import sphere as geo
 from .base import Constraint
 
 
-@dataclass
 class CellGeometry:
-    """Per-cell area, perimeter and fan apex (unit centroid), the unit vertex directions, and the
-    per-corner fan terms that the gradients reuse (components as separate contiguous arrays)."""
-    area: object
-    perimeter: object
-    apex: object
-    unit: object
-    radius: object          # per vertex
-    corners: dict = None    # per-corner terms, see Sphere.cell_geometry
+    """Per-cell area and perimeter, the unit vertex directions, and the per-corner terms that the
+    gradients reuse. ``center`` (the normalised vertex centroid of each cell, ``(n_cells, 3)``) is
+    computed on first use: the forces do not need it."""
+
+    def __init__(self, area, perimeter, unit, radius, corners=None, center=None):
+        self.area, self.perimeter, self.unit, self.radius = area, perimeter, unit, radius
+        self.corners = corners
+        self._center = center
+
+    @property
+    def center(self):
+        if callable(self._center):
+            self._center = self._center()
+        return self._center
 
 
 # Vectors are (3, n) arrays, one contiguous row per Cartesian component: elementwise vector
@@ -38,13 +41,14 @@ def _dot(a, b):
 
 _POOL = None
 PARALLEL_MIN_VERTICES = 16384   # below this, one thread; blocks hold at least half as many vertices
-BLOCK_VERTICES = 32768          # per block: its per-corner temporaries (~0.8 MB each) stay in cache
+BLOCK_VERTICES = 16384          # per block: its per-corner vectors (3 x 3 x 16384 doubles, 1.2 MB) stay in cache
 
 
 def _vertex_blocks(state):
     """Contiguous vertex ranges for large NumPy states: at least one per CPU core (NumPy releases
     the GIL inside its loops, so blocks run on all cores at once) and small enough that a block's
-    temporaries stay in cache (measured: 65,536 cells, 2 cores: 98 ms in 2 blocks, 72 ms in 4)."""
+    temporaries stay in cache (measured, 65,536 cells on 2 cores: 28-30 ms in blocks of 16,384
+    vertices, 32-35 ms in blocks of 32,768 or 65,536)."""
     nv = state.n_vertices
     workers = os.cpu_count() or 1
     if state.device.is_gpu or nv < PARALLEL_MIN_VERTICES:
@@ -54,24 +58,24 @@ def _vertex_blocks(state):
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
 
 
-def _in_parallel(fn, blocks, xp, with_index=False):
-    """[fn(lo, hi[, i]) for each block], on a thread pool when there are several blocks."""
+def _in_parallel(fn, items):
+    """``[fn(item) for item in items]``, on a thread pool when there are several items."""
     global _POOL
-    args = [(lo, hi, i) if with_index else (lo, hi) for i, (lo, hi) in enumerate(blocks)]
-    if len(blocks) == 1:
-        return [fn(*args[0])]
+    if len(items) == 1:
+        return [fn(items[0])]
     if _POOL is None:
         from concurrent.futures import ThreadPoolExecutor
         _POOL = ThreadPoolExecutor(max_workers=os.cpu_count(), thread_name_prefix="spherevm")
-    return [f.result() for f in [_POOL.submit(fn, *a) for a in args]]
+    return [f.result() for f in [_POOL.submit(fn, item) for item in items]]
 
 
 class Sphere(Constraint):
     """Sphere of radius R (per replica, stored in ``State.radius``) centred at the origin.
 
     Perimeters are sums of geodesic arcs ``R theta``; areas are fans of signed spherical triangles
-    about the cell's normalised vertex centroid (the area does not depend on the apex, so the
-    gradients hold it fixed). Normal: ``x/|x|``; ``P_N(x) = R x/|x|``.
+    about the cell's first vertex, with the triple product taken of differences so that small
+    cells keep full relative accuracy. Area gradients come from the edges alone (each edge's end
+    sweeps a thin triangle), with no fan apex. Normal: ``x/|x|``; ``P_N(x) = R x/|x|``.
     """
 
     name = "sphere"
@@ -97,116 +101,129 @@ class Sphere(Constraint):
         return 4.0 * np.pi * np.asarray(radius, dtype=np.float64) ** 2
 
     # -------------------------------------------------------------- per-corner metric
-    # -------------------------------------------------------------- per-corner metric
-    # Corner i = 3 v + k lies in cell c_i = vertex_cells[v, k]; its fan triangle is
-    # (apex_c, u_v, u_next) with next = vertex_neighbors[v, k]. Everything is computed on flat
-    # corner arrays, one contiguous array per Cartesian component, and summed per cell by bincount.
+    # Corner (v, k) lies in cell vertex_cells[v, k], where the boundary runs counter-clockwise from
+    # v to n_k = vertex_neighbors[v, k]; the edge (v, n_k) borders cells k and k-1. Corner arrays
+    # are slot-major, shape (3 components, 3 slots, vertices of the block): a vertex quantity
+    # broadcasts over the slot axis and the sum over a vertex's corners adds three contiguous rows.
+
+    def _corner_index(self, state):
+        """Per vertex block, the slot-major corner tables: next vertex, the corner's cell, the cell
+        before it (k - 1) and the cell's first vertex (its fan apex). Cached per State and topology
+        version (T1 flips bump it)."""
+        cache = getattr(self, "_index_cache", None)
+        if cache is not None and cache[0]() is state and cache[1] == state.topology_version:
+            return cache[2]
+        xp = state.device.xp
+        vn, vc = state.vertex_neighbors.astype(np.intp), state.vertex_cells.astype(np.intp)
+        first = state.cell_vertices[:, 0].astype(np.intp)
+        result = []
+        for lo, hi in _vertex_blocks(state):
+            cells = xp.ascontiguousarray(vc[lo:hi].T).reshape(-1)
+            before = xp.ascontiguousarray(xp.roll(vc[lo:hi], 1, axis=1).T).reshape(-1)
+            result.append(dict(lo=lo, hi=hi, next=xp.ascontiguousarray(vn[lo:hi].T).reshape(-1),
+                               cells=cells, apex=first[cells], both=xp.concatenate((cells, before))))
+        self._index_cache = (weakref.ref(state), state.topology_version, result)
+        return result
 
     def cell_geometry(self, state) -> CellGeometry:
-        """Areas, perimeters, apexes; keeps each corner's fan numerator N and denominator D."""
+        """Areas and perimeters, and the per-corner terms the gradients reuse.
+
+        Perimeter: half-angles ``atan2(|b - d|, |b + d|)`` of the edges ``b -> d``. Area: the fan
+        of signed triangles ``(a, b, d)`` about the cell's first vertex ``a``, each
+        ``2 atan2(a.(b x d), 1 + a.b + a.d + b.d)`` (the area does not depend on the apex).
+        """
         xp = state.device.xp
         n = state.n_cells
         comp = xp.ascontiguousarray(state.positions.T)
         rv = xp.sqrt(_dot(comp, comp))
         u = comp / rv
-        cells = state.vertex_cells.reshape(-1)
-        nxt = state.vertex_neighbors.reshape(-1)
-        blocks = _vertex_blocks(state)
+        index = self._corner_index(state)
 
-        def apex_sums(lo, hi):
-            b = xp.repeat(u[:, lo:hi], 3, axis=1)                      # the corners' own vertex
-            return b, [xp.bincount(cells[3 * lo:3 * hi], weights=c, minlength=n) for c in b]
+        def corners(block):
+            ub = u[:, None, block["lo"]:block["hi"]]                    # (3, 1, nb): b, for every slot
+            d = xp.take(u, block["next"], axis=1).reshape(3, 3, -1)     # the next vertex
+            m = ub - d
+            m2 = _dot(m.reshape(3, -1), m.reshape(3, -1))
+            q = xp.maximum(4.0 - m2, 0.0)                               # |b + d|^2 = 4 - |b - d|^2
+            sm, sp = xp.sqrt(m2), xp.sqrt(q)
+            half = xp.arctan2(sm, sp)                                   # theta / 2
+            x = _cross(m, ub).reshape(3, -1)                            # b x d, from b - d
+            a = xp.take(u, block["apex"], axis=1).reshape(3, 3, -1)
+            num = _dot((a - ub).reshape(3, -1), x)                      # a.(b x d) = (a - b).(b x d)
+            den = 0.5 * q + _dot(a.reshape(3, -1), (ub + d).reshape(3, -1))   # (1 + b.d) + a.(b + d)
+            cells = block["cells"]
+            sums = (xp.bincount(cells, weights=half, minlength=n),
+                    xp.bincount(cells, weights=xp.arctan2(num, den), minlength=n))
+            return dict(m=m.reshape(3, -1), x=x, q=q, two_sin=sm * sp), sums
 
-        parts = _in_parallel(apex_sums, blocks, xp)
-        summed = xp.stack([sum(p[1][i] for p in parts) for i in range(3)])
-        apex_c = summed / xp.sqrt(_dot(summed, summed))
-
-        def fan(block, part):
-            lo, hi = block
-            b = part[0]
-            cl = cells[3 * lo:3 * hi]
-            a = apex_c[:, cl]                                          # fan apex of the corner's cell
-            d = u[:, nxt[3 * lo:3 * hi]]                               # the next vertex
-            num = _dot(a, _cross(b, d))
-            den = 1.0 + _dot(a, b + d) + _dot(b, d)                    # 1 + a.b + b.d + d.a
-            minus = b - d
-            m2 = _dot(minus, minus)
-            # half-angles (the factors 2 are applied per cell): theta/2 = atan2(|b - d|, |b + d|), with
-            # |b + d|^2 = 4 - |b - d|^2 for unit vectors (exact enough: the sum is never small here)
-            lengths = xp.arctan2(xp.sqrt(m2), xp.sqrt(xp.maximum(4.0 - m2, 0.0)))
-            omegas = xp.arctan2(num, den)
-            sums = (xp.bincount(cl, weights=lengths, minlength=n), xp.bincount(cl, weights=omegas, minlength=n))
-            return dict(a=a, b=b, d=d, num=num, den=den, minus=minus, m2=m2), sums
-
-        fans = _in_parallel(lambda lo, hi, i: fan((lo, hi), parts[i]), blocks, xp, with_index=True)
+        parts = _in_parallel(corners, index)
         R = state.radius[state.cell_replica]
-        perimeter = (2.0 * R) * sum(f[1][0] for f in fans)
-        area = (2.0 * R * R) * sum(f[1][1] for f in fans)
-        corner_blocks = [f[0] for f in fans]
-        num = corner_blocks[0]["num"] if len(fans) == 1 else xp.concatenate([c["num"] for c in corner_blocks])
-        den = corner_blocks[0]["den"] if len(fans) == 1 else xp.concatenate([c["den"] for c in corner_blocks])
-        return CellGeometry(area=area, perimeter=perimeter, apex=apex_c.T, unit=u.T,
+        perimeter = (2.0 * R) * sum(p[1][0] for p in parts)
+        area = (2.0 * R * R) * sum(p[1][1] for p in parts)
+        return CellGeometry(area=area, perimeter=perimeter, unit=u.T,
                             radius=state.radius[state.vertex_replica],
-                            corners=dict(blocks=blocks, parts=corner_blocks, num=num, den=den, rv=rv, u=u))
+                            corners=dict(index=index, parts=[p[0] for p in parts], u=u, rv=rv),
+                            center=lambda: self.cell_centers(state, u))
 
-    def _corner_terms(self, state, geometry, lo=0, hi=None, part=None):
-        """Per-corner area gradient (fan triangles on both sides of the vertex, apex held fixed; not
-        yet projected on the tangent plane, which callers do after summing over the corners) and the
-        unit-sphere length gradient toward the next vertex (tangent), for vertices ``lo:hi``."""
+    def cell_centers(self, state, unit=None):
+        """Normalised vertex centroid of each cell, ``(n_cells, 3)`` on the state's device."""
         xp = state.device.xp
-        g = geometry.corners
-        hi = state.n_vertices if hi is None else hi
-        if part is None:   # all corners, as one block
-            part = {k: xp.concatenate([p[k] for p in g["parts"]], axis=-1)
-                    for k in ("a", "b", "d", "num", "den", "minus", "m2")}
-        a, b, d, num, den = part["a"], part["b"], part["d"], part["num"], part["den"]
-        prev, pc = self._previous_corners(state)
-        p = g["u"][:, prev[3 * lo:3 * hi]]
-        num2, den2 = g["num"][pc[3 * lo:3 * hi]], g["den"][pc[3 * lo:3 * hi]]
-        # d Omega(a, b, d)/db = 2 (D (d x a) - N (a + d)) / (N^2 + D^2); likewise for (p, b, a)
-        s1 = 2.0 / (num * num + den * den)
-        s2 = 2.0 / (num2 * num2 + den2 * den2)
-        k1, k2, k3, k4 = s1 * den, s1 * num, s2 * den2, s2 * num2
-        gA = k1 * _cross(d, a) - k2 * (a + d) + k3 * _cross(a, p) - k4 * (p + a)
-        # d theta(b, d)/db = -t/|t|, t = (d - b) - ((d - b).b) b, |t|^2 = |d - b|^2 - ((d - b).b)^2;
-        # written with minus = b - d: -t = minus - (minus.b) b; 0 for a zero-length edge
-        minus = part["minus"]
-        mb = _dot(minus, b)
-        t2 = part["m2"] - mb * mb
-        inv = 1.0 / xp.sqrt(xp.where(t2 > 0, t2, 1.0)) * (t2 > 0)
-        gL = inv * (minus - mb * b)
-        return gA, gL
+        if unit is None:
+            comp = xp.ascontiguousarray(state.positions.T)
+            unit = comp / xp.sqrt(_dot(comp, comp))
+        cells = state.vertex_cells.reshape(-1)
+        corner_unit = xp.repeat(unit, 3, axis=1)
+        summed = xp.stack([xp.bincount(cells, weights=c, minlength=state.n_cells) for c in corner_unit])
+        return (summed / xp.sqrt(_dot(summed, summed))).T
+
+    @staticmethod
+    def _edge_factors(part):
+        """Per corner, on the unit sphere, the factors that turn ``b x d`` and ``b - d`` into the
+        area term ``w(b, d) = (b x d)/(1 + b.d)`` (tangent at b) and the length term
+        ``(b - d)/sin(theta)``, whose tangent part is the gradient of the edge angle theta(b, d)
+        with respect to b (0 for a zero-length edge).
+
+        The area of a cell changes, when its vertex b moves, by the two thin triangles its edges
+        sweep: moving the end b of an arc of angle theta by a tangent step s sweeps
+        ``tan(theta/2) (s . n)``, n the arc's unit normal at b. So the area gradient at b is
+        ``w(b, p) - w(b, d)`` with ``w(b, d) = (b x d)/(1 + b.d) = tan(theta/2) n``, p and d the
+        previous and next vertices (no fan apex involved).
+        """
+        xp = array_module(part["q"])
+        return 2.0 / xp.maximum(part["q"], 1e-300), 2.0 / xp.maximum(part["two_sin"], 1e-150)
 
     def shape_gradient(self, state, geometry: CellGeometry, d_area, d_perimeter):
         """Surface gradient (V, 3) of ``sum_c d_area[c] A_c + d_perimeter[c] P_c``.
 
         With ``d_area = dE/dA`` and ``d_perimeter = dE/dP`` this is the gradient of any energy of the
         cell areas and perimeters (chain rule); the vertex model's forces are minus it.
+
+        Per vertex v with edges to n_k: ``sum_k (dA[k-1] - dA[k]) w(v, n_k) + (dP[k] + dP[k-1])
+        dtheta(v, n_k)/dv`` on the unit sphere (see :meth:`_edge_gradients`), with ``dA`` scaled by
+        R^2 and ``dP`` by R, projected on the tangent plane and divided by ``|x_v|`` (positions
+        ``x = |x| u``).
         """
         xp = state.device.xp
         g = geometry.corners
+        R = state.radius[state.cell_replica]
+        weights = xp.stack((d_area * (R * R), d_perimeter * R))
         out = xp.empty((state.n_vertices, 3))
 
-        def block(lo, hi, i):
-            gA, gL = self._corner_terms(state, geometry, lo, hi, g["parts"][i])
-            cells = state.vertex_cells[lo:hi]
-            wA = d_area[cells].reshape(-1)
-            wP = d_perimeter[cells]
-            wL = (wP + xp.roll(wP, 1, axis=1)).reshape(-1)   # edge v -> n_k borders cells k and k-1
-            rv = g["rv"][lo:hi]
-            radius = geometry.radius[lo:hi]
-            sA, sP = radius * radius / rv, radius / rv
-
-            def per_vertex(x):   # (3, 3n) corner values -> (3, n): the sum over each vertex's corners
-                x = x.reshape(3, hi - lo, 3)
-                return x[:, :, 0] + x[:, :, 1] + x[:, :, 2]
-
-            area = per_vertex(wA * gA)
+        def block(pair):
+            index, part = pair
+            lo, hi = index["lo"], index["hi"]
+            nc = 3 * (hi - lo)
+            w = xp.take(weights, index["both"], axis=1)             # (2, 6nb): cell k, then cell k-1
+            area, length = self._edge_factors(part)
+            alpha = (w[0, nc:] - w[0, :nc]) * area
+            beta = (w[1, :nc] + w[1, nc:]) * length
+            s = (alpha * part["x"] + beta * part["m"]).reshape(3, 3, -1)
+            s = s[:, 0] + s[:, 1] + s[:, 2]
             u = g["u"][:, lo:hi]
-            area -= _dot(area, u) * u                # project the area part on the tangent plane
-            out[lo:hi] = (sA * area + sP * per_vertex(wL * gL)).T
+            s -= _dot(s, u) * u                                      # onto the tangent plane
+            out[lo:hi] = (s / g["rv"][lo:hi]).T
 
-        _in_parallel(block, g["blocks"], xp, with_index=True)
+        _in_parallel(block, list(zip(g["index"], g["parts"])))
         return out
 
     def corner_gradients(self, state, geometry: CellGeometry):
@@ -217,31 +234,21 @@ class Sphere(Constraint):
         :meth:`shape_gradient`, which sums these without building them.)
         """
         xp = state.device.xp
-        gA, gL = self._corner_terms(state, geometry)
-        nv = state.n_vertices
-        rv = geometry.corners["rv"]
-        b = geometry.corners["u"].T[:, None, :]
-        dA = gA.T.reshape(nv, 3, 3)
-        dA = (dA - (dA * b).sum(axis=2)[..., None] * b) * (geometry.radius ** 2 / rv)[:, None, None]
-        lg = gL.T.reshape(nv, 3, 3)
-        dP = (lg + xp.roll(lg, -1, axis=1)) * (geometry.radius / rv)[:, None, None]
+        g = geometry.corners
+        terms = []
+        for part in g["parts"]:
+            area, length = self._edge_factors(part)
+            terms.append((area * part["x"], length * part["m"]))
+        # slot-major (3, 3, nb) blocks -> (V, slot, component)
+        area, length = ([xp.concatenate([t[j].reshape(3, 3, -1) for t in terms], axis=2).transpose(2, 1, 0)
+                         for j in (0, 1)])
+        u = g["u"].T[:, None, :]
+        length = length - (length * u).sum(axis=2)[..., None] * u
+        scale = (geometry.radius / g["rv"])[:, None, None]      # R / |x|
+        # cell k at v is bounded by the edges to n_k (v -> n_k) and n_{k+1} (n_{k+1} -> v)
+        dA = (xp.roll(area, -1, axis=1) - area) * (scale * geometry.radius[:, None, None])
+        dP = (length + xp.roll(length, -1, axis=1)) * scale
         return dA, dP
-
-    def _previous_corners(self, state):
-        """For every corner (v, k): the previous vertex p and the index of p's corner in the same
-        cell (whose next is v), whose fan triangle (apex, p, v) is v's other one in that cell.
-        Cached per State and topology version (T1 flips bump it)."""
-        cache = getattr(self, "_prev_cache", None)
-        if cache is not None and cache[0]() is state and cache[1] == state.topology_version:
-            return cache[2]
-        xp = state.device.xp
-        vn = state.vertex_neighbors
-        prev = xp.roll(vn, -1, axis=1)
-        v_ids = xp.arange(state.n_vertices, dtype=vn.dtype)[:, None]
-        slot = (vn[prev] == v_ids[..., None]).argmax(axis=2)
-        result = (prev.reshape(-1), (3 * prev + slot).reshape(-1))
-        self._prev_cache = (weakref.ref(state), state.topology_version, result)
-        return result
 
     def edge_lengths(self, state, u, v):
         """Geodesic lengths of the edges (u[i], v[i])."""

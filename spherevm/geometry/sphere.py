@@ -97,6 +97,19 @@ def solid_angle_gradient(a, b, c):
     return 2.0 * g / (num * num + den * den)[..., None]
 
 
+def edge_area_gradient(b, d):
+    """``(b x d)/(1 + b.d) = tan(theta/2) n``: the area a polygon gains per unit tangent step of its
+    vertex ``b``, through its edge to ``d``, is ``-edge_area_gradient(b, d)`` for a boundary
+    running ``b -> d`` (counter-clockwise) and ``+edge_area_gradient(b, d)`` for ``d -> b``.
+
+    Moving the end b of an arc of angle theta by a tangent step s sweeps the thin triangle
+    ``tan(theta/2) (s . n)``, n the arc's unit normal at b. So a polygon's area gradient at b is
+    ``edge_area_gradient(b, prev) - edge_area_gradient(b, next)``, with no fan apex; it is tangent
+    at b. ``b x d`` is taken as ``(b - d) x b``, accurate for short edges.
+    """
+    return _cross(b - d, b) / (1.0 + _dot(b, d))[..., None]
+
+
 def triangle_area(a, b, c, radius=1.0):
     """Signed area of the geodesic triangle (a, b, c) on a sphere of the given radius."""
     return radius * radius * solid_angle(a, b, c)

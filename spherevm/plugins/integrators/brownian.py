@@ -155,7 +155,7 @@ class Active(Brownian):
         """Unit normals at the directors' base points: cell centroids or vertices."""
         con = state.constraint
         if self.mode == "cell":
-            return con.cell_geometry(state).apex
+            return con.cell_centers(state)
         return con.normal(state.positions)
 
     def attach(self, simulation):

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import gc
 import sys
 from pathlib import Path
 
@@ -78,6 +79,7 @@ def brownian_step(sim):
 
 def device_bytes_per_cell(n_cells, replicas, gpu):
     """GPU memory held by a FIRE + T1 minimisation, per cell (memory pool, after a few steps)."""
+    gc.collect()                     # earlier simulations (reference cycles) must not be freed mid-count
     pool = gpu.xp.get_default_memory_pool()
     pool.free_all_blocks()
     before = pool.used_bytes()

@@ -41,13 +41,6 @@ __device__ __forceinline__ double solid_angle(vec3 a, vec3 b, vec3 c) {
     return 2.0 * atan2(num, den);
 }
 
-// numerator and denominator of solid_angle: Omega = 2 arg(den + i num); a fan's area is 2 arg of
-// the product of these complex numbers (one atan2 per cell instead of one per triangle)
-__device__ __forceinline__ void solid_angle_parts(vec3 a, vec3 b, vec3 c, double* num, double* den) {
-    *num = dot3(a, cross3(b, c));
-    *den = 1.0 + dot3(a, b) + dot3(b, c) + dot3(c, a);
-}
-
 // gradient of solid_angle(a, b, c) with respect to the middle vertex b (not projected):
 // 2 (D (c x a) - N (a + c)) / (N^2 + D^2)
 __device__ __forceinline__ vec3 solid_angle_gradient(vec3 a, vec3 b, vec3 c) {
@@ -56,4 +49,29 @@ __device__ __forceinline__ vec3 solid_angle_gradient(vec3 a, vec3 b, vec3 c) {
     vec3 g = den * cross3(c, a) - num * (a + c);
     double s = 2.0 / (num * num + den * den);
     return s * g;
+}
+
+// The edge b -> d of a cell (unit vectors), in the terms Sphere.cell_geometry uses:
+// m = b - d, q = |b + d|^2 = 4 - |m|^2, x = b x d (taken as m x b, accurate for short edges).
+struct edge_terms { vec3 m, x; double m2, q; };
+
+__device__ __forceinline__ edge_terms make_edge(vec3 b, vec3 d) {
+    edge_terms e;
+    e.m = b - d;
+    e.m2 = dot3(e.m, e.m);
+    e.q = fmax(4.0 - e.m2, 0.0);
+    e.x = cross3(e.m, b);
+    return e;
+}
+
+// half the edge's angle: atan2(|b - d|, |b + d|)
+__device__ __forceinline__ double half_angle(edge_terms e) { return atan2(sqrt(e.m2), sqrt(e.q)); }
+
+// Surface-gradient terms of the edge at b, on the unit sphere (projection on the tangent plane
+// left to the caller): the area term w(b, d) = (b x d)/(1 + b.d), which a cell with the edge
+// b -> d loses and the cell with d -> b gains, and the length term (b - d)/sin(theta), whose
+// tangent part is d theta/db (0 for a zero-length edge).
+__device__ __forceinline__ vec3 edge_area_term(edge_terms e) { return (2.0 / fmax(e.q, 1e-300)) * e.x; }
+__device__ __forceinline__ vec3 edge_length_term(edge_terms e) {
+    return (2.0 / fmax(sqrt(e.m2) * sqrt(e.q), 1e-150)) * e.m;
 }

@@ -100,12 +100,11 @@ class VertexModel(Force):
         module = load_module(_KERNELS)
         nc, nv = state.n_cells, state.n_vertices
         coef, cell_energy = cp.empty((nc, 2)), cp.empty(nc)
-        apex = cp.empty((nc, 3))
         energy = cp.zeros(state.n_replicas)
         launch(module.get_function("vm_cell_geometry"), nc,
                (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, state.radius,
-                np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, apex, cell_energy, energy))
+                np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, cell_energy, energy))
         forces = cp.empty_like(state.positions)
         launch(module.get_function("vm_vertex_forces"), nv,
-               (state.positions, state.vertex_neighbors, state.vertex_cells, np.int32(nv), coef, apex, forces))
+               (state.positions, state.vertex_neighbors, state.vertex_cells, np.int32(nv), coef, forces))
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)

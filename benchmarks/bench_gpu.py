@@ -38,9 +38,9 @@ def force_floor_bytes(state):
     """Bytes that a force evaluation must move at least: every array it touches, once."""
     nv, nc, ms = state.n_vertices, state.n_cells, state.max_sides
     cell_in = nc * (4 * ms + 4 + 4 + 4 * 8)          # table, sides, replica, 4 parameters
-    cell_out = nc * (8 + 8 + 24 + 8)                  # area, perimeter, apex, cell energy
-    vert = nv * (24 + 12 + 12 + 4 + 24)               # positions, neighbours, cells, replica, forces
-    return cell_in + cell_out + cell_out + vert       # the vertex kernel reads the cell outputs again
+    cell_out = nc * (16 + 8)                          # two force coefficients, cell energy
+    vert = nv * (24 + 12 + 12 + 24)                   # positions, neighbours, cells, forces
+    return cell_in + cell_out + nc * 16 + vert        # the vertex kernel reads the coefficients again
 
 
 def fire_floor_bytes(state):
@@ -95,10 +95,10 @@ def measure(n_cells, replicas, gpu, numpy_max, bw):
     sim = build(n_cells, replicas, gpu)
     state = sim.state
     force = sim.operations.forces[0]
-    t_force = median_time(lambda: force.compute(state), gpu)
-    t_fire = median_time(lambda: fire_iteration(sim), gpu)
+    t_force = median_time(lambda: force.compute(state), gpu, repeat=51)
+    t_fire = median_time(lambda: fire_iteration(sim), gpu, repeat=51)
     bsim = brownian_sim(n_cells, replicas, gpu)
-    t_brown = median_time(lambda: brownian_step(bsim), gpu, repeat=21)
+    t_brown = median_time(lambda: brownian_step(bsim), gpu, repeat=101)
     row = dict(system=f"{replicas} x {n_cells}" if replicas > 1 else f"{n_cells:.0e}",
                cells=n_cells * replicas, force_ms=1e3 * t_force, fire_ms=1e3 * t_fire, brown_ms=1e3 * t_brown,
                force_gbs=force_floor_bytes(state) / t_force / 1e9, fire_gbs=fire_floor_bytes(state) / t_fire / 1e9)

@@ -47,8 +47,8 @@ def cell_centroids(state, method: str = "area"):
     ``a_e -> b_e`` taken counter-clockwise, ``theta_e`` the arc angle. The centroid direction is
     that vector, normalised.
 
-    ``method="vertex"``: ``R`` times the normalised mean of the unit vertex directions (the fan apex
-    of :meth:`spherevm.constraints.Sphere.cell_geometry`).
+    ``method="vertex"``: ``R`` times the normalised mean of the unit vertex directions
+    (:meth:`spherevm.constraints.Sphere.cell_centers`).
 
     Why "area" is the default: the vertex centroid depends on how the vertices are spread along the
     boundary, not only on the cell's shape, and it jumps at every T1. Just before a T1 the short
@@ -79,8 +79,8 @@ def cell_centroids(state, method: str = "area"):
         return xp.stack([xp.bincount(cells, weights=w[..., i].reshape(-1), minlength=n) for i in range(3)],
                         axis=1)
 
-    vertex_sum = per_cell(xp.broadcast_to(unit[:, None, :], (len(unit), 3, 3)))
-    direction = vertex_sum
+    vertex_centroid = state.constraint.cell_centers(state)
+    direction = vertex_centroid
     if method == "area":
         a = unit[:, None, :]
         b = unit[state.vertex_neighbors]               # edge v -> vertex_neighbors[v, k] runs CCW in that cell
@@ -89,8 +89,8 @@ def cell_centroids(state, method: str = "area"):
         theta = xp.arctan2(s, (a * b).sum(axis=-1))
         factor = xp.where(s > 0, theta / xp.where(s > 0, s, 1.0), 1.0)
         area_vec = per_cell(cr * factor[..., None])    # = 2 * integral of n over the cell (unit sphere)
-        ok = (area_vec * vertex_sum).sum(axis=1) > 0
-        direction = xp.where(ok[:, None], area_vec, vertex_sum)
+        ok = (area_vec * vertex_centroid).sum(axis=1) > 0
+        direction = xp.where(ok[:, None], area_vec, vertex_centroid)
     direction = direction / xp.sqrt((direction * direction).sum(axis=1))[:, None]
     out = state.radius[state.cell_replica][:, None] * direction
     return np.asarray(state.device.to_numpy(out), dtype=np.float64)

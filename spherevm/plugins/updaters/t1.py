@@ -1,9 +1,10 @@
 """T1 neighbour exchanges: short edges are rotated so that four cells swap neighbours."""
 from __future__ import annotations
 
-import numpy as np
-
+import weakref
 from pathlib import Path
+
+import numpy as np
 
 from ... import topology
 from ...device import launch, load_module
@@ -103,21 +104,34 @@ class T1(Updater):
         L = self.threshold * np.sqrt(state.mean_cell_area)
         return (2.0 * R * np.sin(np.minimum(L / (2.0 * R), np.pi / 2))) ** 2
 
+    def _edge_list(self, state):
+        """Each undirected edge once, as the corner ``3 u + slot`` with ``u < neighbour``, in edge
+        index order, with its two vertices and its replica. Cached per State and topology version."""
+        cache = getattr(self, "_edges", None)
+        if cache is not None and cache[0]() is state and cache[1] == state.topology_version:
+            return cache[2]
+        xp = state.device.xp
+        vn = state.vertex_neighbors
+        corner = xp.flatnonzero((xp.arange(state.n_vertices)[:, None] < vn).reshape(-1))
+        u = corner // 3
+        edges = dict(corner=corner, u=u, v=vn.reshape(-1)[corner], replica=state.vertex_replica[u])
+        self._edges = (weakref.ref(state), state.topology_version, edges)
+        return edges
+
     def short_edges(self, state):
         """Candidate edges ``(u, slot, geodesic length)`` shorter than the threshold, by edge index."""
         dev = state.device
         xp = dev.xp
-        vn = state.vertex_neighbors
-        u = xp.arange(state.n_vertices, dtype=xp.int32)[:, None]
-        own = u < vn                                     # each undirected edge once
-        d = state.positions[:, None, :] - state.positions[vn]
-        chord2 = (d * d).sum(axis=2)
-        limit = xp.asarray(self.chord_threshold2(state))[state.vertex_replica]
-        short = own & (chord2 < limit[:, None])
-        flat = dev.to_numpy(xp.flatnonzero(short.reshape(-1)))
+        e = self._edge_list(state)
+        comp = xp.ascontiguousarray(state.positions.T)
+        d = xp.take(comp, e["u"], axis=1) - xp.take(comp, e["v"], axis=1)
+        chord2 = xp.einsum("ij,ij->j", d, d)
+        limit = xp.asarray(self.chord_threshold2(state))
+        flat = dev.to_numpy(e["corner"][chord2 < limit[e["replica"]]])
         if len(flat) == 0:
             return flat, flat, np.zeros(0)
         uu, slot = flat // 3, flat % 3
+        vn = state.vertex_neighbors
         lengths = state.constraint.edge_lengths(state, xp.asarray(uu), vn[xp.asarray(uu), xp.asarray(slot)])
         return uu, slot, dev.to_numpy(lengths)
 

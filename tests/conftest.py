@@ -1,7 +1,17 @@
+import os
+
 import numpy as np
 import pytest
+from hypothesis import settings
 
 import spherevm as svm
+
+# Property tests: the same examples on every run by default, so CI is repeatable (a new failing
+# example found by chance would block a landing that changed nothing); HYPOTHESIS_PROFILE=explore
+# draws fresh random examples, many more of them, to hunt for new ones.
+settings.register_profile("repeatable", max_examples=60, deadline=None, derandomize=True)
+settings.register_profile("explore", max_examples=1000, deadline=None)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
 
 
 @pytest.fixture

@@ -21,7 +21,7 @@ mp.mp.dps = 50
 
 EPS = np.finfo(np.float64).eps
 FOUR_PI = 4.0 * np.pi
-PROPS = settings(max_examples=60, deadline=None)
+PROPS = settings()   # examples and randomness from the profile in conftest.py
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -462,11 +462,14 @@ def test_solid_angle_additivity(a, b, c, s):
     om = float(geo.solid_angle(a, b, c))
     m = unit((1 - s) * b + s * c)  # on the geodesic bc
     split = float(geo.solid_angle(a, b, m) + geo.solid_angle(a, m, c))
-    assert split == pytest.approx(om, abs=1e-13)
+    # each side to its rounding bound (large when a pair is nearly antipodal: N and D both small)
+    tol = sum(solid_angle_error_bound(*t) for t in ((a, b, c), (a, b, m), (a, m, c)))
+    assert abs(split - om) <= max(tol, 1e-13)
     # any apex p: the fan sum equals the area modulo 4 pi (exactly, unless p crosses an edge's antipode)
     p = unit(a + b + c + 0.3 * np.array([s, 1 - s, 0.5]))
     fan = float(geo.solid_angle(p, a, b) + geo.solid_angle(p, b, c) + geo.solid_angle(p, c, a))
-    assert abs(mod_4pi(fan - om)) <= 1e-13
+    tol = sum(solid_angle_error_bound(*t) for t in ((a, b, c), (p, a, b), (p, b, c), (p, c, a)))
+    assert abs(mod_4pi(fan - om)) <= max(tol, 1e-13)
 
 
 @PROPS

@@ -83,6 +83,12 @@ class Sphere(Constraint):
     def normal(self, x):
         return geo.normalize(x)
 
+    def project_tangent(self, x, v):
+        """``v - (v.n) n`` with ``n = x/|x|`` (last axis of length 3)."""
+        xp = array_module(x, v)
+        c = xp.einsum("...i,...i->...", v, x) / xp.einsum("...i,...i->...", x, x)
+        return v - c[..., None] * x
+
     def project_normal(self, x, radius):
         xp = array_module(x)
         return xp.asarray(radius)[..., None] * geo.normalize(x)

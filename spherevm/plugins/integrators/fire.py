@@ -75,18 +75,17 @@ class FIRE(Integrator):
         n = state.n_replicas
         v = self.velocities
 
-        def per_replica(x):
-            return xp.bincount(rep, weights=x, minlength=n)
+        def per_replica(a, b):                 # sum over each replica's vertices of the row dots a.b
+            return xp.bincount(rep, weights=xp.einsum("ij,ij->i", a, b), minlength=n)
 
-        power = per_replica((forces * v).sum(axis=1))
-        v_norm = xp.sqrt(per_replica((v * v).sum(axis=1)))
-        f_norm = xp.sqrt(per_replica((forces * forces).sum(axis=1)))
+        power = per_replica(forces, v)
+        v_norm = xp.sqrt(per_replica(v, v))
+        f_norm = xp.sqrt(per_replica(forces, forces))
         uphill = power <= 0
         grow = ~uphill & (self.n_positive >= self.n_min)
         mix = xp.where(uphill, 0.0, self.alpha)
         scale = xp.where(f_norm > 0, mix * v_norm / xp.where(f_norm > 0, f_norm, 1.0), 0.0)
         keep = xp.where(uphill, 0.0, 1.0 - mix)
-        v = keep[rep, None] * v + scale[rep, None] * forces
 
         self.replica_dt = xp.where(uphill, self.replica_dt * self.f_dec,
                                    xp.where(grow, xp.minimum(self.replica_dt * self.f_inc, self.dt_max),
@@ -94,12 +93,18 @@ class FIRE(Integrator):
         self.alpha = xp.where(uphill, self.alpha_start, xp.where(grow, self.alpha * self.f_alpha, self.alpha))
         self.n_positive = xp.where(uphill, 0, self.n_positive + 1)
 
-        dt = xp.where(self.active, self.replica_dt, 0.0)[rep, None]
-        v = v + dt * forces
-        moving = self.active[rep, None]
-        x = state.constraint.project_normal(state.positions + dt * v, state.radius[rep])
-        state.positions = xp.where(moving, x, state.positions)
-        self.velocities = xp.where(moving, state.constraint.project_tangent(x, v), 0.0)
+        # per vertex: v <- keep v + scale F, then v <- v + dt F, x <- P_N(x + dt v), v <- P_T(x, v)
+        dt = xp.where(self.active, self.replica_dt, 0.0)
+        per_vertex = xp.take(xp.stack((keep, scale, dt)), rep, axis=1)[..., None]
+        v = per_vertex[0] * v + (per_vertex[1] + per_vertex[2]) * forces
+        x = state.constraint.project_normal(state.positions + per_vertex[2] * v, state.radius[rep])
+        v = state.constraint.project_tangent(x, v)
+        if bool(self.active.all()):
+            state.positions, self.velocities = x, v
+        else:
+            moving = self.active[rep, None]
+            state.positions = xp.where(moving, x, state.positions)
+            self.velocities = xp.where(moving, v, 0.0)
         simulation.state_changed()
 
     def _step_gpu(self, simulation, forces):

@@ -24,6 +24,8 @@ from spherevm.plugins import Force, ForceResult
 class LineTension(Force):
     """Line tension ``Lambda`` on every edge: ``E = Lambda * sum over edges of R * theta_edge``."""
 
+    narrowable = True   # it keeps no per-replica data: minimize may narrow
+
     def __init__(self, tension=1.0, trigger=None):
         super().__init__(trigger)
         value = float(tension)

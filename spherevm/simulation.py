@@ -269,19 +269,42 @@ class Simulation:
             raise FloatingPointError(f"non-finite position at timestep {self.timestep}: replica {r}, vertex {v}; "
                                      "reduce dt or check the forces (the last good frame is on disk)")
 
+    def _narrow(self, keep, stepped, narrowed):
+        """Step only replicas ``keep`` (of the stepped State) from now on; returns their indices."""
+        selection = self._state.selection(keep)
+        part = self._state.select(selection)
+        saved = [op.narrow(selection) for op in self.operations]   # they still see the wider State
+        narrowed.append((selection, self._state, saved))
+        self._state = part
+        self._cache = None
+        return stepped[keep]
+
+    def _widen(self, selection, wider, saved):
+        """Undo one :meth:`_narrow`: the narrow State's replicas go back into the wider one."""
+        wider.write_back(selection, self._state)
+        self._state = wider
+        self._cache = None
+        for op, data in zip(self.operations, saved):
+            op.widen(selection, data)
+
     def flush(self):
         for w in self.operations.writers:
             if hasattr(w, "flush"):
                 w.flush()
 
     def minimize(self, force_tol: float = 1e-10, energy_tol: float = 1e-20, max_steps: int = 100_000,
-                 check_every: int = 10, progress=None) -> MinimizeResult:
+                 check_every: int = 10, progress=None, narrow: bool = True) -> MinimizeResult:
         """Minimise every replica with the FIRE integrator until it converges or runs out of steps.
 
         A replica stops (and stops moving) when its largest vertex force is below ``force_tol`` or
         its energy per cell below ``energy_tol``; the others go on. Convergence is checked every
         ``check_every`` steps (one small read-back). ``progress`` is an optional callable
         ``progress(step, n_done, n_replicas)`` called at every check.
+
+        ``narrow``: once at most half of the replicas in the stepped State are still running, step
+        a State of those alone (finished ones cost nothing more; each replica's arithmetic is the
+        same), and put everything back at the end. Done only when no writer is attached and every
+        operation is ``narrowable`` (see :class:`spherevm.plugins.base.Operation`).
         """
         from .plugins.integrators import FIRE
         self._require_state()
@@ -303,46 +326,57 @@ class Simulation:
         fire.reset()
         for op in self.operations:
             op.reset_halted()
+        narrow = narrow and not self.operations.writers and all(op.narrowable for op in self.operations)
         n_rep = self._state.n_replicas
         n_cells = self._state.cells_per_replica
-        done = np.zeros(n_rep, dtype=bool)          # stopped, for any reason
+        done = np.zeros(n_rep, dtype=bool)          # stopped, for any reason (indexed by replica)
         converged = np.zeros(n_rep, dtype=bool)
         reason = np.full(n_rep, "max_steps", dtype=object)
         steps = np.full(n_rep, int(max_steps), dtype=np.int64)
+        stepped = np.arange(n_rep)                  # the replicas of the stepped State
+        narrowed = []                               # (selection, wider State, saved data per operation)
         to_np = self.device.to_numpy
         self._write()
         k = 0
-        while True:
-            self._update()
-            if k % check_every == 0 or k == max_steps:
-                _, energy = self.compute_forces()
-                fmax = to_np(self.max_force())
-                epc = to_np(energy) / n_cells
-                by_force = ~done & (fmax < force_tol)
-                by_energy = ~done & ~by_force & (epc < energy_tol)
-                reason[by_force], reason[by_energy] = "force", "energy"
-                newly = by_force | by_energy
-                for op in self.operations:
-                    halted = op.halted()
-                    if halted is not None:
-                        stop = ~done & ~newly & np.asarray(halted, dtype=bool)
-                        reason[stop] = op.halt_reason
-                        steps[stop] = k
-                        done |= stop
-                steps[newly] = k
-                done |= newly
-                converged |= newly
-                self.active_replicas = ~done
-                fire.active = self.device.asarray(~done)
-                if progress is not None:
-                    progress(k, int(done.sum()), n_rep)
-                if done.all() or k >= max_steps:
-                    break
-            self._integrate()
-            self._write()
-            k += 1
-        self.active_replicas = np.ones(n_rep, dtype=bool)
-        fire.active = self.device.asarray(self.active_replicas)
+        try:
+            while True:
+                self._update()
+                if k % check_every == 0 or k == max_steps:
+                    _, energy = self.compute_forces()
+                    fmax = to_np(self.max_force())
+                    epc = to_np(energy) / n_cells[stepped]
+                    running = ~done[stepped]
+                    by_force = running & (fmax < force_tol)
+                    by_energy = running & ~by_force & (epc < energy_tol)
+                    reason[stepped[by_force]], reason[stepped[by_energy]] = "force", "energy"
+                    newly = by_force | by_energy
+                    for op in self.operations:
+                        halted = op.halted()
+                        if halted is not None:
+                            stop = running & ~newly & np.asarray(halted, dtype=bool)
+                            reason[stepped[stop]] = op.halt_reason
+                            steps[stepped[stop]] = k
+                            done[stepped[stop]] = True
+                    steps[stepped[newly]] = k
+                    done[stepped[newly]] = True
+                    converged[stepped[newly]] = True
+                    if progress is not None:
+                        progress(k, int(done.sum()), n_rep)
+                    if done.all() or k >= max_steps:
+                        break
+                    running = ~done[stepped]
+                    if narrow and 2 * running.sum() <= len(stepped):
+                        stepped = self._narrow(np.flatnonzero(running), stepped, narrowed)
+                    self.active_replicas = ~done[stepped]
+                    fire.active = self.device.asarray(self.active_replicas)
+                self._integrate()
+                self._write()
+                k += 1
+        finally:
+            while narrowed:
+                self._widen(*narrowed.pop())
+            self.active_replicas = np.ones(n_rep, dtype=bool)
+            fire.active = self.device.asarray(self.active_replicas)
         self.flush()
         _, energy = self.compute_forces()
         e = to_np(energy)

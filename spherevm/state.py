@@ -1,10 +1,21 @@
 """State: every array of one or many tissues (replicas), struct of arrays, on one device."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from . import topology
 from .device import CPU, resolve
+
+
+@dataclass(frozen=True)
+class ReplicaSelection:
+    """Some replicas of a State, in order, with the global indices of their vertices and cells
+    (NumPy int64): what :meth:`State.select` keeps and :meth:`State.write_back` restores."""
+    replicas: np.ndarray
+    vertices: np.ndarray
+    cells: np.ndarray
 
 
 class State:
@@ -146,6 +157,51 @@ class State:
         return State(a["positions"][v0:v1], cv, sides, a["vertex_neighbors"][v0:v1] - v0,
                      a["vertex_cells"][v0:v1] - c0, [0, v1 - v0], [0, c1 - c0], a["radius"][r:r + 1],
                      constraint=self.constraint, device=self.device, validate=False)
+
+    def selection(self, replicas) -> ReplicaSelection:
+        """The :class:`ReplicaSelection` of the given replica indices (in that order)."""
+        r = np.asarray(replicas, dtype=np.int64).reshape(-1)
+        if len(r) == 0 or r.min() < 0 or r.max() >= self.n_replicas:
+            raise IndexError(f"replicas must be a non-empty list of indices in 0..{self.n_replicas - 1}")
+
+        def ranges(start):
+            n = start[r + 1] - start[r]
+            return np.repeat(start[r] - np.concatenate(([0], np.cumsum(n)[:-1])), n) + np.arange(n.sum())
+
+        return ReplicaSelection(replicas=r, vertices=ranges(self.vertex_start), cells=ranges(self.cell_start))
+
+    def select(self, selection: ReplicaSelection) -> "State":
+        """A new State holding only the selected replicas, renumbered (same device, no validation)."""
+        xp = self.device.xp
+        v, c = xp.asarray(selection.vertices), xp.asarray(selection.cells)
+        vmap = xp.full(self.n_vertices + 1, -1, dtype=xp.int64)   # old -> new; index -1 (padding) -> -1
+        vmap[v] = xp.arange(len(selection.vertices))
+        cmap = xp.full(self.n_cells, -1, dtype=xp.int64)
+        cmap[c] = xp.arange(len(selection.cells))
+        r = selection.replicas
+        return State(self.positions[v], vmap[self.cell_vertices[c]], self.cell_sides[c], vmap[self.vertex_neighbors[v]],
+                     cmap[self.vertex_cells[v]],
+                     np.concatenate(([0], np.cumsum(self.vertex_start[r + 1] - self.vertex_start[r]))),
+                     np.concatenate(([0], np.cumsum(self.cell_start[r + 1] - self.cell_start[r]))),
+                     self.radius_np()[r], constraint=self.constraint, device=self.device, validate=False)
+
+    def write_back(self, selection: ReplicaSelection, part: "State"):
+        """Copy ``part`` (made by :meth:`select` with ``selection``, then evolved, T1 flips
+        included) back into this State's rows of those replicas."""
+        xp = self.device.xp
+        v, c = xp.asarray(selection.vertices), xp.asarray(selection.cells)
+        self.positions[v] = part.positions
+        self.vertex_neighbors[v] = v[part.vertex_neighbors]
+        self.vertex_cells[v] = c[part.vertex_cells]
+        if part.max_sides > self.max_sides:    # T1 flips grew a cell beyond this table's width
+            pad = xp.full((self.n_cells, part.max_sides - self.max_sides), -1, dtype=xp.int32)
+            self.cell_vertices = xp.ascontiguousarray(xp.concatenate([self.cell_vertices, pad], axis=1))
+        rows = xp.full((len(selection.cells), self.max_sides), -1, dtype=xp.int32)
+        cv = part.cell_vertices
+        rows[:, :part.max_sides] = xp.where(cv >= 0, v[xp.maximum(cv, 0)], -1)
+        self.cell_vertices[c] = rows
+        self.cell_sides[c] = part.cell_sides
+        self.topology_changed()
 
     @classmethod
     def concatenate(cls, states, device=None) -> "State":

@@ -69,6 +69,32 @@ def test_minimize_with_t1_reaches_the_same_energies():
     gpu.state.validate()
 
 
+def test_narrowed_minimisation_on_gpu():
+    """Narrowing on the GPU (State.select / write_back, FIRE and T1 device buffers) gives what the
+    full GPU run and the CPU give."""
+    from test_narrowing import counting_narrowings, mixed_ensemble
+    ref = mixed_ensemble("gpu")
+    r_full = ref.minimize(force_tol=1e-12, max_steps=3000, narrow=False)
+    sim = mixed_ensemble("gpu")
+    mp = pytest.MonkeyPatch()
+    try:
+        calls = counting_narrowings(mp)
+        res = sim.minimize(force_tol=1e-12, max_steps=3000)
+    finally:
+        mp.undo()
+    cpu = mixed_ensemble("cpu")
+    r_cpu = cpu.minimize(force_tol=1e-12, max_steps=3000)
+    assert len(calls) >= 2
+    for other in (r_full, r_cpu):
+        assert np.array_equal(res.converged, other.converged)
+        assert np.array_equal(res.reason, other.reason)
+        assert np.allclose(res.energy_per_cell, other.energy_per_cell, rtol=1e-6, atol=1e-12)
+    assert np.array_equal(sim.log("t1_total_flips"), cpu.log("t1_total_flips"))
+    assert np.array_equal(sim.log("t1_total_flips"), ref.log("t1_total_flips"))
+    sim.state.validate(orientation=False)
+    assert sim.state.n_replicas == 8
+
+
 def test_state_round_trip_between_devices():
     cpu = svm.init.random_tiling(100, replicas=2, seed=7)
     back = cpu.to("gpu").to("cpu")

@@ -37,6 +37,22 @@ class Operation:
     def reset_halted(self):
         """Forget what made replicas halt (called when a minimisation starts)."""
 
+    # Narrowing: Simulation.minimize steps only the replicas still running once at most half are
+    # (finished ones cost nothing more). It may do so only if every operation says it can: an
+    # operation that keeps per-replica, per-vertex or per-cell data sets ``narrowable = True`` and
+    # implements narrow() and widen(); one that keeps none just sets ``narrowable = True``.
+    narrowable = False
+
+    def narrow(self, selection):
+        """The Simulation now steps only ``selection`` (a :class:`spherevm.state.ReplicaSelection`
+        of the State it stepped so far): keep the data of those replicas, and return what
+        :meth:`widen` needs to restore the others."""
+        return None
+
+    def widen(self, selection, saved):
+        """Undo :meth:`narrow`: merge the current data of the selected replicas into ``saved`` and
+        go back to it (the Simulation steps the wider State again)."""
+
 
 @dataclass
 class ForceResult:

@@ -33,6 +33,8 @@ class LineTension(Force):
     kP (P - P0 + Lambda / (4 kP))^2 + const``.
     """
 
+    narrowable = True   # it keeps no per-replica data: minimize may narrow
+
     def __init__(self, tension=1.0, trigger=None):
         super().__init__(trigger)
         value = float(tension)

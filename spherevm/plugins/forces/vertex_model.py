@@ -66,6 +66,25 @@ class VertexModel(Force):
             out.append(np.broadcast_to(v, (n,)))
         return out
 
+    narrowable = True
+
+    def narrow(self, selection):
+        """Per-cell parameters follow the selected cells."""
+        saved = (self.kA, self.kP, self.A0, self.P0, self._dimensionless)
+
+        def pick(a):
+            return a[selection.cells] if a.ndim == 1 else a
+
+        self.kA, self.kP, self.A0, self.P0 = (pick(a) for a in saved[:4])
+        if self._dimensionless is not None:
+            self._dimensionless = tuple(pick(a) for a in self._dimensionless)
+        self._cache_for = None
+        return saved
+
+    def widen(self, selection, saved):
+        self.kA, self.kP, self.A0, self.P0, self._dimensionless = saved
+        self._cache_for = None
+
     def _device_parameters(self, state):
         """Per-cell parameters on the device, cached for the State they were made for."""
         cached = getattr(self, "_cache_for", None)

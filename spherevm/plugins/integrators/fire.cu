@@ -34,6 +34,12 @@ extern "C" __global__ void fire_control(
 {
     int r = blockIdx.x * blockDim.x + threadIdx.x;
     if (r >= n_replicas) return;
+    if (!active[r]) {                      // stopped: no move, dt, alpha and counter kept
+        keep[r] = 0.0;
+        scale[r] = 0.0;
+        step[r] = 0.0;
+        return;
+    }
     bool uphill = power[r] <= 0.0;
     bool grow = !uphill && n_positive[r] >= n_min;
     double mix = uphill ? 0.0 : alpha[r];
@@ -43,7 +49,7 @@ extern "C" __global__ void fire_control(
     dt[r] = uphill ? dt[r] * f_dec : (grow ? fmin(dt[r] * f_inc, dt_max) : dt[r]);
     alpha[r] = uphill ? alpha_start : (grow ? alpha[r] * f_alpha : alpha[r]);
     n_positive[r] = uphill ? 0 : n_positive[r] + 1;
-    step[r] = active[r] ? dt[r] : 0.0;
+    step[r] = dt[r];
 }
 
 // Per vertex: mix, semi-implicit Euler, P_N re-projection and P_T velocity transport.

@@ -25,7 +25,8 @@ class FIRE(Integrator):
        carries the velocity into the new tangent plane.
 
     Defaults are Bitzek's: ``dt_max = 10 dt``, ``n_min = 5``, ``f_inc = 1.1``, ``f_dec = 0.5``,
-    ``alpha_start = 0.1``, ``f_alpha = 0.99``. Replicas marked inactive (converged) do not move.
+    ``alpha_start = 0.1``, ``f_alpha = 0.99``. Replicas marked inactive (converged) do not move, and
+    their dt, alpha and counter stay as they were.
     """
 
     def __init__(self, dt=0.01, dt_max=None, n_min=5, f_inc=1.1, f_dec=0.5, alpha_start=0.1, f_alpha=0.99):
@@ -62,6 +63,28 @@ class FIRE(Integrator):
         self.n_positive = xp.zeros(r, dtype=xp.int64)
         self.active = xp.ones(r, dtype=bool)
 
+    narrowable = True
+    _PER_REPLICA = ("replica_dt", "alpha", "n_positive", "active")
+
+    def narrow(self, selection):
+        """Velocities follow the selected vertices; dt, alpha, counters the selected replicas. The
+        others have stopped: their velocities are zeroed, as the next step would do."""
+        xp = self._simulation.device.xp
+        saved = {name: getattr(self, name) for name in ("velocities",) + self._PER_REPLICA}
+        self.velocities = self.velocities[xp.asarray(selection.vertices)]
+        saved["velocities"] = xp.zeros_like(saved["velocities"])
+        for name in self._PER_REPLICA:
+            setattr(self, name, saved[name][xp.asarray(selection.replicas)])
+        return saved
+
+    def widen(self, selection, saved):
+        xp = self._simulation.device.xp
+        saved["velocities"][xp.asarray(selection.vertices)] = self.velocities
+        for name in self._PER_REPLICA:
+            saved[name][xp.asarray(selection.replicas)] = getattr(self, name)
+        for name, value in saved.items():
+            setattr(self, name, value)
+
     def reset_vertices(self, vertices):
         """Zero the velocities of the given vertices (after a topology change, for example)."""
         self.velocities[vertices] = 0.0
@@ -87,11 +110,14 @@ class FIRE(Integrator):
         scale = xp.where(f_norm > 0, mix * v_norm / xp.where(f_norm > 0, f_norm, 1.0), 0.0)
         keep = xp.where(uphill, 0.0, 1.0 - mix)
 
-        self.replica_dt = xp.where(uphill, self.replica_dt * self.f_dec,
-                                   xp.where(grow, xp.minimum(self.replica_dt * self.f_inc, self.dt_max),
+        # stopped replicas keep their dt, alpha and counter
+        on = self.active
+        self.replica_dt = xp.where(on & uphill, self.replica_dt * self.f_dec,
+                                   xp.where(on & grow, xp.minimum(self.replica_dt * self.f_inc, self.dt_max),
                                             self.replica_dt))
-        self.alpha = xp.where(uphill, self.alpha_start, xp.where(grow, self.alpha * self.f_alpha, self.alpha))
-        self.n_positive = xp.where(uphill, 0, self.n_positive + 1)
+        self.alpha = xp.where(on & uphill, self.alpha_start,
+                              xp.where(on & grow, self.alpha * self.f_alpha, self.alpha))
+        self.n_positive = xp.where(on, xp.where(uphill, 0, self.n_positive + 1), self.n_positive)
 
         # per vertex: v <- keep v + scale F, then v <- v + dt F, x <- P_N(x + dt v), v <- P_T(x, v)
         dt = xp.where(self.active, self.replica_dt, 0.0)

@@ -201,12 +201,18 @@ class T1(Updater):
                        log_count=cp.zeros(1, dtype=cp.int32), log_bound=0,
                        cand=cp.empty((cap, _CAND_INTS), dtype=cp.int32), cand_len=cp.empty(cap),
                        log=cp.empty((cap, _LOG_INTS), dtype=cp.int32), active_host=None, active=None, passes=0,
-                       total_flips=cp.zeros(r, cp.uint64), total_refused=cp.zeros(r, cp.uint64),
+                       total_flips=cp.asarray(self._host_totals("total_flips", r)),
+                       total_refused=cp.asarray(self._host_totals("total_refused", r)),
                        chord2=cp.asarray(self.chord_threshold2(state)),
                        new_length=cp.asarray(self.new_length * unit if self.length_factor is None
                                              else np.full(r, -1.0)))
             self._gpu = buf
         return buf
+
+    def _host_totals(self, name, n_replicas):
+        """A running total to continue on the device (zeros if it belongs to another State)."""
+        total = getattr(self, name)
+        return total.astype(np.uint64) if len(total) == n_replicas else np.zeros(n_replicas, np.uint64)
 
     def _update_gpu(self, simulation):
         """Detect, one small read-back (candidate count, full rows), apply, release: see t1.cu."""
@@ -304,6 +310,49 @@ class T1(Updater):
         counts = np.concatenate([self._rejoins, np.zeros(len(removed), dtype=np.int64)])
         self._separated, first = np.unique(keys, return_index=True)
         self._rejoins = counts[first]
+
+    # ------------------------------------------------------------------ narrowing (minimize)
+    narrowable = True
+    _COUNTERS = ("last_flips", "last_refused", "total_flips", "total_refused", "flip_backs")
+
+    @staticmethod
+    def _pairs_between(keys, n_from, cell_map, n_to):
+        """Re-key cell pairs ``min * n + max`` through ``cell_map`` (-1: dropped); sorted, with the
+        positions kept."""
+        a, b = cell_map[keys // n_from], cell_map[keys % n_from]
+        keep = np.flatnonzero((a >= 0) & (b >= 0))
+        new = np.minimum(a[keep], b[keep]) * n_to + np.maximum(a[keep], b[keep])
+        order = np.argsort(new)
+        return new[order], keep[order]
+
+    def narrow(self, selection):
+        """Counters follow the selected replicas; the flip-back memory their cells."""
+        self._sync_counters()
+        saved = {name: getattr(self, name) for name in self._COUNTERS}
+        saved.update(separated=self._separated, rejoins=self._rejoins)
+        for name in self._COUNTERS:
+            setattr(self, name, saved[name][selection.replicas].copy())
+        n_from = self._simulation.state.n_cells           # still the wider State
+        cell_map = np.full(n_from, -1, dtype=np.int64)
+        cell_map[selection.cells] = np.arange(len(selection.cells))
+        self._separated, keep = self._pairs_between(self._separated, n_from, cell_map, len(selection.cells))
+        self._rejoins = saved["rejoins"][keep]
+        self._gpu = None
+        return saved
+
+    def widen(self, selection, saved):
+        self._sync_counters()
+        for name in self._COUNTERS:
+            saved[name][selection.replicas] = getattr(self, name)
+            setattr(self, name, saved[name])
+        n_to = self._simulation.state.n_cells              # the wider State again
+        mine, keep = self._pairs_between(self._separated, len(selection.cells), selection.cells, n_to)
+        others = ~np.isin(saved["separated"] // n_to, selection.cells)
+        keys = np.concatenate([saved["separated"][others], mine])
+        order = np.argsort(keys)
+        self._separated = keys[order]
+        self._rejoins = np.concatenate([saved["rejoins"][others], self._rejoins[keep]])[order]
+        self._gpu = None
 
     # ------------------------------------------------------------------ reporting
     def halted(self):

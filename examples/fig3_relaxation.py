@@ -2,6 +2,7 @@
 
     python examples/fig3_relaxation.py                 # small, minutes on a laptop CPU
     python examples/fig3_relaxation.py --full --device gpu
+    python examples/fig3_relaxation.py --full --device gpu --sizes 1024 --prefix fig3_1024
 
 Main panel: for each N, one ensemble holds every temperature (Brownian takes one T per replica),
 relaxed with FIRE + T1, equilibrated, then run with T1 exchanges; tau_alpha is where the
@@ -23,6 +24,8 @@ from spherevm.protocols import glassy_dynamics
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--full", action="store_true", help="paper size: N = 32, 128, 1024, longer runs")
+    ap.add_argument("--sizes", type=int, nargs="+", help="only these N (e.g. --full --sizes 1024: one size per "
+                    "run, to fit a time limit)")
     ap.add_argument("--device", default="auto")
     ap.add_argument("--prefix", default="fig3")
     args = ap.parse_args(argv)
@@ -31,6 +34,8 @@ def main(argv=None):
             200_000, 8192, 100_000
     else:
         sizes, temps, reps, steps, msd_total, msd_steps = [32, 128], [0.03, 0.02, 0.012], 2, 6000, 256, 4000
+    if args.sizes:
+        sizes = args.sizes
     dt = 0.05
     rows, t0 = [], time.time()
     curves = {}

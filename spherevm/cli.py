@@ -394,10 +394,12 @@ def collect_info() -> dict:
 
     import spherevm
     from . import device
+    from .provenance import source_fingerprint
 
     facts = device.info()
     out = {
         "spherevm": spherevm.__version__,
+        "spherevm_code": source_fingerprint(),
         "spherevm_path": os.path.dirname(os.path.abspath(spherevm.__file__)),
         "python": f"{facts['python']} ({sys.executable})",
         "platform": platform.platform(),
@@ -430,7 +432,7 @@ def cmd_info(args) -> int:
     missing = "not installed"
     cupy = facts["cupy"] or missing
     rows = [
-        ("spherevm", f"{facts['spherevm']} ({facts['spherevm_path']})"),
+        ("spherevm", f"{facts['spherevm']}, code {facts['spherevm_code']} ({facts['spherevm_path']})"),
         ("python", facts["python"]),
         ("platform", facts["platform"]),
         ("numpy", facts["numpy"]),

@@ -34,9 +34,12 @@ import math
 import os
 import sys
 import time
+import warnings
 from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
+
+from .provenance import source_fingerprint
 
 FORMAT = "spherevm-rigidity-sweep"
 FORMAT_VERSION = 1
@@ -426,12 +429,17 @@ def open_sweep_folder(sweep: RigiditySweep, out, create: bool = True) -> str:
         if diffs:
             raise ValueError(f"output folder {out!r} holds a sweep with different parameters ("
                              + "; ".join(diffs) + "); use another folder, or the folder's parameters to resume it")
+        started_with = manifest.get("code")
+        if started_with is not None and started_with != source_fingerprint():
+            warnings.warn(f"{out!r} was started by spherevm code {started_with}, this is {source_fingerprint()}: "
+                          "the records of both will be mixed (individual minimisations may differ in their "
+                          "last digits or, near the transition, in their outcome)", stacklevel=2)
         return path
     if not create:
         return path
     from . import __version__
     os.makedirs(os.path.join(path, CHUNK_DIR), exist_ok=True)
-    manifest = {"format": FORMAT, "version": FORMAT_VERSION, "spherevm": __version__,
+    manifest = {"format": FORMAT, "version": FORMAT_VERSION, "spherevm": __version__, "code": source_fingerprint(),
                 "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "parameters": params,
                 "layout": {"chunks": f"{CHUNK_DIR}/N<cells>_u<first unit>-<end unit>.csv, one row per replica; "
                                      "unit u = p0_index * replicas + replica"}}

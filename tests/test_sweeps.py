@@ -3,12 +3,14 @@ import argparse
 import json
 import math
 import os
+import warnings
 
 import numpy as np
 import pytest
 
 from spherevm import sweeps
 from spherevm.analysis import pentagon_perimeter, rigidity
+from spherevm.provenance import source_fingerprint
 
 # Tiny sweeps: N = 16 far from the transition (p0 = 3.3 rigid, 4.2 floppy) converge in a few
 # hundred steps; the comparisons below are exact, since results do not depend on the chunking.
@@ -199,10 +201,27 @@ def test_tiny_sweep_records_and_manifest(tiny_run):
     assert np.all(rec["energy_per_cell"][:2] > 1e-3) and np.all(rec["energy_per_cell"][2:] < 1e-15)
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["parameters"] == sweeps.RigiditySweep(**TINY).parameters()
+    assert manifest["code"] == source_fingerprint()
     assert sorted(os.listdir(out / "chunks")) == ["N00016_u000000-000002.csv", "N00016_u000002-000004.csv"]
     # the tiling of (N, p0, replica) depends on those numbers only
     assert rec["tiling_seed"][0] == sweeps.tiling_seed(0, 16, 3.3, 0)
     assert rec["tiling_seed"][0] != rec["tiling_seed"][2]
+
+
+def test_resume_with_other_code_warns(tmp_path):
+    out = tmp_path / "sweep"
+    sweep = sweeps.RigiditySweep(**TINY)
+    sweeps.open_sweep_folder(sweep, out)
+    manifest = json.loads((out / "manifest.json").read_text())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sweeps.open_sweep_folder(sweep, out)              # same code: silent
+    manifest["code"] = "000000000000"
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.warns(UserWarning, match="started by spherevm code 000000000000"):
+        sweeps.open_sweep_folder(sweep, out)
+    fp = source_fingerprint()
+    assert len(fp) == 12 and int(fp, 16) >= 0 and fp == source_fingerprint()
 
 
 def test_resume_recomputes_only_the_missing_chunk(tiny_run, tmp_path):

@@ -178,9 +178,8 @@ def normal(seed, stream, timestep, ids, count=1):
     ``sqrt(-2 log u[:, 2b]) * (cos, sin)(TWO_PI * u[:, 2b + 1])``. ``|z| <= sqrt(106 log 2) ~ 8.57``.
     """
     words, count = _blocks(seed, stream, timestep, ids, count)
-    u1 = uniform_from_words(words[..., 0], words[..., 1])
-    u2 = uniform_from_words(words[..., 2], words[..., 3])
-    r = np.sqrt(-2.0 * np.log(u1))
-    t = TWO_PI * u2
+    u = uniform_from_words(words[..., 0::2], words[..., 1::2])   # (N, nblocks, 2): u1, u2
+    r = np.sqrt(-2.0 * np.log(u[..., 0]))
+    t = TWO_PI * u[..., 1]
     z = np.stack((r * np.cos(t), r * np.sin(t)), axis=-1)   # (N, nblocks, 2)
     return z.reshape(z.shape[0], 2 * z.shape[1])[:, :count]

@@ -353,7 +353,7 @@ class Simulation:
                     for op in self.operations:
                         halted = op.halted()
                         if halted is not None:
-                            stop = running & ~newly & np.asarray(halted, dtype=bool)
+                            stop = ~done[stepped] & ~newly & np.asarray(halted, dtype=bool)
                             reason[stepped[stop]] = op.halt_reason
                             steps[stepped[stop]] = k
                             done[stepped[stop]] = True

@@ -140,9 +140,7 @@ class Sphere(Constraint):
         """
         xp = state.device.xp
         n = state.n_cells
-        comp = xp.ascontiguousarray(state.positions.T)
-        rv = xp.sqrt(_dot(comp, comp))
-        u = comp / rv
+        u, rv = self._unit_components(state)
         index = self._corner_index(state)
 
         def corners(block):
@@ -171,12 +169,18 @@ class Sphere(Constraint):
                             corners=dict(index=index, parts=[p[0] for p in parts], u=u, rv=rv),
                             center=lambda: self.cell_centers(state, u))
 
+    @staticmethod
+    def _unit_components(state):
+        """Unit vertex directions as a (3, V) component array, and the distances ``|x|`` (V,)."""
+        comp = state.device.xp.ascontiguousarray(state.positions.T)
+        rv = state.device.xp.sqrt(_dot(comp, comp))
+        return comp / rv, rv
+
     def cell_centers(self, state, unit=None):
         """Normalised vertex centroid of each cell, ``(n_cells, 3)`` on the state's device."""
         xp = state.device.xp
         if unit is None:
-            comp = xp.ascontiguousarray(state.positions.T)
-            unit = comp / xp.sqrt(_dot(comp, comp))
+            unit = self._unit_components(state)[0]
         cells = state.vertex_cells.reshape(-1)
         corner_unit = xp.repeat(unit, 3, axis=1)
         summed = xp.stack([xp.bincount(cells, weights=c, minlength=state.n_cells) for c in corner_unit])

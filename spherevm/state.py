@@ -147,16 +147,10 @@ class State:
         """Replica ``r`` alone, as a new single-replica State with local indices."""
         if not 0 <= r < self.n_replicas:
             raise IndexError(f"replica must be in 0..{self.n_replicas - 1}, got {r}")
-        a = self._arrays_np()
-        v0, v1 = self.vertex_start[r], self.vertex_start[r + 1]
-        c0, c1 = self.cell_start[r], self.cell_start[r + 1]
-        cv = a["cell_vertices"][c0:c1]
-        cv = np.where(cv >= 0, cv - v0, -1)
-        sides = a["cell_sides"][c0:c1]
-        cv = cv[:, :max(int(sides.max()), 3)]
-        return State(a["positions"][v0:v1], cv, sides, a["vertex_neighbors"][v0:v1] - v0,
-                     a["vertex_cells"][v0:v1] - c0, [0, v1 - v0], [0, c1 - c0], a["radius"][r:r + 1],
-                     constraint=self.constraint, device=self.device, validate=False)
+        part = self.select(self.selection([r]))
+        width = max(int(part.device.to_numpy(part.cell_sides).max()), 3)
+        part.cell_vertices = part.device.xp.ascontiguousarray(part.cell_vertices[:, :width])
+        return part
 
     def selection(self, replicas) -> ReplicaSelection:
         """The :class:`ReplicaSelection` of the given replica indices (in that order)."""

@@ -304,7 +304,8 @@ class Simulation:
         ``narrow``: once at most half of the replicas in the stepped State are still running, step
         a State of those alone (finished ones cost nothing more; each replica's arithmetic is the
         same), and put everything back at the end. Done only when no writer is attached and every
-        operation is ``narrowable`` (see :class:`spherevm.plugins.base.Operation`).
+        operation is ``narrowable`` (see :class:`spherevm.plugins.base.Operation`). While narrowed,
+        ``sim.state`` (and what a ``progress`` callback logs) holds the running replicas only.
         """
         from .plugins.integrators import FIRE
         self._require_state()

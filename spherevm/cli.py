@@ -458,38 +458,10 @@ def cmd_info(args) -> int:
 
 
 # ------------------------------------------------------------------------------------ plugins
-def _plugin_kind(cls):
-    from .plugins import Force, Integrator, Updater, Writer
-    for kind, base in (("force", Force), ("integrator", Integrator), ("updater", Updater), ("writer", Writer)):
-        if isinstance(cls, type) and issubclass(cls, base):
-            return kind
-    return "not a plugin"
-
-
 def list_plugins():
-    """Rows ``(name, kind, source)`` for every available plugin; entry points are loaded to find their kind."""
-    from importlib.metadata import entry_points
-
+    """Rows ``(name, kind, source)`` for every registered plugin (see :func:`spherevm.plugins.describe`)."""
     from . import plugins
-    builtins = getattr(plugins, "BUILTINS", {})
-    eps = {ep.name: ep for ep in entry_points(group=plugins.ENTRY_POINT_GROUP)}
-    rows = []
-    for name in plugins.available():
-        if name in builtins:
-            cls = builtins[name]
-            rows.append((name, _plugin_kind(cls), f"built-in  {cls.__module__}.{cls.__qualname__}"))
-            continue
-        ep = eps.get(name)
-        where = "?" if ep is None else ep.value
-        dist = getattr(ep, "dist", None)
-        if dist is not None:
-            where += f"  ({dist.metadata['Name']} {dist.version})"
-        try:
-            kind = _plugin_kind(plugins.load(name))
-        except Exception as exc:  # a broken third-party plugin must not break the listing
-            kind = f"broken: {_one_line(exc)}"
-        rows.append((name, kind, where))
-    return rows
+    return plugins.describe()
 
 
 def cmd_plugins(args) -> int:

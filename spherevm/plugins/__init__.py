@@ -1,12 +1,13 @@
-"""Plugins: forces, integrators, updaters, writers; built-in or found through entry points.
+"""Plugins: forces, integrators, updaters, writers, all found through entry points.
 
-Third-party packages register classes under the entry-point group ``spherevm.plugins``::
+Every plugin, built-in or third-party, is registered the same way, under the entry-point group
+``spherevm.plugins`` (the built-ins in spherevm's own ``pyproject.toml``)::
 
     [project.entry-points."spherevm.plugins"]
     line_tension = "my_package.tension:LineTension"
 
-``spherevm.plugins.load("line_tension")`` then returns the class, and ``available()`` lists every
-plugin by name, the built-ins included.
+``spherevm.plugins.load("line_tension")`` then returns the class, ``available()`` lists every
+plugin by name with its kind, and ``describe()`` adds where each comes from.
 """
 from __future__ import annotations
 
@@ -16,49 +17,62 @@ from . import forces, integrators, updaters, writers
 from .base import Force, ForceResult, Integrator, Operation, Updater, Writer
 
 ENTRY_POINT_GROUP = "spherevm.plugins"
-
-BUILTINS = {
-    "vertex_model": forces.VertexModel,
-    "fire": integrators.FIRE,
-    "t1": updaters.T1,
-    "gsd": writers.GSD,
-    "table": writers.Table,
-}
+KINDS = (("force", Force), ("integrator", Integrator), ("updater", Updater), ("writer", Writer))
 
 
-def _entry_points():
-    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
-
-
-def available() -> dict:
-    """Every plugin name with its kind (force, integrator, updater, writer) or 'unloaded'."""
-    out = {name: _kind(cls) for name, cls in BUILTINS.items()}
-    for name in _entry_points():
-        out.setdefault(name, "entry point")
-    return out
-
-
-def _kind(cls):
-    for kind, base in (("force", Force), ("integrator", Integrator), ("updater", Updater), ("writer", Writer)):
-        if isinstance(cls, type) and issubclass(cls, base):
+def kind_of(obj) -> str:
+    """``"force"``, ``"integrator"``, ``"updater"`` or ``"writer"`` for a plugin class or instance,
+    else ``"unknown"``."""
+    cls = obj if isinstance(obj, type) else type(obj)
+    for kind, base in KINDS:
+        if issubclass(cls, base):
             return kind
     return "unknown"
 
 
+def _entry_points() -> dict:
+    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+
+
 def load(name: str):
-    """The plugin class registered under ``name`` (built-in first, then entry points)."""
-    if name in BUILTINS:
-        return BUILTINS[name]
+    """The plugin class registered under ``name``."""
     eps = _entry_points()
     if name not in eps:
-        known = sorted(set(BUILTINS) | set(eps))
-        raise ValueError(f"no spherevm plugin named {name!r}; available: {known}")
+        raise ValueError(f"no spherevm plugin named {name!r}; available: {sorted(eps)}")
     cls = eps[name].load()
-    if _kind(cls) == "unknown":
+    if kind_of(cls) == "unknown":
         raise TypeError(f"plugin {name!r} ({cls!r}) must subclass spherevm.plugins.Force, Integrator, "
                         "Updater or Writer")
     return cls
 
 
+def _one_line(exc) -> str:
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0] if text else ''}"
+
+
+def describe() -> list:
+    """One row ``(name, kind, source)`` per registered plugin, sorted by name; ``source`` is the
+    entry point's ``module:Class`` and its distribution. A plugin that fails to load is listed with
+    kind ``"broken: <error>"`` rather than breaking the listing."""
+    rows = []
+    for name, ep in sorted(_entry_points().items()):
+        source = ep.value
+        dist = getattr(ep, "dist", None)
+        if dist is not None:
+            source += f"  ({dist.metadata['Name']} {dist.version})"
+        try:
+            kind = kind_of(load(name))
+        except Exception as exc:  # a broken third-party plugin must not hide the others
+            kind = f"broken: {_one_line(exc)}"
+        rows.append((name, kind, source))
+    return rows
+
+
+def available() -> dict:
+    """Every registered plugin name with its kind (see :func:`describe`)."""
+    return {name: kind for name, kind, _ in describe()}
+
+
 __all__ = ["ENTRY_POINT_GROUP", "Force", "ForceResult", "Integrator", "Operation", "Updater", "Writer",
-           "available", "forces", "integrators", "load", "updaters", "writers"]
+           "available", "describe", "forces", "integrators", "kind_of", "load", "updaters", "writers"]

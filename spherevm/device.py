@@ -44,6 +44,16 @@ class Device:
             return a.get()
         return np.asarray(a)
 
+    def segment_max(self, values, segments, n_segments):
+        """Per-segment maximum of non-negative ``values`` (0 for an empty segment)."""
+        out = self.xp.zeros(n_segments)
+        if self.is_gpu:
+            import cupyx
+            cupyx.scatter_max(out, segments, values)
+        else:
+            np.maximum.at(out, segments, values)
+        return out
+
     def synchronize(self):
         if self.is_gpu:
             self.xp.cuda.get_current_stream().synchronize()

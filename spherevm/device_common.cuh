@@ -1,14 +1,10 @@
-// Reductions shared by spherevm's kernels: per-replica (segmented) sums and maxima.
+// Reductions shared by spherevm's kernels: per-replica (segmented) sums.
 #pragma once
 
 struct AddOp { __device__ static double apply(double a, double b) { return a + b; }
                __device__ static void commit(double* p, double v) { atomicAdd(p, v); } };
-// maximum for non-negative doubles: their bit patterns order like unsigned integers
-struct MaxOp { __device__ static double apply(double a, double b) { return fmax(a, b); }
-               __device__ static void commit(double* p, double v) {
-                   atomicMax(reinterpret_cast<unsigned long long*>(p), (unsigned long long)__double_as_longlong(v)); } };
 
-// Combine `value` into out[segment] with Op (sum, or maximum of non-negative values). Threads of a block usually share one segment (replicas are
+// Combine `value` into out[segment] with Op (a sum). Threads of a block usually share one segment (replicas are
 // contiguous ranges): then the block reduces in shared memory and issues one atomic; otherwise
 // every thread adds its own value. Every thread of the block must call it (it synchronises);
 // threads without work pass value 0 and any valid segment, or segment -1 to skip.
@@ -56,7 +52,3 @@ __device__ __forceinline__ void segmented_block_add(double value, int segment, d
     segmented_block_reduce<AddOp>(value, segment, out);
 }
 
-// per-segment maximum of non-negative values
-__device__ __forceinline__ void segmented_block_max(double value, int segment, double* out) {
-    segmented_block_reduce<MaxOp>(value, segment, out);
-}

@@ -1,13 +1,14 @@
 """Simulation: owns the State and the operations, runs steps and minimisations."""
 from __future__ import annotations
 
+from collections.abc import MutableSequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import analysis
 from .device import resolve
-from .plugins.base import Force, Integrator, Updater, Writer
+from .plugins.base import Force, Integrator, Minimizer, Updater, Writer
 
 
 class Operations:
@@ -45,33 +46,52 @@ class Operations:
         yield from self.writers
 
 
-class _OperationList(list):
-    """A list that type-checks its operations and attaches them to the simulation."""
+class _OperationList(MutableSequence):
+    """A list of operations of one kind: every mutation (append, insert, ``+=``, slice and item
+    assignment) type-checks the operations and attaches them; removal detaches."""
 
     def __init__(self, simulation, kind):
-        super().__init__()
-        self._sim, self._kind = simulation, kind
+        self._sim, self._kind, self._items = simulation, kind, []
 
     def _check(self, op):
         if not isinstance(op, self._kind):
             raise TypeError(f"expected a spherevm.plugins.{self._kind.__name__}, got {type(op).__name__}")
-        if self._sim._state is not None:
-            op.attach(self._sim)
         return op
 
-    def append(self, op):
-        super().append(self._check(op))
+    def _attach(self, ops):
+        if self._sim._state is not None:
+            for op in ops:
+                op.attach(self._sim)
 
-    def extend(self, ops):
-        for op in ops:
-            self.append(op)
+    def __getitem__(self, i):
+        return self._items[i]
+
+    def __len__(self):
+        return len(self._items)
+
+    def __setitem__(self, i, value):
+        new = [self._check(op) for op in value] if isinstance(i, slice) else [self._check(value)]
+        old = self._items[i] if isinstance(i, slice) else [self._items[i]]
+        self._items[i] = value if not isinstance(i, slice) else new
+        for op in old:
+            op.detach()
+        self._attach(new)
+
+    def __delitem__(self, i):
+        old = self._items[i] if isinstance(i, slice) else [self._items[i]]
+        del self._items[i]
+        for op in old:
+            op.detach()
 
     def insert(self, i, op):
-        super().insert(i, self._check(op))
+        self._items.insert(i, self._check(op))
+        self._attach([op])
 
-    def remove(self, op):
-        super().remove(op)
-        op.detach()
+    def __eq__(self, other):
+        return list(self) == list(other)
+
+    def __repr__(self):
+        return repr(self._items)
 
 
 @dataclass
@@ -117,7 +137,6 @@ class Simulation:
         self.timestep = 0
         self._state = None
         self._cache = None
-        self.active_replicas = None  # per-replica bool (NumPy): replicas still being evolved
         self.operations = Operations(self)
 
     # ------------------------------------------------------------------ state
@@ -133,7 +152,6 @@ class Simulation:
             raise TypeError(f"state must be a spherevm.State, got {type(value).__name__}")
         self._state = value.copy() if value.device is self.device else value.to(self.device)
         self._cache = None
-        self.active_replicas = np.ones(self._state.n_replicas, dtype=bool)
         for op in self.operations:
             op.attach(self)
 
@@ -175,13 +193,7 @@ class Simulation:
         xp = self.device.xp
         forces, _ = self.compute_forces()
         mag = xp.sqrt((forces * forces).sum(axis=1))
-        out = xp.zeros(self._state.n_replicas)
-        if self.device.is_gpu:
-            import cupyx
-            cupyx.scatter_max(out, self._state.vertex_replica, mag)
-        else:
-            np.maximum.at(out, self._state.vertex_replica, mag)
-        return out
+        return self.device.segment_max(mag, self._state.vertex_replica, self._state.n_replicas)
 
     @property
     def loggables(self) -> dict:
@@ -194,8 +206,13 @@ class Simulation:
             "max_force": lambda s: to_np(s.max_force()),
             "mean_shape_index": lambda s: analysis.mean_shape_index(s.state),
         }
+        owner = dict.fromkeys(out, "the Simulation")
         for op in self.operations:
-            out.update(op.loggables)
+            for name, fn in op.loggables.items():
+                if name in owner:
+                    raise ValueError(f"loggable {name!r} of {type(op).__name__} is already provided by {owner[name]}; "
+                                     "give it another name (prefix it with the plugin's name)")
+                owner[name], out[name] = type(op).__name__, fn
         return out
 
     def log(self, name: str):
@@ -269,21 +286,18 @@ class Simulation:
             raise FloatingPointError(f"non-finite position at timestep {self.timestep}: replica {r}, vertex {v}; "
                                      "reduce dt or check the forces (the last good frame is on disk)")
 
-    def _narrow(self, keep, stepped, narrowed):
-        """Step only replicas ``keep`` (of the stepped State) from now on; returns their indices."""
+    def _narrow(self, keep):
+        """Step only replicas ``keep`` (of the stepped State) from now on; returns what _widen needs."""
         selection = self._state.selection(keep)
         part = self._state.select(selection)
         saved = [op.narrow(selection) for op in self.operations]   # they still see the wider State
-        narrowed.append((selection, self._state, saved))
-        self._state = part
-        self._cache = None
-        return stepped[keep]
+        wider, self._state, self._cache = self._state, part, None
+        return selection, wider, saved
 
     def _widen(self, selection, wider, saved):
         """Undo one :meth:`_narrow`: the narrow State's replicas go back into the wider one."""
         wider.write_back(selection, self._state)
-        self._state = wider
-        self._cache = None
+        self._state, self._cache = wider, None
         for op, data in zip(self.operations, saved):
             op.widen(selection, data)
 
@@ -292,14 +306,14 @@ class Simulation:
             if hasattr(w, "flush"):
                 w.flush()
 
-    def minimize(self, force_tol: float = 1e-10, energy_tol: float = 1e-20, max_steps: int = 100_000,
-                 check_every: int = 10, progress=None, narrow: bool = True) -> MinimizeResult:
-        """Minimise every replica with the FIRE integrator until it converges or runs out of steps.
+    def minimize(self, force_tol=None, energy_tol=None, max_steps: int = 100_000, check_every=None,
+                 progress=None, narrow: bool = True) -> MinimizeResult:
+        """Minimise every replica with the Minimizer integrator (FIRE if none is set) until each
+        converges, is halted or ``max_steps`` iterations have passed; the minimiser starts afresh.
 
-        A replica stops (and stops moving) when its largest vertex force is below ``force_tol`` or
-        its energy per cell below ``energy_tol``; the others go on. Convergence is checked every
-        ``check_every`` steps (one small read-back). ``progress`` is an optional callable
-        ``progress(step, n_done, n_replicas)`` called at every check.
+        ``force_tol``, ``energy_tol`` and ``check_every`` set the minimiser's own (see
+        :class:`spherevm.plugins.base.Minimizer`); None keeps them. ``progress`` is an optional
+        callable ``progress(step, n_done, n_replicas)`` called at every convergence check.
 
         ``narrow``: once at most half of the replicas in the stepped State are still running, step
         a State of those alone (finished ones cost nothing more; each replica's arithmetic is the
@@ -307,80 +321,50 @@ class Simulation:
         operation is ``narrowable`` (see :class:`spherevm.plugins.base.Operation`). While narrowed,
         ``sim.state`` (and what a ``progress`` callback logs) holds the running replicas only.
         """
-        from .plugins.integrators import FIRE
+        from .plugins.integrators import FIRE   # the default minimiser
         self._require_state()
         if not self.operations.forces:
             raise RuntimeError("no force in sim.operations.forces; append one, e.g. "
                                "spherevm.plugins.forces.VertexModel.dimensionless(kr=1, p0=3.8)")
-        for name, val in (("force_tol", force_tol), ("energy_tol", energy_tol)):
-            if not np.isfinite(val) or val < 0:
-                raise ValueError(f"{name} must be finite and >= 0, got {val!r}")
         if int(max_steps) != max_steps or max_steps < 0:
             raise ValueError(f"max_steps must be a non-negative integer, got {max_steps!r}")
-        if int(check_every) != check_every or check_every < 1:
-            raise ValueError(f"check_every must be a positive integer, got {check_every!r}")
         if self.operations.integrator is None:
             self.operations.integrator = FIRE()
         fire = self.operations.integrator
-        if not isinstance(fire, FIRE):
-            raise TypeError(f"minimize() needs the FIRE integrator, found {type(fire).__name__}")
+        if not isinstance(fire, Minimizer):
+            raise TypeError(f"minimize() needs a spherevm.plugins.Minimizer integrator such as FIRE, "
+                            f"found {type(fire).__name__}")
+        fire.configure(force_tol=force_tol, energy_tol=energy_tol, check_every=check_every)
         fire.reset()
         for op in self.operations:
             op.reset_halted()
         narrow = narrow and not self.operations.writers and all(op.narrowable for op in self.operations)
-        n_rep = self._state.n_replicas
-        n_cells = self._state.cells_per_replica
-        done = np.zeros(n_rep, dtype=bool)          # stopped, for any reason (indexed by replica)
-        converged = np.zeros(n_rep, dtype=bool)
-        reason = np.full(n_rep, "max_steps", dtype=object)
-        steps = np.full(n_rep, int(max_steps), dtype=np.int64)
-        stepped = np.arange(n_rep)                  # the replicas of the stepped State
-        narrowed = []                               # (selection, wider State, saved data per operation)
-        to_np = self.device.to_numpy
+        n_rep, n_cells = self._state.n_replicas, self._state.cells_per_replica
+        narrowed = []
         self._write()
-        k = 0
         try:
             while True:
                 self._update()
-                if k % check_every == 0 or k == max_steps:
-                    _, energy = self.compute_forces()
-                    fmax = to_np(self.max_force())
-                    epc = to_np(energy) / n_cells[stepped]
-                    running = ~done[stepped]
-                    by_force = running & (fmax < force_tol)
-                    by_energy = running & ~by_force & (epc < energy_tol)
-                    reason[stepped[by_force]], reason[stepped[by_energy]] = "force", "energy"
-                    newly = by_force | by_energy
-                    for op in self.operations:
-                        halted = op.halted()
-                        if halted is not None:
-                            stop = ~done[stepped] & ~newly & np.asarray(halted, dtype=bool)
-                            reason[stepped[stop]] = op.halt_reason
-                            steps[stepped[stop]] = k
-                            done[stepped[stop]] = True
-                    steps[stepped[newly]] = k
-                    done[stepped[newly]] = True
-                    converged[stepped[newly]] = True
+                if fire.check_due() or fire.iteration >= max_steps:
+                    fire.check_convergence(self)
+                    running = int((~fire.stopped).sum())
                     if progress is not None:
-                        progress(k, int(done.sum()), n_rep)
-                    if done.all() or k >= max_steps:
+                        progress(fire.iteration, n_rep - running, n_rep)
+                    if running == 0 or fire.iteration >= max_steps:
                         break
-                    running = ~done[stepped]
-                    if narrow and 2 * running.sum() <= len(stepped):
-                        stepped = self._narrow(np.flatnonzero(running), stepped, narrowed)
-                    self.active_replicas = ~done[stepped]
-                    fire.active = self.device.asarray(self.active_replicas)
+                    if narrow and 2 * running <= len(fire.stopped):
+                        narrowed.append(self._narrow(np.flatnonzero(~fire.stopped)))
                 self._integrate()
                 self._write()
-                k += 1
         finally:
             while narrowed:
                 self._widen(*narrowed.pop())
-            self.active_replicas = np.ones(n_rep, dtype=bool)
-            fire.active = self.device.asarray(self.active_replicas)
         self.flush()
         _, energy = self.compute_forces()
-        e = to_np(energy)
-        return MinimizeResult(converged=converged, reason=reason.astype(str), energy=e, energy_per_cell=e / n_cells,
-                              max_force=to_np(self.max_force()), steps=steps,
+        e = self.device.to_numpy(energy)
+        running = fire.reason == "running"
+        return MinimizeResult(converged=fire.replica_converged.copy(),
+                              reason=np.where(running, "max_steps", fire.reason).astype(str), energy=e,
+                              energy_per_cell=e / n_cells, max_force=self.device.to_numpy(self.max_force()),
+                              steps=np.where(running, int(max_steps), fire.steps),
                               mean_shape_index=analysis.mean_shape_index(self._state))

@@ -28,6 +28,11 @@ class Constraint:
         """The point at ``distance`` from ``x`` along the unit tangent ``direction`` (projected back)."""
         return self.project_normal(x + distance[..., None] * direction, radius)
 
+    def chord_length(self, length, radius):
+        """Straight-line distance between the ends of a geodesic of ``length``: monotonic in
+        ``length``, so short-edge tests (T1) compare chords and need no trigonometry."""
+        raise NotImplementedError(f"{type(self).__name__}.chord_length is not implemented yet")
+
     def distance_to_surface(self, x, radius):
         raise NotImplementedError(f"{type(self).__name__}.distance_to_surface is not implemented yet")
 

@@ -99,6 +99,11 @@ class Sphere(Constraint):
         phi = (distance / radius)[..., None]
         return xp.asarray(radius)[..., None] * (xp.cos(phi) * geo.normalize(x) + xp.sin(phi) * direction)
 
+    def chord_length(self, length, radius):
+        """``2 R sin(L / 2R)`` (capped at the diameter)."""
+        xp = array_module(length, radius)
+        return 2.0 * radius * xp.sin(xp.minimum(length / (2.0 * radius), xp.pi / 2))
+
     def distance_to_surface(self, x, radius):
         xp = array_module(x)
         return xp.sqrt((x * x).sum(axis=-1)) - radius

@@ -3,7 +3,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..trigger import Always, as_trigger
+from ..validation import non_negative
 
 
 class Operation:
@@ -11,7 +14,17 @@ class Operation:
 
     ``loggables`` maps a quantity name to a callable ``f(simulation)`` returning a scalar or a
     per-replica array; writers and ``Simulation.log`` find them by name.
+
+    Device and surface (HOOMD picks its C++ class at attach; so do we): an operation with a NumPy
+    and a CUDA implementation names them ``_<name>_cpu`` and ``_<name>_gpu`` and binds one with
+    :meth:`implementation` when it attaches, never branching on the device per call. The NumPy
+    path measures everything through the constraint, so it serves every surface whose constraint
+    implements what it calls; a CUDA path compiled for some surfaces lists their constraint
+    classes in ``gpu_surfaces``, and attaching it to a State on another surface raises.
     """
+
+    #: Constraint classes the GPU implementation supports (None: every surface).
+    gpu_surfaces = None
 
     def __init__(self, trigger=None):
         self.trigger = Always() if trigger is None else as_trigger(trigger)
@@ -23,6 +36,21 @@ class Operation:
 
     def detach(self):
         self._simulation = None
+
+    def implementation(self, name, state):
+        """The bound method ``_<name>_cpu`` or ``_<name>_gpu`` serving ``state``'s device, looked
+        up once per device and surface. Raises ValueError if the GPU path does not support
+        ``state.constraint`` (naming both)."""
+        key = (name, state.device.name, type(state.constraint))
+        bound = self.__dict__.setdefault("_bound", {})
+        if key not in bound:
+            supported = self.gpu_surfaces
+            if state.device.is_gpu and supported is not None and not isinstance(state.constraint, supported):
+                names = ", ".join(c.__name__ for c in supported)
+                raise ValueError(f"{type(self).__name__} on the GPU supports {names} surfaces only, but the "
+                                 f"state is on {state.constraint!r}; use device='cpu' for this surface")
+            bound[key] = getattr(self, f"_{name}_{state.device.name}")
+        return bound[key]
 
     @property
     def loggables(self) -> dict:
@@ -40,18 +68,44 @@ class Operation:
     # Narrowing: Simulation.minimize steps only the replicas still running once at most half are
     # (finished ones cost nothing more). It may do so only if every operation says it can: an
     # operation that keeps per-replica, per-vertex or per-cell data sets ``narrowable = True`` and
-    # implements narrow() and widen(); one that keeps none just sets ``narrowable = True``.
+    # lists the attributes holding one row per replica, vertex or cell (NumPy or device arrays) in
+    # ``per_replica``, ``per_vertex`` and ``per_cell``: the default narrow() and widen() follow
+    # them. One with other data overrides both; one that keeps none just sets ``narrowable = True``.
     narrowable = False
+    per_replica = ()
+    per_vertex = ()
+    per_cell = ()
+
+    def _rows(self):
+        return [(name, "replicas") for name in self.per_replica] + \
+            [(name, "vertices") for name in self.per_vertex] + [(name, "cells") for name in self.per_cell]
 
     def narrow(self, selection):
         """The Simulation now steps only ``selection`` (a :class:`spherevm.state.ReplicaSelection`
-        of the State it stepped so far): keep the data of those replicas, and return what
+        of the State it stepped so far): keep the rows of those replicas, and return what
         :meth:`widen` needs to restore the others."""
-        return None
+        saved = {}
+        for name, axis in self._rows():
+            full = getattr(self, name)
+            saved[name] = full
+            setattr(self, name, full[_index_like(full, getattr(selection, axis))])
+        return saved
 
     def widen(self, selection, saved):
-        """Undo :meth:`narrow`: merge the current data of the selected replicas into ``saved`` and
+        """Undo :meth:`narrow`: merge the current rows of the selected replicas into ``saved`` and
         go back to it (the Simulation steps the wider State again)."""
+        for name, axis in self._rows():
+            full = saved[name]
+            full[_index_like(full, getattr(selection, axis))] = getattr(self, name)
+            setattr(self, name, full)
+
+
+def _index_like(array, index):
+    """``index`` (NumPy) on the device of ``array``."""
+    if isinstance(array, np.ndarray):
+        return index
+    import cupy
+    return cupy.asarray(index)
 
 
 @dataclass
@@ -87,13 +141,157 @@ class Integrator(Operation):
 
     ``check(simulation)`` is called every few steps (where the GPU path reads back error flags)
     and raises if the integration went wrong.
+
+    The contract other operations rely on:
+
+    * ``active``: per-replica bool mask (NumPy) of the replicas this integrator still moves; a
+      minimiser stops the replicas that have converged. Updaters act on active replicas only.
+      ``active_on_device()`` is the same mask on the State's device, uploaded once per change.
+    * ``reset_vertices(vertices)``: forget the per-vertex dynamical memory (velocities, say) of the
+      given vertices, after an updater changed the topology around them; ``vertices`` is an index
+      array on the State's device, negative entries are ignored. The default keeps nothing.
     """
+
+    def attach(self, simulation):
+        super().attach(simulation)
+        self.set_active(None)
+
+    per_replica = ("active",)
+
+    def narrow(self, selection):
+        saved = super().narrow(selection)
+        self._active_device = None
+        return saved
+
+    def widen(self, selection, saved):
+        super().widen(selection, saved)
+        self._active_device = None
+
+    def set_active(self, mask):
+        """Move only the replicas where ``mask`` is true (None: every replica)."""
+        state = self._simulation.state
+        n = state.n_replicas
+        active = np.ones(n, dtype=bool) if mask is None else np.array(mask, dtype=bool).reshape(-1)
+        if len(active) != n:
+            raise ValueError(f"active mask has {len(active)} entries, but the state has {n} replicas")
+        self.active = active
+        self._active_device = None
+
+    def active_on_device(self):
+        """``active`` on the State's device (uploaded at most once per change)."""
+        if self._active_device is None:
+            self._active_device = self._simulation.state.device.asarray(self.active)
+        return self._active_device
+
+    def reset_vertices(self, vertices):
+        """Forget per-vertex memory of ``vertices`` (device index array; negative entries ignored)."""
 
     def step(self, simulation, forces):
         raise NotImplementedError
 
     def check(self, simulation):
         pass
+
+
+class Minimizer(Integrator):
+    """An integrator that lowers the energy and keeps per-replica convergence (FIRE is one).
+
+    Every ``check_every`` steps (one small read-back) :meth:`check_convergence` stops, per replica,
+    the replicas whose largest vertex force is below ``force_tol`` or whose energy per cell is
+    below ``energy_tol``, and those that an operation halts (:meth:`Operation.halted`); the others
+    go on. HOOMD-style use: ``while not fire.done: sim.run(100)``, or ``sim.minimize()``.
+
+    Per replica (NumPy): ``replica_converged``, ``reason`` ("force", "energy", an operation's
+    ``halt_reason``, or "running"), ``steps`` (the iteration at which it stopped, -1 while running).
+    ``converged``: every replica reached a tolerance; ``done``: every replica stopped.
+    Subclasses implement :meth:`move` (one iteration) and :meth:`reset_motion`.
+    """
+
+    def __init__(self, force_tol=1e-10, energy_tol=1e-20, check_every=10, trigger=None):
+        super().__init__(trigger)
+        self.configure(force_tol=force_tol, energy_tol=energy_tol, check_every=check_every)
+
+    def configure(self, force_tol=None, energy_tol=None, check_every=None):
+        """Set the stopping rules (None keeps one as it is)."""
+        if force_tol is not None:
+            self.force_tol = float(non_negative("force_tol", force_tol, per_item="a scalar"))
+        if energy_tol is not None:
+            self.energy_tol = float(non_negative("energy_tol", energy_tol, per_item="a scalar"))
+        if check_every is not None:
+            if int(check_every) != check_every or check_every < 1:
+                raise ValueError(f"check_every must be a positive integer, got {check_every!r}")
+            self.check_every = int(check_every)
+
+    def attach(self, simulation):
+        super().attach(simulation)
+        self.reset()
+
+    def reset(self):
+        """Start afresh: motion (velocities and the like) and convergence of every replica."""
+        self.reset_motion()
+        self.reset_convergence()
+
+    def reset_motion(self):
+        """Forget the dynamical memory of every replica (subclasses)."""
+
+    def reset_convergence(self):
+        """Every replica runs again; the iteration count restarts at 0."""
+        n = self._simulation.state.n_replicas
+        self.iteration = 0
+        self._checked_at = None
+        self.replica_converged = np.zeros(n, dtype=bool)
+        self.stopped = np.zeros(n, dtype=bool)
+        self.reason = np.full(n, "running", dtype=object)
+        self.steps = np.full(n, -1, dtype=np.int64)
+        self.set_active(None)
+
+    per_replica = Integrator.per_replica + ("replica_converged", "stopped", "reason", "steps")
+
+    @property
+    def converged(self) -> bool:
+        return bool(self.replica_converged.all())
+
+    @property
+    def done(self) -> bool:
+        return bool(self.stopped.all())
+
+    def check_convergence(self, simulation):
+        """Stop the replicas that reached a tolerance now, or that an operation halts."""
+        self._checked_at = self.iteration
+        state = simulation.state
+        to_np = state.device.to_numpy
+        _, energy = simulation.compute_forces()
+        fmax = to_np(simulation.max_force())
+        epc = to_np(energy) / state.cells_per_replica
+        running = ~self.stopped
+        by_force = running & (fmax < self.force_tol)
+        by_energy = running & ~by_force & (epc < self.energy_tol)
+        self.reason[by_force], self.reason[by_energy] = "force", "energy"
+        newly = by_force | by_energy
+        for op in simulation.operations:
+            halted = op.halted()
+            if halted is not None:
+                stop = ~self.stopped & ~newly & np.asarray(halted, dtype=bool)
+                self.reason[stop] = op.halt_reason
+                self.steps[stop] = self.iteration
+                self.stopped[stop] = True
+        self.steps[newly] = self.iteration
+        self.stopped[newly] = True
+        self.replica_converged[newly] = True
+        self.set_active(~self.stopped)
+
+    def check_due(self) -> bool:
+        return self.iteration % self.check_every == 0 and self._checked_at != self.iteration
+
+    def step(self, simulation, forces):
+        if self.check_due():
+            self.check_convergence(simulation)
+            forces, _ = simulation.compute_forces()
+        self.move(simulation, forces)
+        self.iteration += 1
+
+    def move(self, simulation, forces):
+        raise NotImplementedError
 
 
 class Updater(Operation):

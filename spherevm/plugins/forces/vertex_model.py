@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...constraints import Sphere
 from ...device import launch, load_module
 from ..base import Force, ForceResult
 
@@ -93,9 +94,16 @@ class VertexModel(Force):
             self._cache_for = weakref.ref(state)
         return self._cache
 
+    gpu_surfaces = (Sphere,)
+
+    def attach(self, simulation):
+        super().attach(simulation)
+        self.implementation("compute", simulation.state)   # refuses an unsupported surface now
+
     def compute(self, state) -> ForceResult:
-        if state.device.is_gpu:
-            return self._compute_gpu(state)
+        return self.implementation("compute", state)(state)
+
+    def _compute_cpu(self, state) -> ForceResult:
         xp = state.device.xp
         kA, kP, A0, P0 = self._device_parameters(state)
         geometry = state.constraint.cell_geometry(state)

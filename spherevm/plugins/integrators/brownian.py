@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from ... import random as rng
+from ...constraints import Sphere
 from ...device import launch, load_module
 from ...validation import non_negative, positive
 from ..base import Integrator
@@ -32,8 +33,11 @@ class Brownian(Integrator):
         self.mu = float(non_negative("mu", mu))
         self.max_step = positive("max_step", max_step)
 
+    gpu_surfaces = (Sphere,)
+
     def attach(self, simulation):
         super().attach(simulation)
+        self._step = self.implementation("step", simulation.state)
         n = simulation.state.n_replicas
         if self.T.ndim == 1 and len(self.T) != n:
             raise ValueError(f"T has {len(self.T)} values but the state has {n} replicas")
@@ -50,9 +54,10 @@ class Brownian(Integrator):
     _mode = 0          # CUDA kernel: 0 no self-propulsion, 1 cell directors, 2 vertex directors
 
     def step(self, simulation, forces):
+        self._step(simulation, forces)
+
+    def _step_cpu(self, simulation, forces):
         state = simulation.state
-        if state.device.is_gpu:
-            return self._step_gpu(simulation, forces)
         xp = state.device.xp
         con = state.constraint
         amp = self._noise_amplitude(state)

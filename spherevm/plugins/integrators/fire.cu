@@ -2,11 +2,10 @@
 #include "geometry/sphere.cuh"
 #include "device_common.cuh"
 
-// Per vertex: F.v, v.v, F.F summed per replica, and the largest |F| per replica.
+// Per vertex: F.v, v.v, F.F summed per replica.
 extern "C" __global__ void fire_reduce(
     const double* __restrict__ forces, const double* __restrict__ vel, const int* __restrict__ vertex_replica,
-    int n_vertices, double* __restrict__ power, double* __restrict__ vnorm2, double* __restrict__ fnorm2,
-    double* __restrict__ fmax)
+    int n_vertices, double* __restrict__ power, double* __restrict__ vnorm2, double* __restrict__ fnorm2)
 {
     long v = (long)blockIdx.x * blockDim.x + threadIdx.x;
     int rep = -1;
@@ -18,7 +17,6 @@ extern "C" __global__ void fire_reduce(
         vv = dot3(w, w);
         ff = dot3(f, f);
     }
-    segmented_block_max(sqrt(ff), rep, fmax);
     segmented_block_add(p, rep, power);
     segmented_block_add(vv, rep, vnorm2);
     segmented_block_add(ff, rep, fnorm2);
@@ -73,4 +71,13 @@ extern "C" __global__ void fire_move(
     w = w - dot3(w, n) * n;
     store3(pos, i, x);
     store3(vel, i, w);
+}
+
+// Integrator contract reset_vertices: zero the velocities of the listed vertices (-1: none).
+extern "C" __global__ void fire_reset_vertices(double* __restrict__ vel, const int* __restrict__ vertices, int n)
+{
+    int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    int v = vertices[i];
+    if (v >= 0) store3(vel, v, v3(0.0, 0.0, 0.0));
 }

@@ -5,17 +5,18 @@ from pathlib import Path
 
 import numpy as np
 
+from ...constraints import Sphere
 from ...device import launch, load_module
 from ...validation import positive
-from ..base import Integrator
+from ..base import Minimizer
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
 
-class FIRE(Integrator):
-    """Fast Inertial Relaxation Engine with per-replica time step, mixing and counters.
+class FIRE(Minimizer):
+    """Fast Inertial Relaxation Engine with per-replica time step, mixing, counters and convergence.
 
-    Each step, per replica, with forces F already tangent to the surface:
+    Each iteration, per replica, with forces F already tangent to the surface:
 
     1. power ``P = F . v`` (summed over the replica's vertices);
     2. if ``P > 0``: mix ``v <- (1 - alpha) v + alpha |v| F/|F|``, and after ``n_min`` positive
@@ -25,12 +26,16 @@ class FIRE(Integrator):
        carries the velocity into the new tangent plane.
 
     Defaults are Bitzek's: ``dt_max = 10 dt``, ``n_min = 5``, ``f_inc = 1.1``, ``f_dec = 0.5``,
-    ``alpha_start = 0.1``, ``f_alpha = 0.99``. Replicas marked inactive (converged) do not move, and
-    their dt, alpha and counter stay as they were.
+    ``alpha_start = 0.1``, ``f_alpha = 0.99``. Convergence (``force_tol``, ``energy_tol``,
+    ``check_every``) is per replica, see :class:`spherevm.plugins.base.Minimizer`: replicas that
+    have stopped do not move, and their dt, alpha and counter stay as they were.
     """
 
-    def __init__(self, dt=0.01, dt_max=None, n_min=5, f_inc=1.1, f_dec=0.5, alpha_start=0.1, f_alpha=0.99):
-        super().__init__()
+    gpu_surfaces = (Sphere,)
+
+    def __init__(self, dt=0.01, dt_max=None, n_min=5, f_inc=1.1, f_dec=0.5, alpha_start=0.1, f_alpha=0.99,
+                 force_tol=1e-10, energy_tol=1e-20, check_every=10):
+        super().__init__(force_tol=force_tol, energy_tol=energy_tol, check_every=check_every)
         self.dt = positive("dt", dt)
         self.dt_max = positive("dt_max", dt_max if dt_max is not None else 10 * self.dt)
         if self.dt_max < self.dt:
@@ -49,10 +54,12 @@ class FIRE(Integrator):
         self.velocities = None
 
     def attach(self, simulation):
+        state = simulation.state
+        self._move = self.implementation("move", state)
+        self._reset_vertices = self.implementation("reset_vertices", state)
         super().attach(simulation)
-        self.reset()
 
-    def reset(self):
+    def reset_motion(self):
         """Zero velocities and restore dt, alpha and counters of every replica."""
         state = self._simulation.state
         xp = state.device.xp
@@ -61,38 +68,35 @@ class FIRE(Integrator):
         self.replica_dt = xp.full(r, self.dt)
         self.alpha = xp.full(r, self.alpha_start)
         self.n_positive = xp.zeros(r, dtype=xp.int64)
-        self.active = xp.ones(r, dtype=bool)
 
     narrowable = True
-    _PER_REPLICA = ("replica_dt", "alpha", "n_positive", "active")
+    per_replica = Minimizer.per_replica + ("replica_dt", "alpha", "n_positive")
+    per_vertex = ("velocities",)
 
     def narrow(self, selection):
         """Velocities follow the selected vertices; dt, alpha, counters the selected replicas. The
         others have stopped: their velocities are zeroed, as the next step would do."""
-        xp = self._simulation.device.xp
-        saved = {name: getattr(self, name) for name in ("velocities",) + self._PER_REPLICA}
-        self.velocities = self.velocities[xp.asarray(selection.vertices)]
-        saved["velocities"] = xp.zeros_like(saved["velocities"])
-        for name in self._PER_REPLICA:
-            setattr(self, name, saved[name][xp.asarray(selection.replicas)])
+        saved = super().narrow(selection)
+        saved["velocities"] = self._simulation.device.xp.zeros_like(saved["velocities"])
         return saved
-
-    def widen(self, selection, saved):
-        xp = self._simulation.device.xp
-        saved["velocities"][xp.asarray(selection.vertices)] = self.velocities
-        for name in self._PER_REPLICA:
-            saved[name][xp.asarray(selection.replicas)] = getattr(self, name)
-        for name, value in saved.items():
-            setattr(self, name, value)
 
     def reset_vertices(self, vertices):
         """Zero the velocities of the given vertices (after a topology change, for example)."""
-        self.velocities[vertices] = 0.0
+        self._reset_vertices(vertices)
 
-    def step(self, simulation, forces):
+    def _reset_vertices_cpu(self, vertices):
+        vertices = np.asarray(vertices)
+        self.velocities[vertices[vertices >= 0]] = 0.0
+
+    def _reset_vertices_gpu(self, vertices):
+        launch(load_module(_KERNELS).get_function("fire_reset_vertices"), len(vertices),
+               (self.velocities, vertices, np.int32(len(vertices))))
+
+    def move(self, simulation, forces):
+        self._move(simulation, forces)
+
+    def _move_cpu(self, simulation, forces):
         state = simulation.state
-        if state.device.is_gpu:
-            return self._step_gpu(simulation, forces)
         xp = state.device.xp
         rep = state.vertex_replica
         n = state.n_replicas
@@ -120,36 +124,37 @@ class FIRE(Integrator):
         self.n_positive = xp.where(on, xp.where(uphill, 0, self.n_positive + 1), self.n_positive)
 
         # per vertex: v <- keep v + scale F, then v <- v + dt F, x <- P_N(x + dt v), v <- P_T(x, v)
-        dt = xp.where(self.active, self.replica_dt, 0.0)
+        dt = xp.where(on, self.replica_dt, 0.0)
         per_vertex = xp.take(xp.stack((keep, scale, dt)), rep, axis=1)[..., None]
         v = per_vertex[0] * v + (per_vertex[1] + per_vertex[2]) * forces
         x = state.constraint.project_normal(state.positions + per_vertex[2] * v, state.radius[rep])
         v = state.constraint.project_tangent(x, v)
-        if bool(self.active.all()):
+        if bool(on.all()):
             state.positions, self.velocities = x, v
         else:
-            moving = self.active[rep, None]
+            moving = on[rep, None]
             state.positions = xp.where(moving, x, state.positions)
             self.velocities = xp.where(moving, v, 0.0)
         simulation.state_changed()
 
-    def _step_gpu(self, simulation, forces):
+    def _move_gpu(self, simulation, forces):
         """Three kernels (fire.cu): per-replica sums, per-replica control, per-vertex move."""
         import cupy as cp
         state = simulation.state
         module = load_module(_KERNELS)
         nv, nr = state.n_vertices, state.n_replicas
-        sums = cp.zeros((4, nr))
+        active = self.active_on_device()
+        sums = cp.zeros((3, nr))
         launch(module.get_function("fire_reduce"), nv,
-               (forces, self.velocities, state.vertex_replica, np.int32(nv), sums[0], sums[1], sums[2], sums[3]))
+               (forces, self.velocities, state.vertex_replica, np.int32(nv), sums[0], sums[1], sums[2]))
         keep, scale, step = cp.empty(nr), cp.empty(nr), cp.empty(nr)
         launch(module.get_function("fire_control"), nr,
-               (np.int32(nr), sums[0], sums[1], sums[2], self.active, self.replica_dt, self.alpha,
+               (np.int32(nr), sums[0], sums[1], sums[2], active, self.replica_dt, self.alpha,
                 self.n_positive, keep, scale, step, np.int32(self.n_min), np.float64(self.f_inc),
                 np.float64(self.f_dec), np.float64(self.alpha_start), np.float64(self.f_alpha),
                 np.float64(self.dt_max)))
         launch(module.get_function("fire_move"), nv,
-               (state.positions, self.velocities, forces, state.vertex_replica, state.radius, self.active,
+               (state.positions, self.velocities, forces, state.vertex_replica, state.radius, active,
                 keep, scale, step, np.int32(nv)))
         simulation.state_changed()
 
@@ -160,4 +165,5 @@ class FIRE(Integrator):
 
     def __repr__(self):
         return (f"FIRE(dt={self.dt}, dt_max={self.dt_max}, n_min={self.n_min}, f_inc={self.f_inc}, "
-                f"f_dec={self.f_dec}, alpha_start={self.alpha_start}, f_alpha={self.f_alpha})")
+                f"f_dec={self.f_dec}, alpha_start={self.alpha_start}, f_alpha={self.f_alpha}, "
+                f"force_tol={self.force_tol}, energy_tol={self.energy_tol}, check_every={self.check_every})")

@@ -84,11 +84,13 @@ extern "C" __global__ void t1_apply(
     int* __restrict__ sides, const int* __restrict__ claim, const int* __restrict__ cand,
     const double* __restrict__ cand_len, int n_cand, int max_sides, const double* __restrict__ radius,
     const double* __restrict__ new_length, double length_factor, int* __restrict__ flips,
-    unsigned long long* __restrict__ total_flips, double* __restrict__ velocities, int* __restrict__ log_count,
+    unsigned long long* __restrict__ total_flips, int* __restrict__ moved, int* __restrict__ log_count,
     int* __restrict__ log, int pass_id)
 {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n_cand) return;
+    moved[2 * i] = -1;
+    moved[2 * i + 1] = -1;
     const int* e = cand + (long)i * CAND_INTS;
     int u = e[0], k = e[1], v = e[2], a = e[3], b = e[4], c = e[5], d = e[6];
     int C1 = e[7], C2 = e[8], C3 = e[9], C4 = e[10], r = e[11];
@@ -130,10 +132,8 @@ extern "C" __global__ void t1_apply(
     store3(pos, Y, R * (cos(phi) * m + sin(phi) * (-perp)));
     atomicAdd(flips + r, 1);
     atomicAdd(total_flips + r, 1ull);
-    if (velocities) {
-        store3(velocities, u, v3(0.0, 0.0, 0.0));
-        store3(velocities, v, v3(0.0, 0.0, 0.0));
-    }
+    moved[2 * i] = u;              // for Integrator.reset_vertices
+    moved[2 * i + 1] = v;
     int slot = atomicAdd(log_count, 1);
     int* entry = log + (long)slot * LOG_INTS;
     entry[0] = pass_id; entry[1] = C1; entry[2] = C2; entry[3] = C3; entry[4] = C4; entry[5] = r;

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ... import topology
+from ...constraints import Sphere
 from ...device import launch, load_module
 from ..base import Updater
 
@@ -34,7 +35,8 @@ class T1(Updater):
       four cells, so at most one flip per cell per pass; the rest wait for the next pass. The edge
       index is ``3 u + k`` for the edge ``u -> vertex_neighbors[u, k]`` with ``u < v``; the GPU
       kernel follows the same rule;
-    * ``reset_velocities``: zero the integrator's velocities of the flipped vertices (FIRE).
+    * ``reset_velocities``: ask the integrator to forget the flipped vertices' memory
+      (``Integrator.reset_vertices``: FIRE zeroes their velocities).
 
     Oscillation: a flip that makes two cells neighbours again after an earlier flip separated them
     is a flip back. When one pair of cells has been re-joined ``max_flip_backs`` times, its replica
@@ -88,8 +90,11 @@ class T1(Updater):
         self._separated = np.zeros(0, dtype=np.int64)  # cell pairs separated by a flip (sorted keys)
         self._rejoins = np.zeros(0, dtype=np.int64)    # how often each was joined again
 
+    gpu_surfaces = (Sphere,)
+
     def attach(self, simulation):
         super().attach(simulation)
+        self._update = self.implementation("update", simulation.state)
         self._gpu = None
         self._reset_counters(simulation.state.n_replicas)
 
@@ -97,12 +102,12 @@ class T1(Updater):
     def chord_threshold2(self, state):
         """Squared chord of the threshold per replica: an edge is short iff its chord is shorter.
 
-        On the sphere a geodesic ``L`` has chord ``2 R sin(L / 2R)``, monotonic in ``L``, so the test
-        needs no trigonometry for the many long edges; the GPU kernel uses the same test.
+        The constraint gives the chord of a geodesic of length ``L`` (on the sphere ``2 R sin(L / 2R)``),
+        monotonic in ``L``, so the test needs no trigonometry for the many long edges; the GPU kernel
+        uses the same test.
         """
-        R = state.radius_np()
         L = self.threshold * np.sqrt(state.mean_cell_area)
-        return (2.0 * R * np.sin(np.minimum(L / (2.0 * R), np.pi / 2))) ** 2
+        return state.constraint.chord_length(L, state.radius_np()) ** 2
 
     def _edge_list(self, state):
         """Each undirected edge once, as the corner ``3 u + slot`` with ``u < neighbour``, in edge
@@ -154,15 +159,17 @@ class T1(Updater):
 
     # ------------------------------------------------------------------ the pass
     def update(self, simulation, timestep):
+        self._update(simulation)
+
+    def _update_cpu(self, simulation):
         state = simulation.state
-        if state.device.is_gpu:
-            return self._update_gpu(simulation)
         n_rep = state.n_replicas
         self.last_flips = np.zeros(n_rep, dtype=np.int64)
         self.last_refused = np.zeros(n_rep, dtype=np.int64)
         u, slot, lengths = self.short_edges(state)
-        if simulation.active_replicas is not None and len(u):
-            keep = simulation.active_replicas[state.vertex_replica_np()[u]]
+        integrator = simulation.operations.integrator
+        if len(u) and integrator is not None:
+            keep = integrator.active[state.vertex_replica_np()[u]]
             u, slot, lengths = u[keep], slot[keep], lengths[keep]
         if len(u) == 0:
             return
@@ -181,8 +188,7 @@ class T1(Updater):
         moved = topology.t1_flip(state, u, slot, new)
         self.last_flips = np.bincount(rep, minlength=n_rep)
         self.total_flips += self.last_flips
-        integrator = simulation.operations.integrator
-        if self.reset_velocities and hasattr(integrator, "reset_vertices"):
+        if self.reset_velocities and integrator is not None:
             integrator.reset_vertices(state.device.asarray(moved))
         simulation.state_changed()
 
@@ -200,7 +206,8 @@ class T1(Updater):
                        counters=scratch[:2], flips=scratch[2:2 + r], refused=scratch[2 + r:],
                        log_count=cp.zeros(1, dtype=cp.int32), log_bound=0,
                        cand=cp.empty((cap, _CAND_INTS), dtype=cp.int32), cand_len=cp.empty(cap),
-                       log=cp.empty((cap, _LOG_INTS), dtype=cp.int32), active_host=None, active=None, passes=0,
+                       log=cp.empty((cap, _LOG_INTS), dtype=cp.int32), moved=cp.empty(2 * cap, dtype=cp.int32), passes=0,
+                       all_active=cp.ones(r, dtype=bool),
                        total_flips=cp.asarray(self._host_totals("total_flips", r)),
                        total_refused=cp.asarray(self._host_totals("total_refused", r)),
                        chord2=cp.asarray(self.chord_threshold2(state)),
@@ -220,16 +227,14 @@ class T1(Updater):
         state = simulation.state
         buf = self._gpu_buffers(state)
         module = load_module(_KERNELS)
-        active = simulation.active_replicas
-        if buf["active_host"] is None or not np.array_equal(buf["active_host"], active):
-            buf["active_host"] = active.copy()
-            buf["active"] = cp.asarray(active)
+        integrator = simulation.operations.integrator
+        active = integrator.active_on_device() if integrator is not None else buf["all_active"]
         while True:
             scratch = buf["scratch"]
             cp.cuda.runtime.memsetAsync(scratch.data.ptr, 0, scratch.nbytes, cp.cuda.get_current_stream().ptr)
             launch(module.get_function("t1_detect"), state.n_vertices,
                    (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_sides,
-                    state.vertex_replica, state.radius, buf["chord2"], buf["active"], np.int32(state.n_vertices),
+                    state.vertex_replica, state.radius, buf["chord2"], active, np.int32(state.n_vertices),
                     np.int32(state.max_sides), buf["claim"], buf["refused"], buf["total_refused"], buf["counters"],
                     buf["cand"], buf["cand_len"], np.int32(buf["capacity"])))
             n_cand, widen = (int(x) for x in buf["counters"].get())   # the one read-back
@@ -251,16 +256,18 @@ class T1(Updater):
             if n_cand > len(buf["log"]):
                 buf["log"] = cp.empty((2 * n_cand, _LOG_INTS), cp.int32)
         buf["log_bound"] += n_cand
-        integrator = simulation.operations.integrator
-        velocities = getattr(integrator, "velocities", None) if self.reset_velocities else None
+        if len(buf["moved"]) < 2 * n_cand:
+            buf["moved"] = cp.empty(4 * n_cand, dtype=cp.int32)
+        moved = buf["moved"][:2 * n_cand]
         buf["passes"] += 1
         launch(module.get_function("t1_apply"), n_cand,
                (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_vertices, state.cell_sides,
                 buf["claim"], buf["cand"], buf["cand_len"], np.int32(n_cand), np.int32(state.max_sides),
                 state.radius, buf["new_length"], np.float64(self.length_factor or 0.0), buf["flips"],
-                buf["total_flips"], velocities if velocities is not None else np.intp(0), buf["log_count"], buf["log"],
-                np.int32(buf["passes"])))
+                buf["total_flips"], moved, buf["log_count"], buf["log"], np.int32(buf["passes"])))
         launch(module.get_function("t1_release"), n_cand, (buf["claim"], buf["cand"], np.int32(n_cand)))
+        if self.reset_velocities and integrator is not None:
+            integrator.reset_vertices(moved)
         state.topology_version += 1
         simulation.state_changed()
 

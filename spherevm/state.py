@@ -46,6 +46,7 @@ class State:
         self.radius = xp.asarray(np.broadcast_to(np.asarray(radius, dtype=np.float64),
                                                  (len(self.vertex_start) - 1,)).copy())
         self.topology_version = 0   # bumped by every topology edit (T1 flips): caches key on it
+        self._cached = {}
         self._derive_layout()
         if validate:
             self.validate()
@@ -112,6 +113,17 @@ class State:
     def mean_cell_area(self):
         """<A> per replica: total surface area over the number of cells."""
         return self.constraint.total_area_np(self.radius_np()) / self.cells_per_replica
+
+    def cached(self, key, build, topology: bool = False):
+        """``build()``, computed once and kept with this State under ``key`` (recomputed after a
+        topology edit if ``topology``): the one place constraints and operations keep derived data
+        (device copies of parameters, corner maps, edge lists). Keys start with the owner object,
+        e.g. ``(self, "edges")``; the data dies with the State."""
+        version = self.topology_version if topology else None
+        entry = self._cached.get(key)
+        if entry is None or entry[0] != version:
+            entry = self._cached[key] = (version, build())
+        return entry[1]
 
     def topology_changed(self):
         """Call after editing the index arrays by hand: cached corner maps are rebuilt."""

@@ -8,8 +8,12 @@ class Constraint:
     Projection operators (the paper's formalism): ``project_tangent(x, v)`` is P_T, the part of
     ``v`` tangent to the surface at ``x``; ``project_normal(x, radius)`` is P_N, the closest point
     of the surface. Forces need the metric: per-cell areas, perimeters and centroids
-    (``cell_geometry``) and per-corner gradients of area and perimeter (``corner_gradients``).
+    (``cell_geometry``) and the surface gradient of any function of them (``shape_gradient``).
     ``radius`` is the per-vertex (or per-replica) size parameter of the surface.
+
+    A surface that does not implement some of these yet (a stub) says so before anything runs:
+    operations list the methods they need in ``surface_needs`` and :meth:`require` refuses them at
+    attach time, naming what is missing.
     """
 
     name = "constraint"
@@ -43,7 +47,8 @@ class Constraint:
         raise NotImplementedError(f"{type(self).__name__} does not yet provide cell areas and perimeters "
                                   "(only Sphere does); vertex-model forces need them")
 
-    def corner_gradients(self, state, geometry):
+    def shape_gradient(self, state, geometry, d_area, d_perimeter):
+        """Surface gradient (V, 3) of ``sum_c d_area[c] A_c + d_perimeter[c] P_c``."""
         raise NotImplementedError(f"{type(self).__name__} does not yet provide area and perimeter gradients "
                                   "(only Sphere does); vertex-model forces need them")
 
@@ -52,6 +57,17 @@ class Constraint:
 
     def cell_areas_np(self, state):
         return state.device.to_numpy(self.cell_geometry(state).area)
+
+    def missing(self, names) -> list:
+        """Those of the method ``names`` this surface does not implement (still the base's)."""
+        return [n for n in names if getattr(type(self), n) is getattr(Constraint, n)]
+
+    def require(self, names, who: str):
+        """Raise NotImplementedError if any of ``names`` is missing, naming ``who`` needs it."""
+        absent = self.missing(names)
+        if absent:
+            raise NotImplementedError(f"{who} needs {', '.join(absent)} of the surface, which {self!r} does not "
+                                      "implement yet; use a Sphere")
 
     def __repr__(self):
         return f"{type(self).__name__}()"

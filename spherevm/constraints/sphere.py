@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import os
-import weakref
 import numpy as np
 
 from ..device import array_module
@@ -121,9 +120,10 @@ class Sphere(Constraint):
         """Per vertex block, the slot-major corner tables: next vertex, the corner's cell, the cell
         before it (k - 1) and the cell's first vertex (its fan apex). Cached per State and topology
         version (T1 flips bump it)."""
-        cache = getattr(self, "_index_cache", None)
-        if cache is not None and cache[0]() is state and cache[1] == state.topology_version:
-            return cache[2]
+        return state.cached((self, "corner_index"), lambda: self._build_corner_index(state), topology=True)
+
+    @staticmethod
+    def _build_corner_index(state):
         xp = state.device.xp
         vn, vc = state.vertex_neighbors.astype(np.intp), state.vertex_cells.astype(np.intp)
         first = state.cell_vertices[:, 0].astype(np.intp)
@@ -133,7 +133,6 @@ class Sphere(Constraint):
             before = xp.ascontiguousarray(xp.roll(vc[lo:hi], 1, axis=1).T).reshape(-1)
             result.append(dict(lo=lo, hi=hi, next=xp.ascontiguousarray(vn[lo:hi].T).reshape(-1),
                                cells=cells, apex=first[cells], both=xp.concatenate((cells, before))))
-        self._index_cache = (weakref.ref(state), state.topology_version, result)
         return result
 
     def cell_geometry(self, state) -> CellGeometry:
@@ -214,7 +213,7 @@ class Sphere(Constraint):
         cell areas and perimeters (chain rule); the vertex model's forces are minus it.
 
         Per vertex v with edges to n_k: ``sum_k (dA[k-1] - dA[k]) w(v, n_k) + (dP[k] + dP[k-1])
-        dtheta(v, n_k)/dv`` on the unit sphere (see :meth:`_edge_gradients`), with ``dA`` scaled by
+        dtheta(v, n_k)/dv`` on the unit sphere (see :meth:`_edge_factors`), with ``dA`` scaled by
         R^2 and ``dP`` by R, projected on the tangent plane and divided by ``|x_v|`` (positions
         ``x = |x| u``).
         """

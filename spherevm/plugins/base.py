@@ -25,6 +25,8 @@ class Operation:
 
     #: Constraint classes the GPU implementation supports (None: every surface).
     gpu_surfaces = None
+    #: Constraint methods this operation calls; a surface lacking one is refused at attach.
+    surface_needs = ()
 
     def __init__(self, trigger=None):
         self.trigger = Always() if trigger is None else as_trigger(trigger)
@@ -32,6 +34,7 @@ class Operation:
 
     def attach(self, simulation):
         """Called when the operation joins a Simulation whose State is set."""
+        simulation.state.constraint.require(self.surface_needs, type(self).__name__)
         self._simulation = simulation
 
     def detach(self):

@@ -1,7 +1,6 @@
 """The vertex-model energy E = sum_c kA (A_c - A0)^2 + kP (P_c - P0)^2 and its forces."""
 from __future__ import annotations
 
-import weakref
 from pathlib import Path
 
 import numpy as np
@@ -79,22 +78,18 @@ class VertexModel(Force):
         self.kA, self.kP, self.A0, self.P0 = (pick(a) for a in saved[:4])
         if self._dimensionless is not None:
             self._dimensionless = tuple(pick(a) for a in self._dimensionless)
-        self._cache_for = None
         return saved
 
     def widen(self, selection, saved):
         self.kA, self.kP, self.A0, self.P0, self._dimensionless = saved
-        self._cache_for = None
 
     def _device_parameters(self, state):
         """Per-cell parameters on the device, cached for the State they were made for."""
-        cached = getattr(self, "_cache_for", None)
-        if cached is None or cached() is not state:
-            self._cache = [state.device.asarray(np.ascontiguousarray(p)) for p in self.parameters(state)]
-            self._cache_for = weakref.ref(state)
-        return self._cache
+        return state.cached((self, "parameters"), lambda: [state.device.asarray(np.ascontiguousarray(p))
+                                                            for p in self.parameters(state)])
 
     gpu_surfaces = (Sphere,)
+    surface_needs = ("cell_geometry", "shape_gradient", "total_area_np")
 
     def attach(self, simulation):
         super().attach(simulation)

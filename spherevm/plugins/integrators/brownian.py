@@ -34,6 +34,7 @@ class Brownian(Integrator):
         self.max_step = positive("max_step", max_step)
 
     gpu_surfaces = (Sphere,)
+    surface_needs = ("normal", "project_normal", "total_area_np")
 
     def attach(self, simulation):
         super().attach(simulation)
@@ -41,11 +42,6 @@ class Brownian(Integrator):
         n = simulation.state.n_replicas
         if self.T.ndim == 1 and len(self.T) != n:
             raise ValueError(f"T has {len(self.T)} values but the state has {n} replicas")
-
-    def _noise_amplitude(self, state):
-        """sqrt(2 mu T dt) per vertex."""
-        T = np.broadcast_to(self.T, (state.n_replicas,))
-        return state.device.asarray(np.sqrt(2.0 * self.mu * T * self.dt))[state.vertex_replica]
 
     def _drift(self, simulation, forces):
         """Deterministic velocity of every vertex: mu F (Active adds self-propulsion)."""
@@ -60,7 +56,7 @@ class Brownian(Integrator):
         state = simulation.state
         xp = state.device.xp
         con = state.constraint
-        amp = self._noise_amplitude(state)
+        amp = self._per_replica(state)[1][state.vertex_replica]
         eta = xp.asarray(rng.normal(simulation.seed, rng.STREAM_BROWNIAN, simulation.timestep,
                                     np.arange(state.n_vertices), 3))
         dr = con.project_tangent(state.positions, self.dt * self._drift(simulation, forces) + amp[:, None] * eta)
@@ -79,12 +75,7 @@ class Brownian(Integrator):
         if getattr(self, "_error", None) is None:
             self._error = cp.full(1, np.iinfo(np.uint64).max, dtype=cp.uint64)
         module = load_module(_KERNELS)
-        if getattr(self, "_per_replica_for", None) is not state:   # per-replica constants, uploaded once
-            self._unit = state.device.asarray(np.sqrt(state.mean_cell_area))
-            T = np.broadcast_to(self.T, (state.n_replicas,))
-            self._amp = state.device.asarray(np.sqrt(2.0 * self.mu * T * self.dt))
-            self._per_replica_for = state
-        unit, amp = self._unit, self._amp
+        unit, amp = self._per_replica(state)
         directors = self.directors if self._mode else cp.zeros((1, 3))
         rot_amp = float(np.sqrt(2.0 * self.Dr * self.dt)) if self._mode else 0.0
         launch(module.get_function("brownian_move"), state.n_vertices,
@@ -99,6 +90,15 @@ class Brownian(Integrator):
                     np.int32(state.max_sides), np.float64(rot_amp), np.uint32(simulation.seed),
                     np.uint64(simulation.timestep)))
         simulation.state_changed()
+
+    def _per_replica(self, state):
+        """sqrt(<A>) and the noise amplitude sqrt(2 mu T dt) per replica, on the device (computed
+        once per State)."""
+        def build():
+            T = np.broadcast_to(self.T, (state.n_replicas,))
+            return (state.device.asarray(np.sqrt(state.mean_cell_area)),
+                    state.device.asarray(np.sqrt(2.0 * self.mu * T * self.dt)))
+        return state.cached((self, "per_replica"), build)
 
     def check(self, simulation):
         """Raise for the earliest exploding step the GPU kernel flagged (one small read-back)."""
@@ -116,7 +116,7 @@ class Brownian(Integrator):
     def _guard(self, simulation, dr):
         state = simulation.state
         xp = state.device.xp
-        scale = xp.asarray(np.sqrt(state.mean_cell_area))[state.vertex_replica]
+        scale = self._per_replica(state)[0][state.vertex_replica]
         step = xp.sqrt((dr * dr).sum(axis=1)) / scale
         bad = ~(step <= self.max_step)          # catches NaN too
         if bool(bad.any()):

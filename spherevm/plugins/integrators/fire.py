@@ -32,6 +32,7 @@ class FIRE(Minimizer):
     """
 
     gpu_surfaces = (Sphere,)
+    surface_needs = ("normal", "project_normal")
 
     def __init__(self, dt=0.01, dt_max=None, n_min=5, f_inc=1.1, f_dec=0.5, alpha_start=0.1, f_alpha=0.99,
                  force_tol=1e-10, energy_tol=1e-20, check_every=10):

@@ -1,7 +1,6 @@
 """T1 neighbour exchanges: short edges are rotated so that four cells swap neighbours."""
 from __future__ import annotations
 
-import weakref
 from pathlib import Path
 
 import numpy as np
@@ -91,6 +90,7 @@ class T1(Updater):
         self._rejoins = np.zeros(0, dtype=np.int64)    # how often each was joined again
 
     gpu_surfaces = (Sphere,)
+    surface_needs = ("normal", "project_normal", "edge_lengths", "chord_length", "total_area_np")
 
     def attach(self, simulation):
         super().attach(simulation)
@@ -112,16 +112,14 @@ class T1(Updater):
     def _edge_list(self, state):
         """Each undirected edge once, as the corner ``3 u + slot`` with ``u < neighbour``, in edge
         index order, with its two vertices and its replica. Cached per State and topology version."""
-        cache = getattr(self, "_edges", None)
-        if cache is not None and cache[0]() is state and cache[1] == state.topology_version:
-            return cache[2]
-        xp = state.device.xp
-        vn = state.vertex_neighbors
-        corner = xp.flatnonzero((xp.arange(state.n_vertices)[:, None] < vn).reshape(-1))
-        u = corner // 3
-        edges = dict(corner=corner, u=u, v=vn.reshape(-1)[corner], replica=state.vertex_replica[u])
-        self._edges = (weakref.ref(state), state.topology_version, edges)
-        return edges
+        def build():
+            xp = state.device.xp
+            vn = state.vertex_neighbors
+            corner = xp.flatnonzero((xp.arange(state.n_vertices)[:, None] < vn).reshape(-1))
+            u = corner // 3
+            return dict(corner=corner, u=u, v=vn.reshape(-1)[corner], replica=state.vertex_replica[u])
+
+        return state.cached((self, "edges"), build, topology=True)
 
     def short_edges(self, state):
         """Candidate edges ``(u, slot, geodesic length)`` shorter than the threshold, by edge index."""

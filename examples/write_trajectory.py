@@ -55,7 +55,7 @@ def main(argv=None):
 
     # ---- restore the last frame and compare with the simulated state
     frames = n_frames(args.out)
-    restored = svm.State.from_gsd(args.out, frame=-1)
+    restored = svm.init.from_gsd(args.out, frame=-1)
     live = sim.state.to("cpu")
     same_positions = restored.positions.tobytes() == live.positions.tobytes()
     same_topology = all(np.array_equal(getattr(restored, k), getattr(live, k))

@@ -8,10 +8,12 @@ from scipy.spatial.transform import Rotation
 from scipy.special import j0
 
 import spherevm as svm
-from spherevm.analysis.dynamics import (NoRelaxationWarning, Trajectory, cell_centroids, log_spaced_times, msd,
-                                        remove_rigid_rotation, self_intermediate_scattering, self_overlap,
-                                        tau_alpha)
-from spherevm.analysis.recorder import OnTimesteps, Recorder
+from spherevm.analysis import (NoRelaxationWarning, Trajectory, msd, remove_rigid_rotation,
+                               self_intermediate_scattering, self_overlap, tau_alpha)
+from spherevm.plugins.writers import Recorder
+from spherevm.plugins.writers.recorder import log_spaced_times
+from spherevm.shapes import cell_centroids
+from spherevm.trigger import OnTimesteps
 
 
 # ------------------------------------------------------------------------------------ helpers
@@ -366,7 +368,7 @@ def test_recorder_on_live_simulation(tmp_path):
     writer.close()
     rec.close()
     np.testing.assert_array_equal(rec.timesteps, wanted)
-    traj = rec.trajectory()
+    traj = Trajectory.from_recording(rec)
     assert traj.centroids.shape == (len(wanted), sim.state.n_cells, 3)
     np.testing.assert_array_equal(traj.times, wanted)
     np.testing.assert_allclose(traj.centroids[-1], cell_centroids(sim.state), atol=0)
@@ -377,7 +379,8 @@ def test_recorder_on_live_simulation(tmp_path):
     np.testing.assert_array_equal(from_file.times, traj.times)
     np.testing.assert_allclose(from_file.centroids, traj.centroids, atol=1e-12)
     np.testing.assert_array_equal(from_file.cell_replica, [0] * 32 + [1] * 32)
-    from_csv = Recorder.read_csv(tmp_path / "cells.csv")
+    from_csv = Trajectory.from_recording(Recorder.read_csv(tmp_path / "cells.csv"))
+    np.testing.assert_array_equal(from_csv.times, traj.times)
     np.testing.assert_allclose(from_csv.centroids, traj.centroids, atol=1e-12)
     part = Trajectory.from_gsd(tmp_path / "run.gsd", frames=[0, -1])
     np.testing.assert_array_equal(part.times, [0, 300])
@@ -396,7 +399,7 @@ def test_recorder_on_live_simulation(tmp_path):
     if qs.value.min() > 1 / math.e:
         with pytest.warns(NoRelaxationWarning):
             assert math.isnan(qs.tau_alpha())
-    assert rec.trajectory(dt=0.02).times[-1] == pytest.approx(6.0)
+    assert Trajectory.from_recording(rec, dt=0.02).times[-1] == pytest.approx(6.0)
 
 
 def test_recorder_continues_from_a_later_timestep():
@@ -446,6 +449,6 @@ def test_centroids_and_recorder_on_gpu():
     sim.operations.writers.append(rec)
     sim.run(50)
     np.testing.assert_array_equal(rec.timesteps, log_spaced_times(50, 5))
-    traj = rec.trajectory()
+    traj = Trajectory.from_recording(rec)
     assert isinstance(traj.centroids, np.ndarray)
     np.testing.assert_allclose(traj.centroids[-1], cell_centroids(sim.state.to("cpu")), atol=1e-12)

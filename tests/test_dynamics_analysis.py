@@ -356,8 +356,9 @@ def make_sim():
     return sim
 
 
-def test_recorder_on_live_simulation(tmp_path):
+def test_recorder_on_live_simulation(tmp_path, monkeypatch):
     gsd = pytest.importorskip("gsd.hoomd")
+    gsd_fl = pytest.importorskip("gsd.fl")
     sim = make_sim()
     wanted = log_spaced_times(300, points_per_decade=5)
     rec = Recorder(OnTimesteps(wanted), csv=tmp_path / "cells.csv")
@@ -373,8 +374,12 @@ def test_recorder_on_live_simulation(tmp_path):
     np.testing.assert_array_equal(traj.times, wanted)
     np.testing.assert_allclose(traj.centroids[-1], cell_centroids(sim.state), atol=0)
     assert np.abs(traj.centroids[-1] - traj.centroids[0]).max() > 1e-6       # the cells moved
-    # the same trajectory read back from the GSD file and from the CSV
+    # the same trajectory read back from the GSD file (opened once) and from the CSV
+    opened, real_open = [], gsd_fl.open
+    monkeypatch.setattr(gsd_fl, "open", lambda *a, **k: opened.append(a or k) or real_open(*a, **k))
     from_file = Trajectory.from_gsd(tmp_path / "run.gsd")
+    assert len(opened) == 1
+    monkeypatch.undo()
     assert len(gsd.open(tmp_path / "run.gsd", "r")) == len(wanted)
     np.testing.assert_array_equal(from_file.times, traj.times)
     np.testing.assert_allclose(from_file.centroids, traj.centroids, atol=1e-12)
@@ -414,6 +419,17 @@ def test_recorder_continues_from_a_later_timestep():
     assert len(rec) == len(log_spaced_times(100, 5))
     with pytest.raises(ValueError, match="trigger"):
         Recorder()
+    with pytest.raises(RuntimeError, match="nothing"):
+        Trajectory.from_recording(Recorder(5))
+
+
+def test_analysis_reexports_the_core_and_writer_names():
+    assert svm.analysis.cell_shapes is svm.shapes.cell_shapes
+    assert svm.analysis.mean_shape_index is svm.shapes.mean_shape_index
+    assert svm.analysis.cell_centroids is cell_centroids
+    assert svm.analysis.Recorder is svm.plugins.writers.Recorder is Recorder
+    assert svm.analysis.log_spaced_times is log_spaced_times
+    assert svm.analysis.OnTimesteps is OnTimesteps
 
 
 def test_trajectory_validation():

@@ -326,3 +326,52 @@ def test_ovito_opens_file(written):
         assert not np.any(np.asarray(data.particles.bonds["Periodic Image"]))
         assert data.attributes["Timestep"] == min(3 * i, 9)
         assert len(data.attributes["energy"]) == len(refs[i]["radius"])
+
+
+def test_reader_reads_many_frames_from_one_open_file(written, monkeypatch):
+    import gsd.fl
+    path, sim, writer, refs = written
+    opened, real_open = [], gsd.fl.open
+    monkeypatch.setattr(gsd.fl, "open", lambda *a, **k: opened.append(a or k) or real_open(*a, **k))
+    with svm.gsdio.Reader(path) as f:
+        assert len(f) == len(refs)
+        for i, ref in enumerate(refs):
+            assert_same_state(f.state(i), ref)
+        steps = [f.step(i) for i in range(len(f))]
+        with pytest.raises(FrameIndexError):
+            f.step(len(f))
+    assert len(opened) == 1
+    with gsd.hoomd.open(path) as t:
+        assert steps == [int(frame.configuration.step) for frame in t]
+
+
+def _spherevm_imports(path):
+    """Every spherevm module a source file imports, at the top or inside functions."""
+    import ast
+    import pathlib
+    rel = pathlib.Path(path).relative_to(pathlib.Path(svm.__file__).parent.parent).with_suffix("")
+    package = list(rel.parts[:-1])          # what a level-1 relative import starts from
+    found = set()
+    for node in ast.walk(ast.parse(pathlib.Path(path).read_text())):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = package[:len(package) - node.level + 1] if node.level else []
+            module = ".".join(base + ([node.module] if node.module else []))
+            found.update([module] if node.module else [f"{module}.{a.name}" for a in node.names])
+    return {m for m in found if m.split(".")[0] == "spherevm"}
+
+
+def test_io_and_shapes_modules_import_only_downwards():
+    import pathlib
+    root = pathlib.Path(svm.__file__).parent
+    above_state = ("spherevm.plugins", "spherevm.simulation", "spherevm.analysis", "spherevm.protocols",
+                   "spherevm.sweeps", "spherevm.cli")
+    above_plugins = above_state[1:]
+    rules = {root / "gsdio.py": above_state, root / "shapes.py": above_state, root / "init.py": above_state,
+             root / "state.py": above_state + ("spherevm.gsdio", "spherevm.shapes", "spherevm.init")}
+    rules.update((p, above_plugins) for p in (root / "plugins" / "writers").glob("*.py"))
+    for path, forbidden in rules.items():
+        bad = sorted(m for m in _spherevm_imports(path) if m.startswith(forbidden))
+        assert not bad, f"{path.name} imports {bad} from a higher layer"
+    assert not hasattr(svm.State, "from_gsd")   # reading a file is spherevm.init.from_gsd

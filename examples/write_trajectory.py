@@ -6,7 +6,7 @@
 Open the file in OVITO (File > Load File): vertices are particles, the bonds draw the cell network,
 and a Color coding modifier on ``cell_shape_index`` colours the tissue by shape. All replicas sit
 on spheres centred at the origin; show one with Expression selection ``replica != 0`` followed by
-Delete selected. The last lines restore the final frame with ``State.from_gsd`` and check that it
+Delete selected. The last lines restore the final frame with ``spherevm.init.from_gsd`` and check that it
 is bit for bit the state that was simulated. See docs/file-format.md for the layout.
 """
 from __future__ import annotations
@@ -19,7 +19,7 @@ import spherevm as svm
 from spherevm.plugins.forces import VertexModel
 from spherevm.plugins.integrators import FIRE
 from spherevm.plugins.writers import GSD
-from spherevm.plugins.writers.gsd import n_frames, read_cell_values
+from spherevm.gsdio import n_frames, read_cell_values
 
 
 def main(argv=None):
@@ -55,7 +55,7 @@ def main(argv=None):
 
     # ---- restore the last frame and compare with the simulated state
     frames = n_frames(args.out)
-    restored = svm.State.from_gsd(args.out, frame=-1)
+    restored = svm.init.from_gsd(args.out, frame=-1)
     live = sim.state.to("cpu")
     same_positions = restored.positions.tobytes() == live.positions.tobytes()
     same_topology = all(np.array_equal(getattr(restored, k), getattr(live, k))

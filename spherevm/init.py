@@ -1,10 +1,11 @@
-"""Initial tilings of the sphere: random (the paper's protocol), from polygons, and regular."""
+"""Initial States: random tilings of the sphere (the paper's protocol), from polygons, regular
+tilings, and from a GSD file."""
 from __future__ import annotations
 
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from . import topology
+from . import gsdio, topology
 from .constraints import Sphere
 from .device import CPU
 from .state import State
@@ -255,3 +256,13 @@ def regular_tiling(name: str, radius=None, device=CPU) -> State:
     R = _check_radius(radius, n_cells)
     verts = verts / np.linalg.norm(verts, axis=1)[:, None]
     return from_polygons(verts, _ccw_cells(verts, groups), R, device=device)
+
+
+def from_gsd(path, frame: int = -1, device=CPU, validate: bool = False) -> State:
+    """The State of frame ``frame`` (negative counts from the end) of a spherevm GSD file, restored
+    exactly: bitwise positions, identical topology (see :func:`spherevm.gsdio.read_state`).
+
+    ``validate=True`` also runs :meth:`State.validate` (off by default: at kA = 0 a valid run may
+    fold a cell, which the orientation test rejects).
+    """
+    return gsdio.read_state(path, frame=frame, device=device, validate=validate)

@@ -79,7 +79,7 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
         shots = (start + analysis.log_spaced_times(steps, max(1, frames // 4))).tolist()
         sim.operations.writers.append(GSD(out, trigger=shots))
     sim.run(steps, check_every=100, progress=None if progress is None else lambda i, n: progress("production", i, n))
-    traj = recorder.trajectory(dt=dt)
+    traj = analysis.Trajectory.from_recording(recorder, dt=dt)
     traj.times = traj.times - traj.times[0]
     m = analysis.msd(traj)
     q = analysis.self_overlap(traj, b=b)

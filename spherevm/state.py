@@ -236,17 +236,6 @@ class State:
                    cell_start=cstart, constraint=states[0].constraint,
                    device=device if device is not None else states[0].device, validate=False)
 
-    # ------------------------------------------------------------------ files
-    @classmethod
-    def from_gsd(cls, path, frame: int = -1, device=CPU, validate: bool = False) -> "State":
-        """Restore a State exactly (bitwise positions, identical topology) from a GSD frame.
-
-        ``validate=True`` also runs :meth:`validate` (off by default: at kA = 0 a valid run may
-        fold a cell, which the orientation test rejects).
-        """
-        from .plugins.writers.gsd import read_state
-        return read_state(path, frame=frame, device=device, validate=validate)
-
     def __repr__(self):
         return (f"State(n_replicas={self.n_replicas}, n_cells={self.n_cells}, n_vertices={self.n_vertices}, "
                 f"max_sides={self.max_sides}, constraint={self.constraint!r}, device={self.device.name!r})")

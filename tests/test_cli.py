@@ -57,7 +57,7 @@ def test_minimize_prints_one_row_per_replica_and_writes_gsd(tmp_path, capsys):
     last = max(int(r[6]) for r in rows)
     assert steps[0] == 0 and steps[-1] == last
     assert steps == sorted(set(steps))
-    state = svm.State.from_gsd(str(out))
+    state = svm.init.from_gsd(str(out))
     assert state.n_replicas == 3 and state.n_cells == 3 * 16
 
 

@@ -112,7 +112,7 @@ def test_exploding_step_and_nan_stop_the_run_with_names(tmp_path):
     sim.state.positions[4] = np.nan
     with pytest.raises(FloatingPointError, match="replica 0, vertex 4"):
         sim.run(3)
-    last = svm.State.from_gsd(tmp_path / "t.gsd")
+    last = svm.init.from_gsd(tmp_path / "t.gsd")
     assert np.isfinite(last.positions).all()
 
 

@@ -8,10 +8,12 @@ from scipy.spatial.transform import Rotation
 from scipy.special import j0
 
 import spherevm as svm
-from spherevm.analysis.dynamics import (NoRelaxationWarning, Trajectory, cell_centroids, log_spaced_times, msd,
-                                        remove_rigid_rotation, self_intermediate_scattering, self_overlap,
-                                        tau_alpha)
-from spherevm.analysis.recorder import OnTimesteps, Recorder
+from spherevm.analysis import (NoRelaxationWarning, Trajectory, msd, remove_rigid_rotation,
+                               self_intermediate_scattering, self_overlap, tau_alpha)
+from spherevm.plugins.writers import Recorder
+from spherevm.plugins.writers.recorder import log_spaced_times
+from spherevm.shapes import cell_centroids
+from spherevm.trigger import OnTimesteps
 
 
 # ------------------------------------------------------------------------------------ helpers
@@ -354,8 +356,9 @@ def make_sim():
     return sim
 
 
-def test_recorder_on_live_simulation(tmp_path):
+def test_recorder_on_live_simulation(tmp_path, monkeypatch):
     gsd = pytest.importorskip("gsd.hoomd")
+    gsd_fl = pytest.importorskip("gsd.fl")
     sim = make_sim()
     wanted = log_spaced_times(300, points_per_decade=5)
     rec = Recorder(OnTimesteps(wanted), csv=tmp_path / "cells.csv")
@@ -366,18 +369,23 @@ def test_recorder_on_live_simulation(tmp_path):
     writer.close()
     rec.close()
     np.testing.assert_array_equal(rec.timesteps, wanted)
-    traj = rec.trajectory()
+    traj = Trajectory.from_recording(rec)
     assert traj.centroids.shape == (len(wanted), sim.state.n_cells, 3)
     np.testing.assert_array_equal(traj.times, wanted)
     np.testing.assert_allclose(traj.centroids[-1], cell_centroids(sim.state), atol=0)
     assert np.abs(traj.centroids[-1] - traj.centroids[0]).max() > 1e-6       # the cells moved
-    # the same trajectory read back from the GSD file and from the CSV
+    # the same trajectory read back from the GSD file (opened once) and from the CSV
+    opened, real_open = [], gsd_fl.open
+    monkeypatch.setattr(gsd_fl, "open", lambda *a, **k: opened.append(a or k) or real_open(*a, **k))
     from_file = Trajectory.from_gsd(tmp_path / "run.gsd")
+    assert len(opened) == 1
+    monkeypatch.undo()
     assert len(gsd.open(tmp_path / "run.gsd", "r")) == len(wanted)
     np.testing.assert_array_equal(from_file.times, traj.times)
     np.testing.assert_allclose(from_file.centroids, traj.centroids, atol=1e-12)
     np.testing.assert_array_equal(from_file.cell_replica, [0] * 32 + [1] * 32)
-    from_csv = Recorder.read_csv(tmp_path / "cells.csv")
+    from_csv = Trajectory.from_recording(Recorder.read_csv(tmp_path / "cells.csv"))
+    np.testing.assert_array_equal(from_csv.times, traj.times)
     np.testing.assert_allclose(from_csv.centroids, traj.centroids, atol=1e-12)
     part = Trajectory.from_gsd(tmp_path / "run.gsd", frames=[0, -1])
     np.testing.assert_array_equal(part.times, [0, 300])
@@ -396,7 +404,7 @@ def test_recorder_on_live_simulation(tmp_path):
     if qs.value.min() > 1 / math.e:
         with pytest.warns(NoRelaxationWarning):
             assert math.isnan(qs.tau_alpha())
-    assert rec.trajectory(dt=0.02).times[-1] == pytest.approx(6.0)
+    assert Trajectory.from_recording(rec, dt=0.02).times[-1] == pytest.approx(6.0)
 
 
 def test_recorder_continues_from_a_later_timestep():
@@ -411,6 +419,17 @@ def test_recorder_continues_from_a_later_timestep():
     assert len(rec) == len(log_spaced_times(100, 5))
     with pytest.raises(ValueError, match="trigger"):
         Recorder()
+    with pytest.raises(RuntimeError, match="nothing"):
+        Trajectory.from_recording(Recorder(5))
+
+
+def test_analysis_reexports_the_core_and_writer_names():
+    assert svm.analysis.cell_shapes is svm.shapes.cell_shapes
+    assert svm.analysis.mean_shape_index is svm.shapes.mean_shape_index
+    assert svm.analysis.cell_centroids is cell_centroids
+    assert svm.analysis.Recorder is svm.plugins.writers.Recorder is Recorder
+    assert svm.analysis.log_spaced_times is log_spaced_times
+    assert svm.analysis.OnTimesteps is OnTimesteps
 
 
 def test_trajectory_validation():
@@ -446,6 +465,6 @@ def test_centroids_and_recorder_on_gpu():
     sim.operations.writers.append(rec)
     sim.run(50)
     np.testing.assert_array_equal(rec.timesteps, log_spaced_times(50, 5))
-    traj = rec.trajectory()
+    traj = Trajectory.from_recording(rec)
     assert isinstance(traj.centroids, np.ndarray)
     np.testing.assert_allclose(traj.centroids[-1], cell_centroids(sim.state.to("cpu")), atol=1e-12)

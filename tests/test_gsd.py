@@ -11,7 +11,7 @@ from spherevm import topology
 from spherevm.plugins.forces import VertexModel
 from spherevm.plugins.integrators import FIRE
 from spherevm.plugins.writers import GSD
-from spherevm.plugins.writers.gsd import FrameIndexError, read_cell_values, read_state
+from spherevm.gsdio import FrameIndexError, read_cell_values, read_state
 
 TOPOLOGY = ("cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cells", "vertex_start", "cell_start")
 
@@ -110,10 +110,10 @@ def written(tmp_path):
 
 def test_restore_every_frame_exactly(written):
     path, sim, writer, refs = written
-    assert svm.plugins.writers.gsd.n_frames(path) == len(refs)
+    assert svm.gsdio.n_frames(path) == len(refs)
     for i, ref in enumerate(refs):
         assert_same_state(read_state(path, frame=i), ref)
-        assert_same_state(svm.State.from_gsd(path, frame=i - len(refs)), ref)
+        assert_same_state(svm.init.from_gsd(path, frame=i - len(refs)), ref)
     # the T1 frame really changed the topology, the next one restored it from frame 0's chunks
     assert not np.array_equal(refs[4]["vertex_neighbors"], refs[0]["vertex_neighbors"])
     with gsd.hoomd.open(path) as t:
@@ -156,7 +156,7 @@ def test_hoomd_layout_lengths_box_and_log(written):
             d = frame.particles.position[bonds[:, 0]] - frame.particles.position[bonds[:, 1]]
             assert np.all(np.linalg.norm(d, axis=1) < half)
     # log values are the simulation's, per replica; cell values exact and consistent
-    state0 = svm.State.from_gsd(path, frame=0)
+    state0 = svm.init.from_gsd(path, frame=0)
     area, perimeter = svm.analysis.cell_shapes(state0)
     cells = read_cell_values(path, frame=0)
     assert np.array_equal(cells["area"], area) and np.array_equal(cells["perimeter"], perimeter)
@@ -183,15 +183,15 @@ def test_readable_after_flush_without_close_and_append(tmp_path):
         assert np.array_equal(t[2].log["timestep"], [4])
     writer.close()
     sim.run(2)                          # a write after close appends
-    assert svm.plugins.writers.gsd.n_frames(path) == 4
+    assert svm.gsdio.n_frames(path) == 4
     appender = GSD(path, trigger=1, mode="ab")
     appender.write(sim, sim.timestep)
     appender.close()
-    assert svm.plugins.writers.gsd.n_frames(path) == 5
+    assert svm.gsdio.n_frames(path) == 5
     overwriter = GSD(path, mode="wb")
     overwriter.write(sim, sim.timestep)
     overwriter.close()
-    assert svm.plugins.writers.gsd.n_frames(path) == 1
+    assert svm.gsdio.n_frames(path) == 1
     with pytest.raises(FileExistsError, match="xb"):
         GSD(path, mode="xb").write(sim, 0)
 
@@ -213,7 +213,7 @@ def test_crash_leaves_readable_file(tmp_path):
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 3, proc.stderr
-    assert svm.plugins.writers.gsd.n_frames(path) == 3
+    assert svm.gsdio.n_frames(path) == 3
     assert read_state(path).n_cells == 16
 
 
@@ -234,12 +234,12 @@ def test_bad_input(tmp_path, written):
         f.particles.position = [[0, 0, 0], [1, 0, 0]]
         t.append(f)
     with pytest.raises(ValueError, match="not written by spherevm"):
-        svm.State.from_gsd(plain)
+        svm.init.from_gsd(plain)
     empty = tmp_path / "empty.gsd"
     gsd.hoomd.open(empty, "w").close()
     with pytest.raises(ValueError, match="no complete frame"):
         read_state(empty)
-    n = svm.plugins.writers.gsd.n_frames(path)
+    n = svm.gsdio.n_frames(path)
     for bad in (n, -n - 1, 100):
         with pytest.raises(ValueError, match=f"out of range.*{n} frame"):
             read_state(path, frame=bad)
@@ -326,3 +326,52 @@ def test_ovito_opens_file(written):
         assert not np.any(np.asarray(data.particles.bonds["Periodic Image"]))
         assert data.attributes["Timestep"] == min(3 * i, 9)
         assert len(data.attributes["energy"]) == len(refs[i]["radius"])
+
+
+def test_reader_reads_many_frames_from_one_open_file(written, monkeypatch):
+    import gsd.fl
+    path, sim, writer, refs = written
+    opened, real_open = [], gsd.fl.open
+    monkeypatch.setattr(gsd.fl, "open", lambda *a, **k: opened.append(a or k) or real_open(*a, **k))
+    with svm.gsdio.Reader(path) as f:
+        assert len(f) == len(refs)
+        for i, ref in enumerate(refs):
+            assert_same_state(f.state(i), ref)
+        steps = [f.step(i) for i in range(len(f))]
+        with pytest.raises(FrameIndexError):
+            f.step(len(f))
+    assert len(opened) == 1
+    with gsd.hoomd.open(path) as t:
+        assert steps == [int(frame.configuration.step) for frame in t]
+
+
+def _spherevm_imports(path):
+    """Every spherevm module a source file imports, at the top or inside functions."""
+    import ast
+    import pathlib
+    rel = pathlib.Path(path).relative_to(pathlib.Path(svm.__file__).parent.parent).with_suffix("")
+    package = list(rel.parts[:-1])          # what a level-1 relative import starts from
+    found = set()
+    for node in ast.walk(ast.parse(pathlib.Path(path).read_text())):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = package[:len(package) - node.level + 1] if node.level else []
+            module = ".".join(base + ([node.module] if node.module else []))
+            found.update([module] if node.module else [f"{module}.{a.name}" for a in node.names])
+    return {m for m in found if m.split(".")[0] == "spherevm"}
+
+
+def test_io_and_shapes_modules_import_only_downwards():
+    import pathlib
+    root = pathlib.Path(svm.__file__).parent
+    above_state = ("spherevm.plugins", "spherevm.simulation", "spherevm.analysis", "spherevm.protocols",
+                   "spherevm.sweeps", "spherevm.cli")
+    above_plugins = above_state[1:]
+    rules = {root / "gsdio.py": above_state, root / "shapes.py": above_state, root / "init.py": above_state,
+             root / "state.py": above_state + ("spherevm.gsdio", "spherevm.shapes", "spherevm.init")}
+    rules.update((p, above_plugins) for p in (root / "plugins" / "writers").glob("*.py"))
+    for path, forbidden in rules.items():
+        bad = sorted(m for m in _spherevm_imports(path) if m.startswith(forbidden))
+        assert not bad, f"{path.name} imports {bad} from a higher layer"
+    assert not hasattr(svm.State, "from_gsd")   # reading a file is spherevm.init.from_gsd

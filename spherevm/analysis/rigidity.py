@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .shapes import pentagon_perimeter
+from ..shapes import pentagon_perimeter
 
 #: Energy per cell (units kP <A>^2) below which a minimised state counts as zero energy. The
 #: measured distribution is bimodal with a gap of many decades: floppy states stop at

@@ -1,13 +1,53 @@
-"""Record cell centroids of a live Simulation (log-spaced or on any trigger) for the dynamics analysis."""
+"""Record cell centroids of a live Simulation (log-spaced or on any trigger) for the dynamics analysis.
+
+The Recorder keeps raw arrays (a :class:`Recording`); ``spherevm.analysis.Trajectory.from_recording``
+turns them into a Trajectory, so this writer needs nothing from the analysis layer above it.
+"""
 from __future__ import annotations
 
+import math
 import os
+from dataclasses import dataclass
 
 import numpy as np
 
-from ..plugins.base import Writer
-from ..trigger import OnTimesteps, as_trigger
-from .dynamics import CENTROID_METHODS, Trajectory, cell_centroids, log_spaced_times
+from ...shapes import CENTROID_METHODS, cell_centroids
+from ...trigger import OnTimesteps, as_trigger
+from ..base import Writer
+
+
+def log_spaced_times(t_max: int, points_per_decade: int = 10, t_min: int = 1, include_zero: bool = True) -> np.ndarray:
+    """Sorted unique integer timesteps, about ``points_per_decade`` per decade from ``t_min`` to ``t_max``.
+
+    The points ``t_min * 10^(k / points_per_decade)`` rounded to integers (duplicates at small t
+    dropped, so the first decades hold every integer), always including ``t_min`` and ``t_max``,
+    plus 0 (the time origin) when ``include_zero``. Feed them to :class:`Recorder` (add the current
+    timestep for a run not starting at 0).
+    """
+    for name, v in (("t_max", t_max), ("t_min", t_min), ("points_per_decade", points_per_decade)):
+        if isinstance(v, bool) or int(v) != v or v < 1:
+            raise ValueError(f"{name} must be a positive integer, got {v!r}")
+    t_max, t_min, ppd = int(t_max), int(t_min), int(points_per_decade)
+    if t_max < t_min:
+        raise ValueError(f"t_max ({t_max}) must be >= t_min ({t_min})")
+    n = int(math.floor(ppd * math.log10(t_max / t_min) + 1e-9))
+    pts = np.rint(t_min * 10.0 ** (np.arange(n + 1) / ppd)).astype(np.int64)
+    pts = np.concatenate([[0] if include_zero else [], [t_min], pts, [t_max]]).astype(np.int64)
+    pts = pts[(pts <= t_max) & ((pts >= t_min) | (include_zero & (pts == 0)))]
+    return np.unique(pts)
+
+
+@dataclass(frozen=True)
+class Recording:
+    """Cell centroids recorded over time: what a :class:`Recorder` holds and its CSV file stores.
+
+    timesteps : (T,) int64; centroids : (T, n_cells, 3) float64; cell_replica : (n_cells,) replica
+    of each cell; radius : (n_replicas,) sphere radius of each replica.
+    """
+    timesteps: np.ndarray
+    centroids: np.ndarray
+    cell_replica: np.ndarray
+    radius: np.ndarray
 
 
 class Recorder(Writer):
@@ -21,7 +61,8 @@ class Recorder(Writer):
         is overwritten at the first write and flushed after every frame).
     method : centroid definition, ``"area"`` or ``"vertex"`` (see :func:`cell_centroids`).
 
-    ``trajectory()`` returns the recorded :class:`~spherevm.analysis.dynamics.Trajectory`.
+    :meth:`recording` returns what was recorded; ``spherevm.analysis.Trajectory.from_recording``
+    makes it a Trajectory.
 
     The Simulation runs writers on timestep 0 and after each step, but not at the start of a run
     that continues from timestep t > 0. So that such a run keeps its time origin, a Recorder
@@ -116,20 +157,15 @@ class Recorder(Writer):
     def __len__(self):
         return len(self._times)
 
-    def trajectory(self, dt: float = None) -> Trajectory:
-        """The recorded centroids as a Trajectory; times are timesteps, or ``timestep * dt`` if given."""
+    def recording(self) -> Recording:
+        """The centroids recorded so far (copies)."""
         if not self._times:
             raise RuntimeError("Recorder has recorded nothing yet: append it to sim.operations.writers and run")
-        times = self.timesteps.astype(np.float64)
-        if dt is not None:
-            if not np.isfinite(dt) or dt <= 0:
-                raise ValueError(f"dt must be positive and finite, got {dt!r}")
-            times = times * dt
-        return Trajectory(times, np.stack(self._centroids), self._cell_replica, self._radius)
+        return Recording(self.timesteps, np.stack(self._centroids), self._cell_replica.copy(), self._radius.copy())
 
     @staticmethod
-    def read_csv(path) -> Trajectory:
-        """A Trajectory from a Recorder CSV (radius from the centroids' distance to the centre)."""
+    def read_csv(path) -> Recording:
+        """The Recording in a Recorder CSV (radius from the centroids' distance to the centre)."""
         data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
         times, first = np.unique(data[:, 0], return_index=True)
         n_cells = int(data[:, 1].max()) + 1
@@ -142,7 +178,7 @@ class Recorder(Writer):
         rep = data[:n_cells, 2].astype(np.int64)
         r = np.linalg.norm(cent[0], axis=1)
         radius = np.bincount(rep, weights=r) / np.bincount(rep)
-        return Trajectory(times, cent, rep, radius)
+        return Recording(times.astype(np.int64), cent, rep, radius)
 
     def __repr__(self):
         return f"Recorder(trigger={self.trigger!r}, csv={self.csv!r}, method={self.method!r}, frames={len(self)})"

@@ -1,0 +1,226 @@
+"""Cell centroids over time (:class:`Trajectory`) and the removal of each tissue's rigid rotation.
+
+A Trajectory is built from States, from a spherevm GSD file or from a Recorder's
+:class:`~spherevm.plugins.writers.recorder.Recording`; :mod:`spherevm.analysis.dynamics` measures it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..gsdio import Reader
+from ..plugins.writers.recorder import Recorder
+from ..shapes import cell_centroids
+
+
+# ======================================================================================== trajectory
+@dataclass(eq=False)
+class Trajectory:
+    """Cell centroids over time, for one tissue or an ensemble of replicas.
+
+    times : (T,) sampling times (timesteps, or times in any unit), increasing.
+    centroids : (T, n_cells, 3) cell positions on the sphere of each replica.
+    cell_replica : (n_cells,) replica of each cell.
+    radius : (n_replicas,) sphere radius of each replica.
+    """
+    times: np.ndarray
+    centroids: np.ndarray
+    cell_replica: np.ndarray
+    radius: np.ndarray
+    _order: np.ndarray = field(default=None, init=False, repr=False, compare=False)
+    _starts: np.ndarray = field(default=None, init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        self.times = np.asarray(self.times, dtype=np.float64).reshape(-1)
+        self.centroids = np.asarray(self.centroids, dtype=np.float64)
+        self.cell_replica = np.asarray(self.cell_replica, dtype=np.int64).reshape(-1)
+        self.radius = np.atleast_1d(np.asarray(self.radius, dtype=np.float64))
+        T = len(self.times)
+        if self.centroids.ndim != 3 or self.centroids.shape[2] != 3 or self.centroids.shape[0] != T:
+            raise ValueError(f"centroids must have shape (len(times), n_cells, 3) = ({T}, n_cells, 3), "
+                             f"got {self.centroids.shape}")
+        if T < 1:
+            raise ValueError("a Trajectory needs at least one frame")
+        if np.any(np.diff(self.times) <= 0):
+            raise ValueError("times must increase strictly")
+        if self.cell_replica.shape != (self.centroids.shape[1],):
+            raise ValueError(f"cell_replica must have one entry per cell ({self.centroids.shape[1]}), "
+                             f"got shape {self.cell_replica.shape}")
+        if len(self.cell_replica) and self.cell_replica.min() < 0:
+            raise ValueError("cell_replica must be non-negative")
+        n_rep = int(self.cell_replica.max()) + 1 if len(self.cell_replica) else 0
+        if self.radius.shape != (n_rep,):
+            raise ValueError(f"radius must have one value per replica ({n_rep}), got shape {self.radius.shape}")
+        if not np.all(np.isfinite(self.radius)) or np.any(self.radius <= 0):
+            raise ValueError("radius must be positive and finite")
+        counts = np.bincount(self.cell_replica, minlength=n_rep)
+        if np.any(counts == 0):
+            raise ValueError(f"replica {int(np.flatnonzero(counts == 0)[0])} has no cells")
+        if not np.all(np.isfinite(self.centroids)):
+            raise ValueError("centroids contain NaN or inf")
+        self._order, self._starts = _replica_layout(self.cell_replica, n_rep)
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n_frames(self) -> int:
+        return len(self.times)
+
+    def __len__(self):
+        return self.n_frames
+
+    @property
+    def n_cells(self) -> int:
+        return self.centroids.shape[1]
+
+    @property
+    def n_replicas(self) -> int:
+        return len(self.radius)
+
+    @property
+    def cells_per_replica(self) -> np.ndarray:
+        return np.bincount(self.cell_replica, minlength=self.n_replicas)
+
+    @property
+    def length_unit(self) -> np.ndarray:
+        """sqrt(<A>) per replica, with <A> = 4 pi R^2 / N: the unit of every length the measures return."""
+        return np.sqrt(4 * np.pi * self.radius ** 2 / self.cells_per_replica)
+
+    # ------------------------------------------------------------------ builders
+    @classmethod
+    def from_states(cls, times, states, method: str = "area") -> "Trajectory":
+        """A Trajectory from States of the same tissue(s) at the given times (cells never renumbered)."""
+        states = list(states)
+        times = np.asarray(times, dtype=np.float64).reshape(-1)
+        if len(states) != len(times) or not states:
+            raise ValueError(f"need one State per time, got {len(states)} states and {len(times)} times")
+        first = states[0]
+        cents = []
+        for k, s in enumerate(states):   # one vectorised centroid computation per frame
+            if s.n_cells != first.n_cells or not np.array_equal(s.cell_start, first.cell_start):
+                raise ValueError(f"state {k} has {s.n_cells} cells in {s.n_replicas} replicas, frame 0 "
+                                 f"{first.n_cells} in {first.n_replicas}: the analysis follows fixed cells")
+            cents.append(cell_centroids(s, method=method))
+        return cls(times, np.stack(cents), first.cell_replica_np(), first.radius_np())
+
+    @classmethod
+    def from_gsd(cls, path, frames=None, method: str = "area", times: str = "step") -> "Trajectory":
+        """Centroids of the frames of a spherevm GSD file (all frames, or ``frames``: a slice or indices).
+
+        ``times="step"`` takes each frame's ``configuration/step`` (timesteps); ``"frame"`` uses the
+        frame indices. Each frame's State is restored exactly (:func:`spherevm.init.from_gsd`), so
+        the cell topology after T1s is the one of that frame. The file is opened once.
+        """
+        if times not in ("step", "frame"):
+            raise ValueError(f"times must be 'step' or 'frame', got {times!r}")
+        with Reader(path) as reader:
+            n = len(reader)
+            if frames is None:
+                idx = np.arange(n)
+            elif isinstance(frames, slice):
+                idx = np.arange(n)[frames]
+            else:
+                idx = np.asarray(frames, dtype=np.int64).reshape(-1)
+                idx = np.where(idx < 0, idx + n, idx)
+                if np.any((idx < 0) | (idx >= n)):
+                    raise IndexError(f"frames must lie in 0..{n - 1} (or -{n}..-1) for {path!r}")
+            if len(idx) == 0:
+                raise ValueError(f"no frames selected from {path!r} ({n} frames)")
+            t = (np.array([reader.step(int(i)) for i in idx], dtype=np.float64) if times == "step"
+                 else idx.astype(np.float64))
+            return cls.from_states(t, [reader.state(int(i)) for i in idx], method=method)
+
+    @classmethod
+    def from_recording(cls, recording, dt: float = None) -> "Trajectory":
+        """A Trajectory from a :class:`~spherevm.plugins.writers.Recorder` or the
+        :class:`~spherevm.plugins.writers.recorder.Recording` it returns or reads from its CSV.
+
+        Times are the recorded timesteps, or ``timestep * dt`` if ``dt`` is given.
+        """
+        if isinstance(recording, Recorder):
+            recording = recording.recording()
+        times = np.asarray(recording.timesteps, dtype=np.float64)
+        if dt is not None:
+            if not np.isfinite(dt) or dt <= 0:
+                raise ValueError(f"dt must be positive and finite, got {dt!r}")
+            times = times * dt
+        return cls(times, recording.centroids, recording.cell_replica, recording.radius)
+
+    # ------------------------------------------------------------------ helpers
+    def without_rotation(self, reference: int = 0) -> "Trajectory":
+        """A copy in which every frame is rigidly rotated (per replica) onto frame ``reference``.
+
+        For viewing and for custom analyses; the measures below remove the rotation pair by pair.
+        """
+        ref = self.centroids[reference]
+        return Trajectory(self.times.copy(), remove_rigid_rotation(ref, self.centroids, self.cell_replica),
+                          self.cell_replica.copy(), self.radius.copy())
+
+
+def _replica_layout(cell_replica, n_rep):
+    """Sort order of cells by replica (None when already sorted) and the start of each replica."""
+    order = None if np.all(np.diff(cell_replica) >= 0) else np.argsort(cell_replica, kind="stable")
+    counts = np.bincount(cell_replica, minlength=n_rep)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    return order, starts
+
+
+def _replica_sum(values, order, starts):
+    """Sum ``values (..., n_cells)`` over the cells of each replica: ``(..., n_replicas)``."""
+    if order is not None:
+        values = values[..., order]
+    return np.add.reduceat(values, starts, axis=-1)
+
+
+# ======================================================================================== rotation
+def remove_rigid_rotation(reference, current, cell_replica, return_rotation: bool = False):
+    """Rotate each replica of ``current`` rigidly onto ``reference``; returns the rotated positions.
+
+    For every replica r (cells ``cell_replica == r``) the proper rotation ``Q_r`` (det +1) about the
+    sphere's centre that minimises ``sum_i |Q_r c_i - ref_i|^2`` (Kabsch: SVD of
+    ``H = sum_i c_i ref_i^T = U S V^T``, ``Q = V diag(1, 1, d) U^T``, ``d = sign det(V U^T)``) is
+    applied to ``current``. No translation: the sphere's centre is fixed.
+
+    ``reference`` is ``(n_cells, 3)`` or ``(..., n_cells, 3)``, ``current`` ``(..., n_cells, 3)``
+    (broadcast against each other, e.g. all frames of a trajectory onto one reference). All
+    replicas and leading indices are solved in one batched ``np.linalg.svd``.
+    ``return_rotation=True`` also returns ``Q`` with shape ``(..., n_replicas, 3, 3)``.
+    """
+    ref = np.asarray(reference, dtype=np.float64)
+    cur = np.asarray(current, dtype=np.float64)
+    rep = np.asarray(cell_replica, dtype=np.int64).reshape(-1)
+    if ref.shape[-1] != 3 or cur.shape[-1] != 3 or ref.shape[-2] != len(rep) or cur.shape[-2] != len(rep):
+        raise ValueError(f"reference {ref.shape} and current {cur.shape} must end in (n_cells, 3) with "
+                         f"n_cells = len(cell_replica) = {len(rep)}")
+    n_rep = int(rep.max()) + 1
+    order, starts = _replica_layout(rep, n_rep)
+    sizes = np.diff(np.append(starts, len(rep)))
+    if np.any(sizes == 0):
+        raise ValueError("every replica index 0..max(cell_replica) must have cells")
+    equal = order is None and np.all(sizes == sizes[0])
+    if equal:   # the usual ensemble: contiguous replicas of equal size, batched BLAS products
+        m = int(sizes[0])
+        ref_r = ref.reshape(ref.shape[:-2] + (n_rep, m, 3))
+        cur_r = cur.reshape(cur.shape[:-2] + (n_rep, m, 3))
+        H = np.swapaxes(cur_r, -1, -2) @ ref_r                              # (..., n_rep, 3, 3)
+    else:       # H[..., r, a, b] = sum over the cells of replica r of cur[a] ref[b]
+        outer = cur[..., :, :, None] * ref[..., :, None, :]                 # (..., n_cells, 3, 3)
+        outer = np.moveaxis(outer.reshape(outer.shape[:-2] + (9,)), -2, -1)  # (..., 9, n_cells)
+        H = _replica_sum(outer, order, starts)                                # (..., 9, n_rep)
+        H = np.moveaxis(H, -1, -2).reshape(H.shape[:-2] + (n_rep, 3, 3))
+    U, _, Vt = np.linalg.svd(H)
+    V = np.swapaxes(Vt, -1, -2)
+    d = np.sign(np.linalg.det(V) * np.linalg.det(U))
+    d = np.where(d == 0, 1.0, d)
+    V = V.copy()
+    V[..., :, 2] *= d[..., None]
+    Q = V @ np.swapaxes(U, -1, -2)                                        # (..., n_rep, 3, 3)
+    if equal:
+        rotated = (cur_r @ np.swapaxes(Q, -1, -2)).reshape(np.broadcast_shapes(Q.shape[:-3], cur.shape[:-2])
+                                                          + cur.shape[-2:])
+    else:
+        Qc = np.broadcast_to(Q, np.broadcast_shapes(Q.shape[:-3], cur.shape[:-2]) + Q.shape[-3:])
+        Qg = Qc[..., rep, :, :]                                           # (..., n_cells, 3, 3)
+        rotated = (Qg[..., 0] * cur[..., None, 0] + Qg[..., 1] * cur[..., None, 1]
+                   + Qg[..., 2] * cur[..., None, 2])
+    return (rotated, Q) if return_rotation else rotated

@@ -1,0 +1,129 @@
+"""Cell shapes and positions of a State: areas, perimeters, shape indices, centroids, and the
+regular spherical polygons they are compared with.
+
+Core cell geometry, below the plugins: the GSD writer, the Recorder and the Simulation's loggables
+use it without importing :mod:`spherevm.analysis` (which re-exports it for users).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .constraints import Sphere
+
+CENTROID_METHODS = ("area", "vertex")
+
+
+# ======================================================================================== shapes
+def cell_shapes(state):
+    """Per-cell areas and perimeters, as NumPy arrays of length ``n_cells``."""
+    g = state.constraint.cell_geometry(state)
+    return state.device.to_numpy(g.area), state.device.to_numpy(g.perimeter)
+
+
+def shape_index_of(area, perimeter):
+    """``P / sqrt(A)`` per cell; NaN for a cell of non-positive area (folded over, which the energy
+    allows at kA = 0)."""
+    return perimeter / np.sqrt(np.where(area > 0, area, np.nan))
+
+
+def shape_index(state):
+    """Per-cell shape index ``P / sqrt(A)`` (see :func:`shape_index_of`)."""
+    return shape_index_of(*cell_shapes(state))
+
+
+def mean_shape_index(state):
+    """Mean shape index per replica, over the cells of positive area."""
+    q = shape_index(state)
+    ok = np.isfinite(q)
+    rep = state.cell_replica_np()
+    total = np.bincount(rep, weights=np.where(ok, q, 0.0), minlength=state.n_replicas)
+    return total / np.maximum(np.bincount(rep, weights=ok, minlength=state.n_replicas), 1)
+
+
+def regular_polygon_perimeter(n_sides: int, area: float, radius: float) -> float:
+    """Perimeter of the regular spherical ``n_sides``-gon of the given area on a sphere of ``radius``.
+
+    Interior angle from the angle excess ``alpha = (A/R^2 + (n-2) pi)/n``; side from the right
+    triangle centre-vertex-midpoint, ``cos(s/2) = cos(pi/n) / sin(alpha/2)``.
+    """
+    n = int(n_sides)
+    if n < 3:
+        raise ValueError(f"n_sides must be >= 3, got {n_sides}")
+    if not radius > 0 or not area > 0:
+        raise ValueError(f"area and radius must be positive, got area={area}, radius={radius}")
+    if area >= 2 * np.pi * radius ** 2:
+        raise ValueError(f"area must be below a hemisphere, 2 pi R^2 = {2 * np.pi * radius ** 2:g}, got {area}")
+    alpha = (area / radius ** 2 + (n - 2) * np.pi) / n
+    half_side = np.arccos(np.clip(np.cos(np.pi / n) / np.sin(alpha / 2), -1.0, 1.0))
+    return float(2 * n * half_side * radius)
+
+
+def pentagon_perimeter(n_cells) -> float:
+    """The paper's bound: perimeter of a unit-area regular spherical pentagon, R = sqrt(N / 4 pi).
+
+    Accepts a scalar or an array of cell numbers (returns an array then).
+    """
+    n = np.asarray(n_cells)
+    if np.any(n < 4):
+        raise ValueError(f"n_cells must be >= 4, got {n_cells}")
+    values = [regular_polygon_perimeter(5, 1.0, np.sqrt(k / (4 * np.pi))) for k in np.atleast_1d(n)]
+    return values[0] if n.ndim == 0 else np.array(values)
+
+
+# ======================================================================================== centroids
+def cell_centroids(state, method: str = "area"):
+    """Cell positions on the sphere, ``(n_cells, 3)`` NumPy float64, each at distance R from the centre.
+
+    ``method="area"`` (default): the centre of mass of the spherical polygon, pushed radially onto
+    the sphere. The surface integral of the unit normal over a spherical polygon is exact and
+    cheap: closing the polygon with the planar sectors (centre, edge arc) gives a closed surface,
+    so ``integral of n dA = (R^2 / 2) sum_edges theta_e (a_e x b_e) / |a_e x b_e|`` over the edges
+    ``a_e -> b_e`` taken counter-clockwise, ``theta_e`` the arc angle. The centroid direction is
+    that vector, normalised.
+
+    ``method="vertex"``: ``R`` times the normalised mean of the unit vertex directions
+    (:meth:`spherevm.constraints.Sphere.cell_centers`).
+
+    Why "area" is the default: the vertex centroid depends on how the vertices are spread along the
+    boundary, not only on the cell's shape, and it jumps at every T1. Just before a T1 the short
+    edge's two vertices almost coincide and count twice in the two cells that lose the edge; after
+    the flip they count once, so the vertex centroid of an n-sided cell jumps by about
+    ``|r_edge - r_cell| / n``, roughly 0.08 sqrt(<A>) for a hexagon, a spurious displacement in
+    every T1 that a cage plateau of the MSD (around 0.01 <A> in a glass) would feel. The area
+    centroid is continuous through a T1: flipping a vanishing edge barely changes the polygon.
+
+    A cell folded over (non-positive area, allowed at kA = 0) has no meaningful area centroid (its
+    area vector vanishes or points inward); such cells fall back to the vertex centroid.
+
+    Works on either device (the sums run where the state lives); only the Sphere is supported.
+    """
+    if method not in CENTROID_METHODS:
+        raise ValueError(f"method must be one of {CENTROID_METHODS}, got {method!r}")
+    if not isinstance(state.constraint, Sphere):
+        raise NotImplementedError(f"cell_centroids supports the Sphere constraint only, got "
+                                  f"{type(state.constraint).__name__}")
+    xp = state.device.xp
+    pos = state.positions
+    unit = pos / xp.sqrt((pos * pos).sum(axis=1))[:, None]
+    cells = state.vertex_cells.reshape(-1)            # corner k of vertex v lies in cell vertex_cells[v, k]
+    n = state.n_cells
+
+    def per_cell(w):                                  # w: (V, 3 corners, 3 components)
+        return xp.stack([xp.bincount(cells, weights=w[..., i].reshape(-1), minlength=n) for i in range(3)],
+                        axis=1)
+
+    vertex_centroid = state.constraint.cell_centers(state)
+    direction = vertex_centroid
+    if method == "area":
+        a = unit[:, None, :]
+        b = unit[state.vertex_neighbors]               # edge v -> vertex_neighbors[v, k] runs CCW in that cell
+        cr = xp.cross(a, b)
+        s = xp.sqrt((cr * cr).sum(axis=-1))
+        theta = xp.arctan2(s, (a * b).sum(axis=-1))
+        factor = xp.where(s > 0, theta / xp.where(s > 0, s, 1.0), 1.0)
+        area_vec = per_cell(cr * factor[..., None])    # = 2 * integral of n over the cell (unit sphere)
+        ok = (area_vec * vertex_centroid).sum(axis=1) > 0
+        direction = xp.where(ok[:, None], area_vec, vertex_centroid)
+    direction = direction / xp.sqrt((direction * direction).sum(axis=1))[:, None]
+    out = state.radius[state.cell_replica][:, None] * direction
+    return np.asarray(state.device.to_numpy(out), dtype=np.float64)

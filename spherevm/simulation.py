@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import analysis
+from . import init, shapes
 from .device import resolve
 from .plugins.base import Force, Integrator, Minimizer, Updater, Writer
 
@@ -155,6 +155,11 @@ class Simulation:
         for op in self.operations:
             op.attach(self)
 
+    def create_state_from_gsd(self, path, frame: int = -1):
+        """Set the State from a GSD frame (HOOMD's ``Simulation.create_state_from_gsd``), restored
+        exactly on this Simulation's device; see :func:`spherevm.init.from_gsd`."""
+        self.state = init.from_gsd(path, frame=frame, device=self.device)
+
     def _require_state(self):
         if self._state is None:
             raise RuntimeError("set sim.state first, for example sim.state = spherevm.init.random_tiling(64)")
@@ -204,7 +209,7 @@ class Simulation:
             "energy": lambda s: to_np(s.compute_forces()[1]),
             "energy_per_cell": lambda s: to_np(s.compute_forces()[1]) / s.state.cells_per_replica,
             "max_force": lambda s: to_np(s.max_force()),
-            "mean_shape_index": lambda s: analysis.mean_shape_index(s.state),
+            "mean_shape_index": lambda s: shapes.mean_shape_index(s.state),
         }
         owner = dict.fromkeys(out, "the Simulation")
         for op in self.operations:
@@ -367,4 +372,4 @@ class Simulation:
                               reason=np.where(running, "max_steps", fire.reason).astype(str), energy=e,
                               energy_per_cell=e / n_cells, max_force=self.device.to_numpy(self.max_force()),
                               steps=np.where(running, int(max_steps), fire.steps),
-                              mean_shape_index=analysis.mean_shape_index(self._state))
+                              mean_shape_index=shapes.mean_shape_index(self._state))

@@ -23,6 +23,11 @@ def _cupy_or_none():
         return None
 
 
+def gpu_available() -> bool:
+    """Whether CuPy imports and sees a working NVIDIA GPU."""
+    return _cupy_or_none() is not None
+
+
 class Device:
     """An execution device: ``name`` is ``"cpu"`` or ``"gpu"``, ``xp`` its array module."""
 
@@ -117,7 +122,7 @@ def info() -> dict:
             out["gpu_error"] = str(exc).splitlines()[0]
     except ImportError:
         out["cupy"] = None
-    out["gpu_usable"] = _cupy_or_none() is not None
+    out["gpu_usable"] = gpu_available()
     out["default_device"] = resolve("auto").name
     return out
 

@@ -450,9 +450,6 @@ def test_trajectory_validation():
 # ------------------------------------------------------------------------------------ GPU
 @pytest.mark.gpu
 def test_centroids_and_recorder_on_gpu():
-    from gpu_support import HAS_GPU
-    if not HAS_GPU:
-        pytest.skip("needs CuPy and a working NVIDIA GPU")
     cpu = svm.init.random_tiling(100, replicas=3, seed=4)
     gpu = cpu.to("gpu")
     for method in ("area", "vertex"):

@@ -1,14 +1,13 @@
 """GPU path (CuPy RawKernels) against the NumPy reference. Skipped without CuPy and a GPU."""
 import numpy as np
 import pytest
-from gpu_support import requires_gpu
 
 import spherevm as svm
 from spherevm.plugins.forces import VertexModel
 from spherevm.plugins.integrators import FIRE, Active, Brownian
 from spherevm.plugins.updaters import T1
 
-pytestmark = [requires_gpu, pytest.mark.gpu]
+pytestmark = pytest.mark.gpu
 
 
 def _rel(a, b):

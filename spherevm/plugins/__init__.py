@@ -31,7 +31,11 @@ def kind_of(obj) -> str:
 
 
 def _entry_points() -> dict:
-    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+    """Entry points by name; a name registered more than once maps to all of its registrations."""
+    out = {}
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        out.setdefault(ep.name, []).append(ep)
+    return out
 
 
 def load(name: str):
@@ -39,7 +43,10 @@ def load(name: str):
     eps = _entry_points()
     if name not in eps:
         raise ValueError(f"no spherevm plugin named {name!r}; available: {sorted(eps)}")
-    cls = eps[name].load()
+    if len({ep.value for ep in eps[name]}) > 1:
+        raise ValueError(f"plugin name {name!r} is registered more than once: "
+                         f"{', '.join(ep.value for ep in eps[name])}; uninstall one of them")
+    cls = eps[name][0].load()
     if kind_of(cls) == "unknown":
         raise TypeError(f"plugin {name!r} ({cls!r}) must subclass spherevm.plugins.Force, Integrator, "
                         "Updater or Writer")
@@ -56,7 +63,8 @@ def describe() -> list:
     entry point's ``module:Class`` and its distribution. A plugin that fails to load is listed with
     kind ``"broken: <error>"`` rather than breaking the listing."""
     rows = []
-    for name, ep in sorted(_entry_points().items()):
+    for name, registered in sorted(_entry_points().items()):
+        ep = registered[0]
         source = ep.value
         dist = getattr(ep, "dist", None)
         if dist is not None:

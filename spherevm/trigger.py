@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .validation import integer
+
 
 class Trigger:
     """Base class: ``trigger(timestep) -> bool``. Combine with ``&``, ``|`` and ``~``."""
@@ -20,20 +22,14 @@ class Trigger:
         return Not(self)
 
 
-def _nonneg_int(name, value):
-    if int(value) != value or value < 0:
-        raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
-    return int(value)
-
-
 class Periodic(Trigger):
     """Every ``period`` steps, on timesteps with ``(timestep - phase) % period == 0``."""
 
     def __init__(self, period: int, phase: int = 0):
-        self.period = _nonneg_int("period", period)
+        self.period = integer("period", period)
         if self.period < 1:
             raise ValueError(f"period must be >= 1, got {period!r}")
-        self.phase = _nonneg_int("phase", phase)
+        self.phase = integer("phase", phase)
 
     def __call__(self, timestep):
         return timestep >= self.phase and (timestep - self.phase) % self.period == 0
@@ -46,7 +42,7 @@ class On(Trigger):
     """Exactly on the given timestep."""
 
     def __init__(self, timestep: int):
-        self.timestep = _nonneg_int("timestep", timestep)
+        self.timestep = integer("timestep", timestep)
 
     def __call__(self, timestep):
         return timestep == self.timestep
@@ -59,7 +55,7 @@ class After(Trigger):
     """On every timestep strictly after the given one."""
 
     def __init__(self, timestep: int):
-        self.timestep = _nonneg_int("timestep", timestep)
+        self.timestep = integer("timestep", timestep)
 
     def __call__(self, timestep):
         return timestep > self.timestep
@@ -72,7 +68,7 @@ class Before(Trigger):
     """On every timestep strictly before the given one."""
 
     def __init__(self, timestep: int):
-        self.timestep = _nonneg_int("timestep", timestep)
+        self.timestep = integer("timestep", timestep)
 
     def __call__(self, timestep):
         return timestep < self.timestep

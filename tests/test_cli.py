@@ -1,7 +1,9 @@
 """The ``spherevm`` command line: in-process through ``spherevm.cli.main`` and once as a subprocess."""
 from __future__ import annotations
 
+import ast
 import json
+import os
 import pathlib
 import subprocess
 import sys
@@ -10,7 +12,8 @@ import numpy as np
 import pytest
 
 import spherevm as svm
-from spherevm import cli
+from spherevm import cli, sweeps
+from spherevm.cli import rigidity as rigidity_cli
 
 EXAMPLE = pathlib.Path(__file__).parent / "plugin_example"
 
@@ -149,6 +152,94 @@ def test_help_and_version(capsys):
     assert "--p0" in capsys.readouterr().out
     assert cli.main(["--version"]) == 0
     assert svm.__version__ in capsys.readouterr().out
+
+
+# ------------------------------------------------------------------------------------ rigidity
+def _rigidity_args(*argv):
+    return cli.build_parser().parse_args(["rigidity", *argv])
+
+
+def test_rigidity_runs_a_tiny_sweep_and_writes_tables(tmp_path, capsys):
+    out = tmp_path / "cli"
+    args = _rigidity_args("--cells", "16", "--p0", "3.3", "4.2", "--replicas", "2", "--device", "cpu",
+                          "--workers", "1", "--out", str(out))
+    assert args.func is rigidity_cli.run
+    assert args.func(args) == 0
+    captured = capsys.readouterr()
+    assert "pentagon" in captured.out and "16" in captured.out
+    assert "rigidity: [" in captured.err and "minimisations 4/4" in captured.err
+    names = set(os.listdir(out))
+    assert {"manifest.json", "chunks", "replicas.csv", "fraction.csv", "p0star.csv", "p0star_density.csv"} <= names
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        assert {"fraction.png", "p0star_distribution.png", "p0star_vs_N.png", "critical_perimeter.png"} <= names
+    lines = (out / "fraction.csv").read_text().splitlines()
+    assert lines[0].startswith("n_cells,p0,n_replicas,n_zero,n_rigid,n_unconverged")
+    assert lines[1].startswith("16,3.3,2,0,2,0") and lines[2].startswith("16,4.2,2,2,0,0")
+    # a mismatching rerun fails before any work
+    args = _rigidity_args("--cells", "16", "--p0", "3.3", "4.2", "--replicas", "3", "--device", "cpu",
+                          "--out", str(out))
+    with pytest.raises(ValueError, match="different parameters"):
+        args.func(args)
+    rc = cli.main(["rigidity", "--cells", "16", "--p0", "3.3", "4.2", "--replicas", "3", "--device", "cpu",
+                   "--out", str(out)])
+    _assert_one_line_error(capsys.readouterr(), rc, 2)
+
+
+def test_rigidity_defaults_are_the_small_sweep():
+    args = _rigidity_args()
+    assert args.cells == [16, 32] and args.replicas == 12
+    assert sweeps.parse_p0_grid(args.p0) == pytest.approx(np.round(np.arange(3.5, 4.0001, 0.025), 10))
+    assert args.kr == 0.0 and args.device == "auto"
+    sweep = rigidity_cli.sweep_from_args(args)
+    assert sweep == sweeps.RigiditySweep(cells=[16, 32], p0=sweeps.parse_p0_grid(["3.5:4.0:0.025"]), replicas=12)
+    ref = rigidity_cli.sweep_from_args(_rigidity_args("--t1-reference"))
+    assert ref.t1_threshold == 0.1 and ref.t1_length_factor == 2.0
+    for bad in (["--p0", "3.9", "3.8"], ["--p0", "3.6:3.5:0.1"]):
+        with pytest.raises(ValueError, match="p0"):
+            rigidity_cli.sweep_from_args(_rigidity_args(*bad))
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["rigidity", "--cells", "16", "2"], "argument --cells/-N: must be an integer >= 4, got '2'"),
+    (["rigidity", "--replicas", "0"], "argument --replicas/-R: must be an integer >= 1, got '0'"),
+    (["rigidity", "--seed", "-1"], "argument --seed: must be a non-negative integer, got '-1'"),
+    (["rigidity", "--zero-tol", "0"], "argument --zero-tol: must be positive and finite, got '0'"),
+    (["rigidity", "--workers", "x"], "argument --workers/-j: must be an integer >= 1, got 'x'"),
+    (["dynamics", "--T", "-1"], "argument --T/-T: must be a finite number >= 0, got '-1'"),
+])
+def test_bad_values_name_the_flag_and_the_range(argv, message, capsys):
+    rc = cli.main(argv)
+    captured = capsys.readouterr()
+    _assert_one_line_error(captured, rc, 2)
+    assert captured.err.strip() == f"spherevm: error: {message}"
+
+
+def _imports(path, root):
+    """Absolute names of the modules a file imports (relative imports resolved)."""
+    package = ".".join(("spherevm",) + path.relative_to(root).parent.parts)
+    names = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names += [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = package.rsplit(".", node.level - 1)[0] if node.level else ""
+            module = ".".join(p for p in (base, node.module) if p)
+            names += [module] + [f"{module}.{alias.name}" for alias in node.names]
+    return names
+
+
+def test_the_library_does_not_import_the_command_line():
+    """Layers point down: argparse and spherevm.cli are imported only by spherevm/cli/ (and __main__)."""
+    root = pathlib.Path(svm.__file__).parent
+    for path in root.rglob("*.py"):
+        if root / "cli" in path.parents or path == root / "__main__.py":
+            continue
+        for name in _imports(path, root):
+            assert name != "argparse" and not (name + ".").startswith("spherevm.cli."), (path, name)
 
 
 # ------------------------------------------------------------------------------------ info, plugins

@@ -1,5 +1,4 @@
 """Rigidity sweeps: F(p0, N), p0* distributions, chunked resumable runs on any executor."""
-import argparse
 import json
 import math
 import os
@@ -304,7 +303,7 @@ def test_chunk_failure_names_the_chunk_and_keeps_finished_ones(tmp_path, monkeyp
             raise FloatingPointError("NaN energy")
         return real(params, n, start, stop, device)
 
-    monkeypatch.setattr(sweeps, "run_chunk", flaky)
+    monkeypatch.setattr(sweeps.execution, "run_chunk", flaky)   # what run_sweep calls
     out = tmp_path / "s"
     with pytest.raises(RuntimeError, match=r"chunk N00016_u00000\d-00000\d .*failed: FloatingPointError"):
         sweeps.run_sweep(sweeps.RigiditySweep(**TINY), out, executor=sweeps.InProcessExecutor(), device="cpu",
@@ -312,7 +311,7 @@ def test_chunk_failure_names_the_chunk_and_keeps_finished_ones(tmp_path, monkeyp
     assert len(os.listdir(out / "chunks")) == 1
 
 
-# ------------------------------------------------------------------------------------ command line
+# ------------------------------------------------------------------------------------ p0 grids
 def test_parse_p0_grid():
     assert sweeps.parse_p0_grid(["3.60:3.90:0.01"]) == pytest.approx(np.arange(31) * 0.01 + 3.6)
     assert len(sweeps.parse_p0_grid(["3.60:3.90:0.01"])) == 31
@@ -321,53 +320,6 @@ def test_parse_p0_grid():
     for bad in (["3.9:3.6:0.1"], ["3.6:3.9"], ["3.6:3.9:0"], ["x"]):
         with pytest.raises(ValueError, match="p0"):
             sweeps.parse_p0_grid(bad)
-
-
-def _parser():
-    parser = argparse.ArgumentParser(prog="spherevm")
-    sweeps.add_cli(parser.add_subparsers(dest="command"))
-    return parser
-
-
-def test_cli_runs_a_tiny_sweep_and_writes_tables(tmp_path, capsys):
-    out = tmp_path / "cli"
-    args = _parser().parse_args(["rigidity", "--cells", "16", "--p0", "3.3", "4.2", "--replicas", "2",
-                                 "--device", "cpu", "--workers", "1", "--out", str(out)])
-    assert args.func is sweeps.cmd_rigidity
-    assert args.func(args) == 0
-    captured = capsys.readouterr()
-    assert "pentagon" in captured.out and "16" in captured.out
-    assert "rigidity: [" in captured.err and "minimisations 4/4" in captured.err
-    names = set(os.listdir(out))
-    assert {"manifest.json", "chunks", "replicas.csv", "fraction.csv", "p0star.csv", "p0star_density.csv"} <= names
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        pass
-    else:
-        assert {"fraction.png", "p0star_distribution.png", "p0star_vs_N.png", "critical_perimeter.png"} <= names
-    lines = (out / "fraction.csv").read_text().splitlines()
-    assert lines[0].startswith("n_cells,p0,n_replicas,n_zero,n_rigid,n_unconverged")
-    assert lines[1].startswith("16,3.3,2,0,2,0") and lines[2].startswith("16,4.2,2,2,0,0")
-    # a mismatching rerun fails before any work
-    args = _parser().parse_args(["rigidity", "--cells", "16", "--p0", "3.3", "4.2", "--replicas", "3",
-                                 "--device", "cpu", "--out", str(out)])
-    with pytest.raises(ValueError, match="different parameters"):
-        args.func(args)
-
-
-def test_cli_defaults_are_the_small_sweep():
-    args = _parser().parse_args(["rigidity"])
-    assert args.cells == [16, 32] and args.replicas == 12
-    assert sweeps.parse_p0_grid(args.p0) == pytest.approx(np.round(np.arange(3.5, 4.0001, 0.025), 10))
-    assert args.kr == 0.0 and args.device == "auto"
-    sweep = sweeps.sweep_from_args(args)
-    assert sweep == sweeps.RigiditySweep(cells=[16, 32], p0=sweeps.parse_p0_grid(["3.5:4.0:0.025"]), replicas=12)
-    ref = sweeps.sweep_from_args(_parser().parse_args(["rigidity", "--t1-reference"]))
-    assert ref.t1_threshold == 0.1 and ref.t1_length_factor == 2.0
-    for bad in (["--p0", "3.9", "3.8"], ["--p0", "3.6:3.5:0.1"]):
-        with pytest.raises(ValueError, match="p0"):
-            sweeps.sweep_from_args(_parser().parse_args(["rigidity", *bad]))
 
 
 def test_reference_t1_rule_runs():
@@ -405,3 +357,11 @@ def test_gpu_sweep_matches_cpu(tiny_run, tmp_path):
     assert list(status) == list(rigidity.classify(first.records["energy_per_cell"], first.records["reason"]))
     rigid = status == "rigid"
     assert np.allclose(result.records["energy_per_cell"][rigid], first.records["energy_per_cell"][rigid], rtol=1e-6)
+
+
+def test_reference_t1_is_the_t1_preset():
+    from spherevm.plugins.updaters.t1 import PRESETS
+    ref = PRESETS["reference"]
+    assert ref["new_length"] is None
+    assert sweeps.RigiditySweep.reference_t1() == {"t1_threshold": ref["threshold"],
+                                                   "t1_length_factor": ref["length_factor"]}

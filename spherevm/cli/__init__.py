@@ -1,0 +1,100 @@
+"""The ``spherevm`` command (also ``python -m spherevm``), one module per subcommand.
+
+Subcommands::
+
+    spherevm minimize [--cells N] [--replicas R] [--p0 P] [--kr K] [--seed S] [--out run.gsd] ...
+    spherevm dynamics --cells N --p0 P --kr K --T T --dt DT --steps S [--out run.gsd] [--csv msd.csv]
+    spherevm rigidity [--cells N ...] [--p0 START:STOP:STEP ...] [--replicas R] [--out FOLDER] ...
+    spherevm info [--json]
+    spherevm plugins
+
+Bad arguments and bad input caught by the library end with one line on standard error,
+``spherevm: error: ...``, and exit status 2; a failure while a minimisation runs gives status 1.
+No traceback is shown unless ``--debug`` is given before the subcommand. See docs/cli.md.
+
+The command line sits above the library: nothing in spherevm outside this package imports it.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from . import dynamics, info, minimize, plugins, rigidity
+from .arguments import RUNTIME_ERROR, USAGE_ERROR, CLIError, one_line
+
+PROG = "spherevm"
+COMMANDS = (minimize, dynamics, rigidity, info, plugins)
+COMMAND_NAMES = tuple(c.__name__.rsplit(".", 1)[-1] for c in COMMANDS)
+COMMANDS_METAVAR = "{" + ",".join(COMMAND_NAMES) + "}"
+
+__all__ = ["CLIError", "PROG", "RUNTIME_ERROR", "USAGE_ERROR", "build_parser", "main"]
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error becomes a CLIError (one line, no usage dump, no SystemExit)."""
+
+    def error(self, message):
+        if message.startswith(f"argument {COMMANDS_METAVAR}: invalid choice:"):
+            message = "unknown command" + message.split("invalid choice", 1)[1]
+        raise CLIError(message, USAGE_ERROR)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser of the whole command line; each subcommand sets ``func``, its handler."""
+    from .. import __version__
+    parser = _Parser(prog=PROG, description="Vertex models of confluent tissue on a sphere.",
+                     epilog="Run 'spherevm <command> --help' for a command's options. Docs: docs/cli.md")
+    parser.add_argument("--version", action="version", version=f"spherevm {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the full traceback on errors instead of one line")
+    sub = parser.add_subparsers(dest="command", metavar=COMMANDS_METAVAR, parser_class=_Parser)
+    for command in COMMANDS:
+        command.add_parser(sub)
+    return parser
+
+
+def _report(message):
+    sys.stderr.write(f"{PROG}: error: {message}\n")
+    sys.stderr.flush()
+
+
+def main(argv=None) -> int:
+    """Run the command line ``argv`` (default ``sys.argv[1:]``); return the exit status."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(None if argv is None else [os.fspath(a) for a in argv])
+    except CLIError as exc:
+        _report(exc.message)
+        return exc.code
+    except SystemExit as exc:  # --help, --version
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else USAGE_ERROR)
+    if args.command is None:
+        _report(f"no command given; choose one of: {', '.join(COMMAND_NAMES)} (see spherevm --help)")
+        return USAGE_ERROR
+    try:
+        return int(args.func(args) or 0)
+    except CLIError as exc:
+        if args.debug:
+            raise
+        _report(exc.message)
+        return exc.code
+    except KeyboardInterrupt:
+        sys.stderr.write(f"\n{PROG}: interrupted\n")
+        return 130
+    except BrokenPipeError:  # e.g. `spherevm plugins | head -1`: the reader left, nothing to report
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
+        return 0
+    except (ValueError, TypeError, FileNotFoundError) as exc:
+        if args.debug:
+            raise
+        _report(one_line(exc))
+        return USAGE_ERROR
+    except Exception as exc:
+        if args.debug:
+            raise
+        _report(f"{type(exc).__name__}: {one_line(exc)} (rerun as 'spherevm --debug ...' for the traceback)")
+        return RUNTIME_ERROR

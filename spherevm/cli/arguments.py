@@ -1,0 +1,64 @@
+"""What the subcommands share: exit codes, :class:`CLIError`, and argparse types that wrap the
+library's own checks (:mod:`spherevm.validation`), so a flag and its Python parameter accept the
+same values and a bad value is reported as ``argument --flag: must be <range>, got '<text>'``."""
+from __future__ import annotations
+
+import argparse
+import os
+
+from .. import validation
+
+USAGE_ERROR = 2     # bad arguments or bad input
+RUNTIME_ERROR = 1   # something failed while running
+
+
+class CLIError(Exception):
+    """A failure to report as one line, ``spherevm: error: <message>``, with an exit status."""
+
+    def __init__(self, message, code=USAGE_ERROR):
+        super().__init__(message)
+        self.message = message
+        self.code = code
+
+
+def one_line(exc) -> str:
+    """An exception's message on one line (its type name when it has none)."""
+    text = " ".join(part.strip() for part in str(exc).splitlines() if part.strip())
+    return text or type(exc).__name__
+
+
+def _argument_type(convert, validate, **bounds):
+    def parse(text):
+        try:
+            value = convert(text)
+        except ValueError:
+            value = text            # not a number: the validator rejects it, saying what is allowed
+        try:
+            return validate("value", value, **bounds)
+        except validation.ParameterError as exc:
+            raise argparse.ArgumentTypeError(f"must be {exc.allowed}, got {text!r}") from None
+    return parse
+
+
+def integer(minimum=0):
+    """argparse type: an integer >= ``minimum`` (:func:`spherevm.validation.integer`)."""
+    return _argument_type(int, validation.integer, minimum=minimum)
+
+
+def real(strict=False):
+    """argparse type: a finite number >= 0, > 0 with ``strict`` (:func:`spherevm.validation.real`)."""
+    return _argument_type(float, validation.real, strict=strict)
+
+
+def check_out_path(path):
+    """Fail early (before any work) when the file ``path`` cannot be written."""
+    if not path:
+        raise CLIError("argument --out: expected a file name, got ''")
+    full = os.path.abspath(path)
+    if os.path.isdir(full):
+        raise CLIError(f"argument --out: {path!r} is a directory; give a file name such as run.gsd")
+    folder = os.path.dirname(full)
+    if not os.path.isdir(folder):
+        raise CLIError(f"argument --out: folder {folder!r} does not exist; create it first")
+    if not os.access(folder, os.W_OK | os.X_OK) or (os.path.exists(full) and not os.access(full, os.W_OK)):
+        raise CLIError(f"argument --out: cannot write {path!r} (permission denied)")

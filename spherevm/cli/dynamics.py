@@ -1,0 +1,93 @@
+"""``spherevm dynamics``: Brownian dynamics of relaxed tilings; MSD, self-overlap and tau_alpha."""
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+import numpy as np
+
+from .arguments import RUNTIME_ERROR, USAGE_ERROR, CLIError, check_out_path, integer, one_line, real
+
+
+def add_parser(subparsers):
+    """Register ``dynamics`` on the ``spherevm`` subparsers."""
+    d = subparsers.add_parser("dynamics", help="Brownian dynamics: MSD, self-overlap and tau_alpha (the paper's Fig. 3)",
+                              description="Relax random tilings with FIRE + T1, equilibrate, then run overdamped "
+                                          "Brownian dynamics at temperature T with T1 exchanges; record cell "
+                                          "centroids at log-spaced times, and report MSD, self-overlap Q_s and "
+                                          "tau_alpha (Q_s = 1/e) in the co-rotating frame.")
+    g = d.add_argument_group("system")
+    g.add_argument("--cells", "-N", type=integer(4), default=64, metavar="N", help="cells per replica (default: %(default)s)")
+    g.add_argument("--replicas", "-R", type=integer(1), default=4, metavar="R",
+                   help="independent tissues, averaged (default: %(default)s)")
+    g.add_argument("--seed", type=integer(0), default=0, help="random seed (default: %(default)s)")
+    g.add_argument("--p0", type=real(), default=3.775, metavar="P", help="target shape index (default: %(default)s)")
+    g.add_argument("--kr", type=real(), default=0.0, metavar="K", help="area stiffness (default: %(default)s)")
+    g = d.add_argument_group("dynamics")
+    g.add_argument("--T", "-T", dest="T", type=real(), default=0.01, help="temperature, >= 0 (default: %(default)s)")
+    g.add_argument("--dt", type=real(strict=True), default=0.05, help="time step, > 0 (default: %(default)s)")
+    g.add_argument("--steps", type=integer(1), default=5000, help="production steps (default: %(default)s)")
+    g.add_argument("--equilibrate", type=integer(0), default=None, metavar="STEPS",
+                   help="equilibration steps before production (default: steps/10)")
+    g.add_argument("--relax", type=integer(0), default=5000, metavar="STEPS",
+                   help="FIRE steps of the initial relaxation, 0 to skip (default: %(default)s)")
+    g.add_argument("--b", type=real(strict=True), default=0.5, help="self-overlap window, sqrt(<A>) (default: %(default)s)")
+    g = d.add_argument_group("output")
+    g.add_argument("--out", "-o", default=None, metavar="FILE.gsd", help="GSD trajectory of the production run")
+    g.add_argument("--csv", default=None, metavar="FILE.csv", help="time, MSD and Q_s (default: next to --out, else none)")
+    g.add_argument("--device", choices=("cpu", "gpu", "auto"), default="auto", help="where to run (default: %(default)s)")
+    g.add_argument("--quiet", "-q", action="store_true", help="no progress on standard error")
+    d.set_defaults(func=run)
+    return d
+
+
+class _StageProgress:
+    """``progress(stage, done, total)`` for long runs: a line every few seconds on standard error."""
+
+    def __init__(self, stream, enabled=True):
+        self.stream, self.enabled = stream, enabled
+        self.start = self.last = time.monotonic()
+        self.stage = None
+
+    def __call__(self, stage, done, total):
+        now = time.monotonic()
+        if not self.enabled or (stage == self.stage and done < total and now - self.last < 5.0):
+            return
+        self.stage, self.last = stage, now
+        self.stream.write(f"dynamics: {stage:<11} {done:>8d}/{total}  {now - self.start:7.1f} s\n")
+        self.stream.flush()
+
+
+def run(args) -> int:
+    """The handler of ``spherevm dynamics``."""
+    from ..protocols import glassy_dynamics
+    for path in (args.out, args.csv):
+        if path is not None:
+            check_out_path(path)
+    csv_path = args.csv or (os.path.splitext(args.out)[0] + ".csv" if args.out else None)
+    err = sys.stderr
+    if not args.quiet:
+        err.write(f"spherevm: dynamics of {args.replicas} x {args.cells} cells, p0={args.p0:g} kr={args.kr:g} "
+                  f"T={args.T:g} dt={args.dt:g}, {args.steps} steps\n")
+    t0 = time.perf_counter()
+    try:
+        res = glassy_dynamics(args.cells, args.p0, args.kr, args.T, dt=args.dt, steps=args.steps,
+                              replicas=args.replicas, seed=args.seed, device=args.device, relax_steps=args.relax,
+                              equilibrate_steps=args.equilibrate, b=args.b, out=args.out,
+                              progress=_StageProgress(err, enabled=not args.quiet))
+    except (ValueError, TypeError) as exc:
+        raise CLIError(one_line(exc), USAGE_ERROR) from exc
+    except Exception as exc:
+        raise CLIError(f"dynamics failed: {one_line(exc)}", RUNTIME_ERROR) from exc
+    if csv_path:
+        res.write_csv(csv_path)
+    print(f"{'time':>12} {'MSD':>12} {'Q_s':>8}")
+    for t, m, q in zip(res.lag, res.msd, res.self_overlap):
+        print(f"{t:12.5g} {m:12.5g} {q:8.4f}")
+    tau = "not reached (Q_s stays above 1/e: run longer)" if not np.isfinite(res.tau_alpha) else f"{res.tau_alpha:.5g}"
+    print(f"tau_alpha = {tau}")
+    if not args.quiet:
+        err.write(f"spherevm: done in {time.perf_counter() - t0:.1f} s"
+                  f"{'' if csv_path is None else f'; wrote {csv_path}'}{'' if args.out is None else f' and {args.out}'}\n")
+    return 0

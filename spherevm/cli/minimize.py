@@ -1,0 +1,181 @@
+"""``spherevm minimize``: FIRE minimisation of an ensemble of random tilings, one row per replica."""
+from __future__ import annotations
+
+import sys
+import time
+
+from ..progress import StatusLine
+from .arguments import RUNTIME_ERROR, USAGE_ERROR, CLIError, check_out_path, integer, one_line, real
+
+
+def add_parser(subparsers):
+    """Register ``minimize`` on the ``spherevm`` subparsers."""
+    m = subparsers.add_parser("minimize", help="minimise an ensemble of random tilings with FIRE",
+                              description="Minimise R random tilings of N cells with the vertex model "
+                                          "E/(kP <A>) = sum kr (a - 1)^2 + (p - p0)^2 and print one row per "
+                                          "replica. Progress goes to standard error, the table to standard output.")
+    g = m.add_argument_group("system")
+    g.add_argument("--cells", "-N", type=integer(4), default=64, metavar="N",
+                   help="cells per replica, >= 4 (default: %(default)s)")
+    g.add_argument("--replicas", "-R", type=integer(1), default=4, metavar="R",
+                   help="independent tilings, minimised together (default: %(default)s)")
+    g.add_argument("--seed", type=integer(0), default=0, help="random seed of the tilings (default: %(default)s)")
+    g.add_argument("--p0", type=real(), default=3.8, metavar="P",
+                   help="target shape index p0 = P0/sqrt(<A>), >= 0 (default: %(default)s)")
+    g.add_argument("--kr", type=real(), default=1.0, metavar="K",
+                   help="area stiffness kr = kA <A>/kP, >= 0 (default: %(default)s)")
+    g.add_argument("--t1", type=real(strict=True), default=0.04, metavar="THRESHOLD",
+                   help="T1 neighbour exchanges of edges shorter than THRESHOLD (units of sqrt(<A>)), "
+                        "new edges 3 x THRESHOLD long (default: %(default)s)")
+    g.add_argument("--no-t1", dest="t1", action="store_const", const=None,
+                   help="no T1 exchanges (edges may then collapse and stall the minimisation)")
+    g = m.add_argument_group("minimiser")
+    g.add_argument("--dt", type=real(strict=True), default=0.02, help="FIRE time step, > 0 (default: %(default)s)")
+    g.add_argument("--force-tol", type=real(), default=1e-8,
+                   help="a replica converges when its largest vertex force is below this (default: %(default)s)")
+    g.add_argument("--energy-tol", type=real(), default=1e-14,
+                   help="... or its energy per cell below this (default: %(default)s)")
+    g.add_argument("--max-steps", type=integer(0), default=20000, help="step limit (default: %(default)s)")
+    g.add_argument("--check-every", type=integer(1), default=10,
+                   help="steps between convergence checks and progress updates (default: %(default)s)")
+    g = m.add_argument_group("output")
+    g.add_argument("--out", "-o", default=None, metavar="FILE.gsd",
+                   help="write a GSD trajectory (first frame, every --write-every steps, last frame)")
+    g.add_argument("--write-every", type=integer(0), default=1000, metavar="STEPS",
+                   help="frame period of --out; 0 writes the first and last frames only (default: %(default)s)")
+    g.add_argument("--device", choices=("cpu", "gpu", "auto"), default="auto",
+                   help="where to run; auto takes the GPU when CuPy sees one (default: %(default)s)")
+    g.add_argument("--quiet", "-q", action="store_true", help="no progress or summary on standard error")
+    m.set_defaults(func=run)
+    return m
+
+
+class _Progress:
+    """The ``progress`` callback of Simulation.minimize, drawn on standard error.
+
+    On a terminal one line is redrawn in place (at most ten times a second); otherwise a line is
+    printed at the first check, when a replica finishes, every 5 seconds in the first minute and
+    every 30 seconds after that, and at the end.
+    """
+
+    def __init__(self, sim, max_steps, stream, enabled=True):
+        self.sim, self.max_steps, self.enabled = sim, max_steps, enabled
+        self.status = StatusLine(stream)
+        self.tty = enabled and self.status.tty
+        self.start = self.last = time.monotonic()
+        self.last_done = None
+        self.drawn = False
+
+    def __call__(self, step, n_done, n_replicas):
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        final = n_done == n_replicas or step >= self.max_steps
+        if self.tty:
+            show = final or now - self.last >= 0.1 or not self.drawn
+        else:
+            heartbeat = 5.0 if now - self.start < 60.0 else 30.0
+            show = final or n_done != self.last_done or now - self.last >= heartbeat
+        if not show:
+            return
+        self.last, self.last_done = now, n_done
+        fmax = float(self.sim.device.to_numpy(self.sim.max_force()).max())  # forces are cached: cheap
+        line = (f"minimize: step {step:>{len(str(self.max_steps))}d}/{self.max_steps}  "
+                f"done {n_done}/{n_replicas}  max|F| {fmax:.2e}  {now - self.start:6.1f} s")
+        self.status.show(line)
+        self.drawn = True
+
+    def close(self):
+        self.status.close()
+
+
+def _format_table(result) -> str:
+    cols = ("replica", "energy/cell", "<P/sqrt(A)>", "max|F|", "converged", "reason", "steps")
+    rows = []
+    for r in range(len(result.converged)):
+        rows.append((str(r), f"{result.energy_per_cell[r]:.6e}", f"{result.mean_shape_index[r]:.6f}",
+                     f"{result.max_force[r]:.3e}", "yes" if result.converged[r] else "no",
+                     str(result.reason[r]), str(int(result.steps[r]))))
+    widths = [max(len(c), *(len(row[i]) for row in rows)) for i, c in enumerate(cols)]
+    left = {4, 5}  # text columns
+    def fmt(row):
+        return "  ".join(v.ljust(w) if i in left else v.rjust(w) for i, (v, w) in enumerate(zip(row, widths))).rstrip()
+    return "\n".join([fmt(cols)] + [fmt(row) for row in rows])
+
+
+def _count_frames(path):
+    try:
+        import gsd.hoomd
+        with gsd.hoomd.open(path, "r") as traj:
+            return len(traj)
+    except Exception:
+        return None
+
+
+def run(args) -> int:
+    """The handler of ``spherevm minimize``."""
+    import spherevm as svm
+    from ..trigger import On, Periodic
+
+    if args.out is not None:
+        check_out_path(args.out)
+        import importlib.util
+        if importlib.util.find_spec("gsd") is None:  # the GSD writer needs it: fail before any work
+            raise CLIError("argument --out: writing GSD files needs the 'gsd' package (pip install gsd)")
+    err = sys.stderr
+    # set-up: anything the library refuses here is bad input (status 2)
+    try:
+        device = svm.device.resolve(args.device)
+        sim = svm.Simulation(device=device, seed=args.seed)
+        sim.state = svm.init.random_tiling(args.cells, replicas=args.replicas, seed=args.seed)
+        sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=args.kr, p0=args.p0))
+        if args.t1 is not None:
+            sim.operations.updaters.append(svm.plugins.updaters.T1(threshold=args.t1, new_length=3.0 * args.t1))
+        sim.operations.integrator = svm.plugins.integrators.FIRE(dt=args.dt)
+        writer = None
+        if args.out is not None:
+            trigger = Periodic(args.write_every) if args.write_every > 0 else On(0)
+            writer = svm.plugins.writers.GSD(args.out, trigger=trigger)
+            sim.operations.writers.append(writer)
+    except (ValueError, TypeError, RuntimeError, OSError) as exc:
+        raise CLIError(one_line(exc), USAGE_ERROR) from exc
+
+    if not args.quiet:
+        err.write(f"spherevm: minimizing {args.replicas} replica(s) of {args.cells} cells, p0={args.p0:g} "
+                  f"kr={args.kr:g}{'' if args.t1 is None else f' t1={args.t1:g}'} on {device.name}"
+                  f"{'' if args.out is None else f', writing {args.out}'}\n")
+        err.flush()
+    progress = _Progress(sim, args.max_steps, err, enabled=not args.quiet)
+    t0 = time.perf_counter()
+    # the run: a failure here is a runtime failure (status 1)
+    try:
+        try:
+            result = sim.minimize(force_tol=args.force_tol, energy_tol=args.energy_tol,
+                                  max_steps=args.max_steps, check_every=args.check_every, progress=progress)
+        finally:
+            progress.close()
+        if writer is not None:
+            if not writer.trigger(sim.timestep):  # the last frame, unless the trigger just wrote it
+                writer.write(sim, sim.timestep)
+            writer.close()
+    except Exception as exc:
+        raise CLIError(f"minimization failed at step {sim.timestep}: {one_line(exc)}", RUNTIME_ERROR) from exc
+    finally:  # also on Ctrl-C: every frame written so far stays readable
+        if writer is not None:
+            try:
+                writer.close()
+            except Exception:
+                pass
+    elapsed = time.perf_counter() - t0
+
+    print(_format_table(result), file=sys.stdout)
+    sys.stdout.flush()
+    if not args.quiet:
+        n_conv = int(result.converged.sum())
+        msg = (f"spherevm: {n_conv}/{len(result.converged)} replica(s) converged in {sim.timestep} steps, "
+               f"{elapsed:.2f} s on {device.name}")
+        if writer is not None:
+            frames = _count_frames(args.out)
+            msg += f"; wrote {args.out}" + ("" if frames is None else f" ({frames} frame{'s' * (frames != 1)})")
+        err.write(msg + "\n")
+    return 0

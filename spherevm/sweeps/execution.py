@@ -1,0 +1,287 @@
+"""Running a sweep: one chunk as a batched minimisation (:func:`run_chunk`), the executors, and
+:func:`run_sweep`, which runs the missing chunks, saves each as it finishes and reports progress."""
+from __future__ import annotations
+
+import concurrent.futures as cf
+import math
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..progress import StatusLine
+from ..validation import integer
+from .spec import Chunk, RigiditySweep, plan_chunks, tiling_seed
+from .store import (CHUNK_DIR, RECORD_COLUMNS, merge_records, open_sweep_folder, scan_chunks, sorted_records,
+                    write_columns)
+from .tables import summarize_records
+
+#: cells per batch on the CPU: the NumPy cost per cell and step is flat from ~500 cells up (and
+#: rises slowly beyond ~2000, out of cache), while a smaller batch wastes fewer steps waiting for
+#: its slowest replica (docs/rigidity.md, "Chunking").
+CPU_BATCH_CELLS = 512
+#: cells per batch on a GPU: large, so each kernel launch serves many replicas; ~0.3 GB.
+GPU_BATCH_CELLS = 1 << 18
+
+
+# ---------------------------------------------------------------------------------------- one chunk
+def build_chunk_state(sweep: RigiditySweep, chunk: Chunk):
+    """The batched State of a chunk and its per-replica (p0, p0_index, replica, tiling_seed)."""
+    from ..init import random_tilings
+    units = [sweep.unit(u) for u in range(chunk.start, chunk.stop)]
+    seeds = [tiling_seed(sweep.seed, chunk.n_cells, sweep.p0[k], r, sweep.shared_tilings) for k, r in units]
+    state = random_tilings(chunk.n_cells, seeds)   # shared tilings: a repeated seed gives the same tiling
+    p0 = np.array([sweep.p0[k] for k, _ in units])
+    return state, p0, [k for k, _ in units], [r for _, r in units], seeds
+
+
+def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu") -> dict:
+    """Minimise one chunk; returns its per-replica records (a dict of lists, :data:`RECORD_COLUMNS`).
+
+    A plain module-level function of plain arguments, so any executor (process pool, Dask) can run
+    it. The vertex model is given per cell: ``kA = kr kP / <A>``, ``kP = 1``, ``A0 = <A>``,
+    ``P0 = p0 sqrt(<A>)``, with each replica's own p0.
+    """
+    from ..plugins.forces import VertexModel
+    from ..plugins.integrators import FIRE
+    from ..plugins.updaters import T1
+    from ..simulation import Simulation
+
+    t0 = time.perf_counter()
+    sweep = RigiditySweep.from_parameters(parameters)
+    chunk = Chunk(int(n_cells), int(start), int(stop))
+    state, p0, p0_index, replica, seeds = build_chunk_state(sweep, chunk)
+    mean_area = state.mean_cell_area                     # per replica (1 at the default radius)
+    cell_rep = state.cell_replica_np()
+    area = mean_area[cell_rep]
+    sim = Simulation(device=device, seed=sweep.seed)
+    sim.state = state
+    sim.operations.forces.append(VertexModel(kA=sweep.kr / area, kP=1.0, A0=area,
+                                             P0=p0[cell_rep] * np.sqrt(area)))
+    # with a length factor, T1 ignores new_length
+    sim.operations.updaters.append(T1(threshold=sweep.t1_threshold, new_length=sweep.t1_new_length,
+                                      length_factor=sweep.t1_length_factor, max_flip_backs=sweep.t1_max_flip_backs))
+    sim.operations.integrator = FIRE(dt=sweep.dt)
+    res = sim.minimize(force_tol=sweep.force_tol, energy_tol=sweep.energy_tol, max_steps=sweep.max_steps,
+                       check_every=sweep.check_every)
+    flips = np.asarray(sim.log("t1_total_flips"))          # the loggable syncs the GPU counters
+    elapsed = time.perf_counter() - t0
+    n = chunk.size
+    return {"n_cells": [chunk.n_cells] * n, "p0": p0.tolist(), "p0_index": list(p0_index), "replica": list(replica),
+            "tiling_seed": list(seeds), "energy_per_cell": [float(e) for e in res.energy_per_cell],
+            "max_force": [float(f) for f in res.max_force],
+            "mean_shape_index": [float(q) for q in res.mean_shape_index],
+            "steps": [int(s) for s in res.steps], "reason": [str(r) for r in res.reason],
+            "t1_flips": [int(f) for f in flips], "chunk": [chunk.id] * n,
+            "chunk_seconds": [round(elapsed, 4)] * n}
+
+
+# ---------------------------------------------------------------------------------------- executors
+class InProcessExecutor(cf.Executor):
+    """Runs each call at submission, in this process (for the GPU, tests and debugging)."""
+
+    def __init__(self):
+        self._shutdown = False
+
+    def submit(self, fn, /, *args, **kwargs):
+        if self._shutdown:
+            raise RuntimeError("cannot schedule new futures after shutdown")
+        future = cf.Future()
+        try:
+            result = fn(*args, **kwargs)
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller through the future
+            if isinstance(exc, (KeyboardInterrupt, SystemExit)):
+                raise
+            future.set_exception(exc)
+        else:
+            future.set_result(result)
+        return future
+
+    def shutdown(self, wait=True, *, cancel_futures=False):
+        self._shutdown = True
+
+
+def default_executor(device="auto", workers=None):
+    """``(executor, device_name, owned)``: in-process on a GPU, a process pool on the CPU."""
+    from ..device import resolve
+    dev = resolve(device)
+    if dev.is_gpu:
+        return InProcessExecutor(), dev.name, True
+    n = (os.cpu_count() or 1) if workers is None else integer("workers", workers, 1)
+    if n <= 1:
+        return InProcessExecutor(), dev.name, True
+    import multiprocessing
+    # spawn: no fork of a process that may hold a CUDA context or threads
+    return cf.ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn")), dev.name, True
+
+
+# ---------------------------------------------------------------------------------------- progress
+@dataclass
+class SweepProgress:
+    """What a progress callback receives after every finished chunk (and once at the start)."""
+    chunks_done: int
+    chunks_total: int
+    units_done: int        # minimisations finished, including those found on disk
+    units_total: int
+    units_reused: int      # found on disk at the start
+    elapsed: float
+    last_chunk: str = ""
+    cells_done: int = 0    # the same counts weighted by N (the cost of a minimisation grows with N)
+    cells_total: int = 0
+    cells_reused: int = 0
+
+    @property
+    def eta(self) -> float:
+        """Seconds left, extrapolated from the cells minimised so far in this run (NaN at first)."""
+        new = self.cells_done - self.cells_reused
+        left = self.cells_total - self.cells_done
+        return math.nan if new <= 0 else self.elapsed * left / new
+
+
+class TextProgress:
+    """A plain-text progress bar on a stream (standard error): redrawn in place on a terminal,
+    otherwise one line per finished chunk at most every 5 seconds (and the last)."""
+
+    def __init__(self, stream=None, width=28, label="rigidity"):
+        self.status = StatusLine(stream)
+        self.tty = self.status.tty
+        self.width, self.label = width, label
+        self.last = -math.inf
+
+    def __call__(self, p: SweepProgress):
+        now = time.monotonic()
+        final = p.chunks_done == p.chunks_total
+        if not self.tty and not final and p.chunks_done and now - self.last < 5.0:
+            return
+        self.last = now
+        frac = p.cells_done / p.cells_total if p.cells_total else 1.0
+        fill = int(round(self.width * frac))
+        eta = "" if not math.isfinite(p.eta) or final else f"  eta {p.eta:5.0f} s"
+        reused = f" ({p.units_reused} on disk)" if p.units_reused else ""
+        line = (f"{self.label}: [{'#' * fill}{'.' * (self.width - fill)}] {100 * frac:5.1f}%  "
+                f"chunks {p.chunks_done}/{p.chunks_total}  minimisations {p.units_done}/{p.units_total}{reused}  "
+                f"{p.elapsed:6.1f} s{eta}")
+        self.status.show(line)
+
+    def close(self):
+        self.status.close()
+
+
+# ---------------------------------------------------------------------------------------- the sweep
+@dataclass
+class SweepResult:
+    """What :func:`run_sweep` returns."""
+    sweep: RigiditySweep
+    out: str
+    records: dict                      # per-replica columns (NumPy), sorted by (N, p0, replica)
+    computed: list = field(default_factory=list)   # chunk ids computed in this call
+    reused: int = 0                    # chunk files found finished on disk
+    recomputed_bad: list = field(default_factory=list)  # unreadable chunk files that were recomputed
+    elapsed: float = 0.0
+    executor: str = ""
+
+    def summarize(self, zero_tol=None, **kwargs):
+        """``(fractions, p0star, density)`` tables, see :func:`spherevm.analysis.rigidity.summarize`."""
+        return summarize_records(self.records, zero_tol=zero_tol, **kwargs)
+
+
+def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=None, batch_cells=None,
+              progress=None) -> SweepResult:
+    """Run (or resume) a rigidity sweep, writing each chunk to ``<out>/chunks/`` as it finishes.
+
+    ``executor``: any :class:`concurrent.futures.Executor` (or a ``distributed.Client``, whose
+    ``get_executor()`` is used); None picks :func:`default_executor` (in-process on a GPU, a
+    process pool of ``workers`` processes on the CPU). ``device``: where each chunk is minimised
+    (``"cpu"``, ``"gpu"`` or ``"auto"``; with your own executor it is resolved on the worker).
+    ``batch_cells``: cells per chunk (default :data:`CPU_BATCH_CELLS` or :data:`GPU_BATCH_CELLS`);
+    it changes how the work is cut, never the results. ``progress``: called with a
+    :class:`SweepProgress` after every chunk.
+
+    Everything is validated before the folder is created; a folder holding a sweep with other
+    parameters raises ValueError. A chunk that fails stops the sweep (RuntimeError naming the
+    chunk); the chunks finished before it stay on disk and a rerun resumes from them.
+    """
+    if not isinstance(sweep, RigiditySweep):
+        raise TypeError(f"sweep must be a RigiditySweep, got {type(sweep).__name__}")
+    from ..device import DEVICE_NAMES, Device
+    if not isinstance(device, Device) and (not isinstance(device, str) or device.lower() not in DEVICE_NAMES):
+        raise ValueError(f"device must be one of {DEVICE_NAMES}, got {device!r}")
+    if workers is not None:
+        integer("workers", workers, 1)
+    if batch_cells is not None:
+        integer("batch_cells", batch_cells, 1)
+    if progress is not None and not callable(progress):
+        raise TypeError("progress must be callable")
+    open_sweep_folder(sweep, out, create=False)          # bad folder or mismatch: errors before anything is made
+
+    owned = False
+    if executor is None:
+        executor, device_name, owned = default_executor(device, workers)
+    else:
+        if hasattr(executor, "get_executor") and not isinstance(executor, cf.Executor):
+            executor = executor.get_executor()          # a dask.distributed Client
+        if not hasattr(executor, "submit"):
+            raise TypeError(f"executor must be a concurrent.futures.Executor, got {type(executor).__name__}")
+        device_name = device.name if isinstance(device, Device) else device.lower()
+    if batch_cells is None:
+        batch_cells = GPU_BATCH_CELLS if device_name == "gpu" else CPU_BATCH_CELLS
+    try:
+        path = open_sweep_folder(sweep, out, create=True)
+        done, parts, bad = scan_chunks(sweep, path, clean=True)
+        chunks = plan_chunks(sweep, batch_cells, done)
+        reused_units = int(sum(d.sum() for d in done.values()))
+        reused_cells = int(sum(n * d.sum() for n, d in done.items()))
+        t0 = time.perf_counter()
+        state = SweepProgress(chunks_done=0, chunks_total=len(chunks), units_done=reused_units,
+                              units_total=sweep.total_units, units_reused=reused_units, elapsed=0.0,
+                              cells_done=reused_cells, cells_total=sweep.units_per_size * sum(sweep.cells),
+                              cells_reused=reused_cells)
+        if progress is not None:
+            progress(state)
+        params = sweep.parameters()
+        in_process = isinstance(executor, InProcessExecutor)
+        # bounded submission for the in-process executor (it runs at submit time, so each chunk is
+        # written before the next starts); everything at once otherwise, largest N first
+        todo = sorted(chunks, key=lambda c: -c.n_cells * c.size)
+        limit = 1 if in_process else len(todo)
+        pending = {}
+        computed = []
+        folder = os.path.join(path, CHUNK_DIR)
+        while todo or pending:
+            while todo and len(pending) < limit:
+                c = todo.pop(0)
+                pending[executor.submit(run_chunk, params, c.n_cells, c.start, c.stop, device_name)] = c
+            finished, _ = cf.wait(list(pending), return_when=cf.FIRST_COMPLETED)
+            for fut in finished:
+                c = pending.pop(fut)
+                exc = fut.exception()
+                if exc is not None:
+                    for other in pending:
+                        other.cancel()
+                    raise RuntimeError(f"chunk {c.id} ({c.size} minimisations of N = {c.n_cells}) failed: "
+                                       f"{type(exc).__name__}: {exc}; finished chunks are kept in {folder}, "
+                                       "rerun to resume") from exc
+                rec = fut.result()
+                write_columns(os.path.join(folder, c.id + ".csv"), rec, RECORD_COLUMNS)
+                parts.append(rec)
+                computed.append(c.id)
+                state.chunks_done += 1
+                state.units_done += c.size
+                state.cells_done += c.size * c.n_cells
+                state.elapsed = time.perf_counter() - t0
+                state.last_chunk = c.id
+                if progress is not None:
+                    progress(state)
+    except BaseException:
+        # a failed chunk or Ctrl-C: do not wait for the chunks still running (finished ones are on disk)
+        if owned:
+            owned = False
+            executor.shutdown(wait=False, cancel_futures=True)
+        raise
+    finally:
+        if owned:
+            executor.shutdown(wait=True)
+    return SweepResult(sweep=sweep, out=path, records=sorted_records(merge_records(parts)), computed=computed,
+                       reused=len(parts) - len(computed), recomputed_bad=[b for b, _ in bad],
+                       elapsed=time.perf_counter() - t0, executor=type(executor).__name__)

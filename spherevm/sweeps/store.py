@@ -1,0 +1,213 @@
+"""A sweep on disk: ``manifest.json`` (the parameters), ``chunks/*.csv`` (one row per replica),
+written atomically, checked against the requested sweep, and scanned to resume."""
+from __future__ import annotations
+
+import csv
+import json
+import os
+import time
+import warnings
+
+import numpy as np
+
+from ..provenance import source_fingerprint
+from .spec import RigiditySweep
+
+FORMAT = "spherevm-rigidity-sweep"
+FORMAT_VERSION = 1
+MANIFEST = "manifest.json"
+CHUNK_DIR = "chunks"
+
+RECORD_COLUMNS = ("n_cells", "p0", "p0_index", "replica", "tiling_seed", "energy_per_cell", "max_force",
+                  "mean_shape_index", "steps", "reason", "t1_flips", "chunk", "chunk_seconds")
+_INT_COLUMNS = {"n_cells", "p0_index", "replica", "tiling_seed", "steps", "t1_flips"}
+_STR_COLUMNS = {"reason", "chunk"}
+
+
+def _format(value):
+    if isinstance(value, float):
+        return repr(value)
+    return str(value)
+
+
+def write_columns(path, columns: dict, order=None):
+    """Write a dict of equal-length columns as CSV, atomically (a temporary file, then rename)."""
+    order = list(order or columns)
+    n = len(next(iter(columns.values()))) if columns else 0
+    tmp = f"{path}.tmp{os.getpid()}"
+    with open(tmp, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(order)
+        for i in range(n):
+            row = []
+            for c in order:
+                v = columns[c][i]
+                if isinstance(v, (np.floating,)):
+                    v = float(v)
+                elif isinstance(v, (np.integer,)):
+                    v = int(v)
+                elif isinstance(v, np.bool_):
+                    v = bool(v)
+                row.append(_format(v))
+            w.writerow(row)
+    os.replace(tmp, path)
+
+
+def read_records(path) -> dict:
+    """Read a chunk (or replicas.csv) file back into typed columns (lists)."""
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(fh))
+    if not rows or tuple(rows[0]) != RECORD_COLUMNS:
+        raise ValueError(f"{path}: not a sweep record file (header {rows[0] if rows else 'missing'})")
+    out = {c: [] for c in RECORD_COLUMNS}
+    for row in rows[1:]:
+        if len(row) != len(RECORD_COLUMNS):
+            raise ValueError(f"{path}: malformed row {row}")
+        for c, v in zip(RECORD_COLUMNS, row):
+            out[c].append(v if c in _STR_COLUMNS else int(v) if c in _INT_COLUMNS else float(v))
+    return out
+
+
+def merge_records(parts) -> dict:
+    """One dict of record columns from several (chunk order kept)."""
+    out = {c: [] for c in RECORD_COLUMNS}
+    for p in parts:
+        for c in RECORD_COLUMNS:
+            out[c].extend(p[c])
+    return out
+
+
+def sorted_records(records: dict) -> dict:
+    """Records as NumPy columns, sorted by (N, p0 index, replica)."""
+    cols = {c: np.asarray(records[c]) for c in RECORD_COLUMNS}
+    if len(cols["n_cells"]) == 0:
+        return cols
+    order = np.lexsort((cols["replica"], cols["p0_index"], cols["n_cells"]))
+    return {c: v[order] for c, v in cols.items()}
+
+
+def check_out_folder(out):
+    """Fail (ValueError) before anything is created when ``out`` cannot become a sweep folder."""
+    if out is None or str(out) == "":
+        raise ValueError("out must name a folder for the sweep's results, got an empty path")
+    path = os.path.abspath(os.fspath(out))
+    if os.path.exists(path):
+        if not os.path.isdir(path):
+            raise ValueError(f"output folder {out!r} exists and is not a folder")
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise ValueError(f"output folder {out!r} is not writable (permission denied)")
+        return path
+    parent = os.path.dirname(path)
+    while not os.path.exists(parent):
+        up = os.path.dirname(parent)
+        if up == parent:
+            break
+        parent = up
+    if not os.path.isdir(parent):
+        raise ValueError(f"cannot create output folder {out!r}: {parent!r} is not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"cannot create output folder {out!r}: {parent!r} is not writable (permission denied)")
+    return path
+
+
+def _manifest_mismatch(old: dict, new: dict):
+    diffs = []
+    for key in sorted(set(old) | set(new)):
+        a, b = old.get(key, "<missing>"), new.get(key, "<missing>")
+        if a != b:
+            diffs.append(f"{key}: {a!r} in the folder, {b!r} requested")
+    return diffs
+
+
+def open_sweep_folder(sweep: RigiditySweep, out, create: bool = True) -> str:
+    """Check ``out`` against ``sweep`` (ValueError on a mismatch) and write its manifest.
+
+    A new or empty folder gets ``manifest.json``; a folder with a manifest must hold the same
+    parameters (else the differences are listed); any other non-empty folder is refused.
+    """
+    path = check_out_folder(out)
+    manifest_path = os.path.join(path, MANIFEST)
+    params = sweep.parameters()
+    if os.path.isdir(path) and os.listdir(path):
+        if not os.path.exists(manifest_path):
+            raise ValueError(f"output folder {out!r} is not empty and holds no {MANIFEST}: not a rigidity sweep "
+                             "folder; choose a new or empty folder")
+        try:
+            with open(manifest_path) as fh:
+                manifest = json.load(fh)
+        except (OSError, json.JSONDecodeError) as exc:
+            raise ValueError(f"cannot read {manifest_path}: {exc}") from None
+        if manifest.get("format") != FORMAT:
+            raise ValueError(f"{manifest_path} is not a {FORMAT} manifest")
+        if manifest.get("version") != FORMAT_VERSION:
+            raise ValueError(f"{manifest_path} has format version {manifest.get('version')}, "
+                             f"this spherevm writes {FORMAT_VERSION}")
+        diffs = _manifest_mismatch(manifest.get("parameters", {}), params)
+        if diffs:
+            raise ValueError(f"output folder {out!r} holds a sweep with different parameters ("
+                             + "; ".join(diffs) + "); use another folder, or the folder's parameters to resume it")
+        started_with = manifest.get("code")
+        if started_with is not None and started_with != source_fingerprint():
+            warnings.warn(f"{out!r} was started by spherevm code {started_with}, this is {source_fingerprint()}: "
+                          "the records of both will be mixed (individual minimisations may differ in their "
+                          "last digits or, near the transition, in their outcome)", stacklevel=2)
+        return path
+    if not create:
+        return path
+    from .. import __version__
+    os.makedirs(os.path.join(path, CHUNK_DIR), exist_ok=True)
+    manifest = {"format": FORMAT, "version": FORMAT_VERSION, "spherevm": __version__, "code": source_fingerprint(),
+                "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "parameters": params,
+                "layout": {"chunks": f"{CHUNK_DIR}/N<cells>_u<first unit>-<end unit>.csv, one row per replica; "
+                                     "unit u = p0_index * replicas + replica"}}
+    tmp = manifest_path + f".tmp{os.getpid()}"
+    with open(tmp, "w") as fh:
+        json.dump(manifest, fh, indent=2)
+        fh.write("\n")
+    os.replace(tmp, manifest_path)
+    return path
+
+
+def scan_chunks(sweep: RigiditySweep, path: str, clean: bool = False):
+    """Finished chunk files of a sweep folder: ``(done, records, bad)``.
+
+    ``done`` maps N to a bool array over its units; ``records`` lists the parsed files; ``bad``
+    lists files that could not be read or do not match the sweep (they are recomputed).
+    ``clean=True`` (run_sweep) removes temporary files an interrupted write left behind.
+    """
+    folder = os.path.join(path, CHUNK_DIR)
+    done = {n: np.zeros(sweep.units_per_size, dtype=bool) for n in sweep.cells}
+    records, bad = [], []
+    if not os.path.isdir(folder):
+        return done, records, bad
+    for name in sorted(os.listdir(folder)):
+        full = os.path.join(folder, name)
+        if ".tmp" in name:          # left over by an interrupted write
+            if clean:
+                try:
+                    os.remove(full)
+                except OSError:
+                    pass
+            continue
+        if not name.endswith(".csv"):
+            continue
+        try:
+            rec = read_records(full)
+            n = set(rec["n_cells"])
+            if len(n) != 1 or next(iter(n)) not in done or not rec["n_cells"]:
+                raise ValueError("size not in this sweep")
+            n = next(iter(n))
+            u = np.asarray(rec["p0_index"]) * sweep.replicas + np.asarray(rec["replica"])
+            k = np.asarray(rec["p0_index"])
+            if np.any(k < 0) or np.any(k >= len(sweep.p0)) or np.any(np.asarray(rec["replica"]) >= sweep.replicas):
+                raise ValueError("unit outside this sweep")
+            if not np.allclose(np.asarray(sweep.p0)[k], rec["p0"], rtol=0, atol=1e-12):
+                raise ValueError("p0 values do not match the grid")
+            if np.any(done[n][u]):
+                raise ValueError("units already covered by another chunk file")
+        except (ValueError, OSError) as exc:
+            bad.append((full, str(exc)))
+            continue
+        done[n][u] = True
+        records.append(rec)
+    return done, records, bad

@@ -1,0 +1,75 @@
+"""From per-replica records to F(p0, N), p0* and p0*(N): tables, plots and a text summary
+(the statistics themselves are in :mod:`spherevm.analysis.rigidity`)."""
+from __future__ import annotations
+
+import os
+
+from ..analysis import rigidity
+from .store import RECORD_COLUMNS, sorted_records, write_columns
+
+
+def summarize_records(records: dict, zero_tol=None, sigma=None, resamples: int = 400):
+    """``(fractions, p0star, density)`` from per-replica records (see analysis.rigidity.summarize)."""
+    tol = rigidity.ZERO_ENERGY_TOL if zero_tol is None else zero_tol
+    status = rigidity.classify(records["energy_per_cell"], records["reason"], tol)
+    return rigidity.summarize(records["n_cells"], records["p0"], status, sigma=sigma, resamples=resamples)
+
+
+def write_tables(out, records: dict, zero_tol=None, plots=True, sigma=None) -> dict:
+    """Write ``replicas.csv``, ``fraction.csv`` (F(p0,N)), ``p0star.csv`` (p0*(N) beside the pentagon
+    bound), ``p0star_density.csv`` and, with matplotlib, ``fraction.png``, ``p0star_distribution.png``
+    (Fig. 2 style, F in the inset), ``p0star_vs_N.png`` and ``critical_perimeter.png`` (Fig. 4).
+
+    Returns a dict with the tables (``fractions``, ``p0star``, ``density``), the ``files`` written
+    and ``plot_note`` (why plots were skipped, or None).
+    """
+    path = os.path.abspath(os.fspath(out))
+    os.makedirs(path, exist_ok=True)
+    records = sorted_records(records)
+    tol = rigidity.ZERO_ENERGY_TOL if zero_tol is None else zero_tol
+    status = rigidity.classify(records["energy_per_cell"], records["reason"], tol)
+    frac, p0star, density = rigidity.summarize(records["n_cells"], records["p0"], status, sigma=sigma)
+    files = []
+    rec = dict(records)
+    write_columns(os.path.join(path, "replicas.csv"), {**rec, "status": status}, RECORD_COLUMNS + ("status",))
+    files.append(os.path.join(path, "replicas.csv"))
+    for name, table in (("fraction.csv", frac), ("p0star.csv", p0star), ("p0star_density.csv", density)):
+        write_columns(os.path.join(path, name), table)
+        files.append(os.path.join(path, name))
+    note = None
+    if plots:
+        try:
+            import matplotlib
+            matplotlib.use("Agg", force=False)
+            import matplotlib.pyplot as plt
+        except ImportError:
+            note = "matplotlib is not installed: plots skipped (pip install 'spherevm[plot]')"
+        else:
+            for name, fig in (("fraction.png", lambda: rigidity.plot_fraction(frac)),
+                              ("p0star_distribution.png", lambda: rigidity.plot_transition(frac, p0star, density)),
+                              ("p0star_vs_N.png", lambda: rigidity.plot_p0_star(p0star)),
+                              ("critical_perimeter.png", lambda: rigidity.plot_critical_perimeter(p0star))):
+                f = fig()
+                f.tight_layout()
+                f.savefig(os.path.join(path, name), dpi=150)
+                plt.close(f)
+                files.append(os.path.join(path, name))
+    return {"fractions": frac, "p0star": p0star, "density": density, "status": status, "files": files,
+            "plot_note": note}
+
+
+def format_p0star_table(p0star) -> str:
+    """p0*(N) beside the pentagon bound, as plain text."""
+    head = ("N", "p0*", "+-", "spread", "p0(F=1/2)", "pentagon", "p0*-pent", "replicas", "unconv", "note")
+    rows = []
+    for i in range(len(p0star["n_cells"])):
+        p, pent = p0star["p0_star"][i], p0star["pentagon_perimeter"][i]
+        rows.append((str(int(p0star["n_cells"][i])), f"{p:.4f}", f"{p0star['p0_star_err'][i]:.4f}",
+                     f"{p0star['std'][i]:.4f}", f"{p0star['p0_half'][i]:.4f}", f"{pent:.4f}", f"{p - pent:+.4f}",
+                     str(int(p0star["n_replicas"][i])), str(int(p0star["n_unconverged"][i])),
+                     "" if p0star["bracketed"][i] else "transition not inside the p0 grid"))
+    widths = [max(len(h), *(len(r[j]) for r in rows)) if rows else len(h) for j, h in enumerate(head)]
+    lines = ["  ".join(h.rjust(w) for h, w in zip(head, widths)).rstrip()]
+    lines += ["  ".join(v.rjust(w) if j < len(head) - 1 else v for j, (v, w) in enumerate(zip(r, widths))).rstrip()
+              for r in rows]
+    return "\n".join(lines)

@@ -346,9 +346,6 @@ def test_p0_star_increases_with_n(tmp_path):
 @pytest.mark.gpu
 def test_gpu_sweep_matches_cpu(tiny_run, tmp_path):
     """Same classification and steps on the GPU; energies agree to round-off (not run here: no GPU)."""
-    from gpu_support import HAS_GPU
-    if not HAS_GPU:
-        pytest.skip("needs CuPy and a working NVIDIA GPU")
     _, first, _ = tiny_run
     result = sweeps.run_sweep(sweeps.RigiditySweep(**TINY), tmp_path / "gpu", device="gpu")
     assert result.executor == "InProcessExecutor"          # the default on a GPU

@@ -9,6 +9,7 @@ from . import gsdio, topology
 from .constraints import Sphere
 from .device import CPU
 from .state import State
+from .validation import integer
 
 REGULAR_TILINGS = ("dodecahedron", "truncated_icosahedron")
 MAX_ATTEMPTS = 1000
@@ -99,15 +100,11 @@ def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, v
     (:func:`spherevm.topology.morton_codes`), so that neighbours are close in memory; the GPU force
     kernels gather several times faster at large N.
     """
-    n = int(n_cells)
-    if n != n_cells or n < 4:
-        raise ValueError(f"n_cells must be an integer >= 4, got {n_cells}")
-    if int(replicas) != replicas or replicas < 1:
-        raise ValueError(f"replicas must be an integer >= 1, got {replicas}")
-    if int(seed) != seed or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed}")
+    n = integer("n_cells", n_cells, minimum=4)
+    replicas = integer("replicas", replicas, minimum=1)
+    seed = integer("seed", seed)
     R = _check_radius(radius, n)
-    return _tilings(n, [(int(seed), r) for r in range(int(replicas))], R, vertices, sort, device)
+    return _tilings(n, [(seed, r) for r in range(replicas)], R, vertices, sort, device)
 
 
 def random_tilings(n_cells: int, seeds, radius=None, vertices="centroid", sort: bool = True, device=CPU) -> State:

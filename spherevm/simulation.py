@@ -9,6 +9,7 @@ import numpy as np
 from . import init, shapes
 from .device import resolve
 from .plugins.base import Force, Integrator, Minimizer, Updater, Writer
+from .validation import integer
 
 
 class Operations:
@@ -131,9 +132,7 @@ class Simulation:
 
     def __init__(self, device="auto", seed: int = 0):
         self.device = resolve(device)
-        if int(seed) != seed or seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-        self.seed = int(seed)
+        self.seed = integer("seed", seed, maximum=2**32 - 1)   # the Philox key is one 32-bit word
         self.timestep = 0
         self._state = None
         self._cache = None
@@ -257,14 +256,12 @@ class Simulation:
         before, so the last good frame stays on disk. ``progress(done, total)`` is called at checks.
         """
         self._require_state()
-        if int(steps) != steps or steps < 0:
-            raise ValueError(f"steps must be a non-negative integer, got {steps!r}")
+        steps = integer("steps", steps)
         if self.operations.integrator is None:
             raise RuntimeError("set sim.operations.integrator before run()")
         if check_every is None:
             check_every = 100 if self.device.is_gpu else 1
-        if int(check_every) != check_every or check_every < 1:
-            raise ValueError(f"check_every must be a positive integer, got {check_every!r}")
+        check_every = integer("check_every", check_every, minimum=1)
         self._write()   # the frame a run starts from (writers skip timesteps they already wrote)
         try:
             for i in range(1, int(steps) + 1):
@@ -331,8 +328,7 @@ class Simulation:
         if not self.operations.forces:
             raise RuntimeError("no force in sim.operations.forces; append one, e.g. "
                                "spherevm.plugins.forces.VertexModel.dimensionless(kr=1, p0=3.8)")
-        if int(max_steps) != max_steps or max_steps < 0:
-            raise ValueError(f"max_steps must be a non-negative integer, got {max_steps!r}")
+        max_steps = integer("max_steps", max_steps)
         if self.operations.integrator is None:
             self.operations.integrator = FIRE()
         fire = self.operations.integrator

@@ -13,14 +13,19 @@ class ParameterError(ValueError):
         self.name, self.value, self.allowed = name, value, allowed
 
 
-def integer(name, value, minimum: int = 0) -> int:
-    """An integer >= ``minimum`` (an integral float or NumPy integer is fine, a bool is not)."""
+def integer(name, value, minimum: int = 0, maximum: int | None = None) -> int:
+    """An integer in ``[minimum, maximum]`` (an integral float or NumPy integer is fine, a bool is not)."""
     try:
-        ok = int(value) == value and not isinstance(value, (bool, np.bool_)) and int(value) >= minimum
+        ok = (int(value) == value and not isinstance(value, (bool, np.bool_)) and int(value) >= minimum
+              and (maximum is None or int(value) <= maximum))
     except (TypeError, ValueError, OverflowError):
         ok = False
     if not ok:
-        raise ParameterError(name, value, "a non-negative integer" if minimum == 0 else f"an integer >= {minimum}")
+        if maximum is not None:
+            allowed = f"an integer in [{minimum}, {maximum}]"
+        else:
+            allowed = "a non-negative integer" if minimum == 0 else f"an integer >= {minimum}"
+        raise ParameterError(name, value, allowed)
     return int(value)
 
 

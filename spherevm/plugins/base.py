@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..trigger import Always, as_trigger
-from ..validation import non_negative
+from ..validation import integer, non_negative
 
 
 class Operation:
@@ -221,9 +221,7 @@ class Minimizer(Integrator):
         if energy_tol is not None:
             self.energy_tol = float(non_negative("energy_tol", energy_tol, per_item="a scalar"))
         if check_every is not None:
-            if int(check_every) != check_every or check_every < 1:
-                raise ValueError(f"check_every must be a positive integer, got {check_every!r}")
-            self.check_every = int(check_every)
+            self.check_every = integer("check_every", check_every, minimum=1)
 
     def attach(self, simulation):
         super().attach(simulation)

@@ -7,7 +7,7 @@ import numpy as np
 
 from ...constraints import Sphere
 from ...device import launch, load_module
-from ...validation import positive
+from ...validation import integer, positive
 from ..base import Minimizer
 
 _KERNELS = Path(__file__).with_suffix(".cu")
@@ -41,9 +41,7 @@ class FIRE(Minimizer):
         self.dt_max = positive("dt_max", dt_max if dt_max is not None else 10 * self.dt)
         if self.dt_max < self.dt:
             raise ValueError(f"dt_max must be >= dt={self.dt}, got {dt_max!r}")
-        if int(n_min) != n_min or n_min < 0:
-            raise ValueError(f"n_min must be a non-negative integer, got {n_min!r}")
-        self.n_min = int(n_min)
+        self.n_min = integer("n_min", n_min)
         self.f_inc = positive("f_inc", f_inc)
         if self.f_inc < 1:
             raise ValueError(f"f_inc must be >= 1, got {f_inc!r}")

@@ -9,6 +9,7 @@ from ... import topology
 from ...constraints import Sphere
 from ...device import launch, load_module
 from ..base import Updater
+from ...validation import integer, positive
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 _CAND_INTS, _LOG_INTS = 12, 6
@@ -57,24 +58,21 @@ class T1(Updater):
             threshold, new_length, length_factor = (PRESETS[preset][k] for k in
                                                     ("threshold", "new_length", "length_factor"))
         self.preset = preset
-        self.threshold = float(threshold)
-        if not np.isfinite(self.threshold) or self.threshold <= 0:
-            raise ValueError(f"threshold must be positive and finite, got {threshold!r}")
+        self.threshold = positive("threshold", threshold)
         if length_factor is not None:
-            self.length_factor, self.new_length = float(length_factor), None
-            if not np.isfinite(self.length_factor) or self.length_factor <= 0:
-                raise ValueError(f"length_factor must be positive and finite, got {length_factor!r}")
+            self.length_factor, self.new_length = positive("length_factor", length_factor), None
+            if self.length_factor <= 1:
+                raise ValueError(f"length_factor must be > 1 (a shorter new edge is short again and flips "
+                                 f"straight back), got {length_factor!r}")
         else:
             if new_length is None:
                 raise ValueError("give new_length (in units of sqrt(<A>)) or length_factor")
-            self.new_length, self.length_factor = float(new_length), None
-            if not np.isfinite(self.new_length) or self.new_length <= self.threshold:
+            self.new_length, self.length_factor = positive("new_length", new_length), None
+            if self.new_length <= self.threshold:
                 raise ValueError(f"new_length must be finite and > threshold={self.threshold} "
                                  f"(else the new edge flips straight back), got {new_length!r}")
-        if int(max_flip_backs) != max_flip_backs or max_flip_backs < 1:
-            raise ValueError(f"max_flip_backs must be a positive integer, got {max_flip_backs!r}")
+        self.max_flip_backs = integer("max_flip_backs", max_flip_backs, minimum=1)
         self.reset_velocities = bool(reset_velocities)
-        self.max_flip_backs = int(max_flip_backs)
         self._reset_counters(0)
 
     def _reset_counters(self, n_replicas):

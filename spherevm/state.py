@@ -70,12 +70,6 @@ class State:
         self.vertex_replica = xp.asarray(self._vertex_replica)
         self.cell_replica = xp.asarray(self._cell_replica)
 
-    def vertex_start_np(self):
-        return self.vertex_start
-
-    def cell_start_np(self):
-        return self.cell_start
-
     def vertex_replica_np(self):
         return self._vertex_replica
 

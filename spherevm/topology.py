@@ -140,8 +140,8 @@ def check(state, tol: float = 1e-9, orientation: bool = True):
         raise ValueError(f"vertex {v} is off the surface by {dist[v]:.3g} (allowed {tol:g} R); "
                          "project positions with the constraint first")
     # Euler characteristic per replica: V - E + F with E = 3V/2
-    nvr = np.diff(state.vertex_start_np())
-    ncr = np.diff(state.cell_start_np())
+    nvr = np.diff(state.vertex_start)
+    ncr = np.diff(state.cell_start)
     chi = nvr - 3 * nvr // 2 + ncr
     if np.any(nvr % 2) or np.any(chi != 2):
         r = int(np.flatnonzero((chi != 2) | (nvr % 2 == 1))[0])

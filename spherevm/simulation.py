@@ -33,11 +33,11 @@ class Operations:
     def integrator(self, value):
         if value is not None and not isinstance(value, Integrator):
             raise TypeError(f"integrator must be a spherevm.plugins.Integrator, got {type(value).__name__}")
+        if value is not None and self._sim._state is not None:
+            value.attach(self._sim)             # a refused integrator leaves the old one in place
         if self._integrator is not None:
             self._integrator.detach()
         self._integrator = value
-        if value is not None and self._sim._state is not None:
-            value.attach(self._sim)
 
     def __iter__(self):
         yield from self.updaters
@@ -72,11 +72,12 @@ class _OperationList(MutableSequence):
 
     def __setitem__(self, i, value):
         new = [self._check(op) for op in value] if isinstance(i, slice) else [self._check(value)]
+        self._attach(new)                       # a refused operation never joins the list
         old = self._items[i] if isinstance(i, slice) else [self._items[i]]
-        self._items[i] = value if not isinstance(i, slice) else new
+        self._items[i] = new if isinstance(i, slice) else value
         for op in old:
-            op.detach()
-        self._attach(new)
+            if not any(op is n for n in new):
+                op.detach()
 
     def __delitem__(self, i):
         old = self._items[i] if isinstance(i, slice) else [self._items[i]]
@@ -85,8 +86,8 @@ class _OperationList(MutableSequence):
             op.detach()
 
     def insert(self, i, op):
-        self._items.insert(i, self._check(op))
-        self._attach([op])
+        self._attach([self._check(op)])
+        self._items.insert(i, op)
 
     def __eq__(self, other):
         return list(self) == list(other)

@@ -45,10 +45,10 @@ def edge_index(vn, u, v):
 
 def edge_cells(state, u, v):
     """(C1, C2, C3, C4) of the edge u - v, with u < v (the updater's orientation)."""
+    vn, vc = to_numpy(state.vertex_neighbors), to_numpy(state.vertex_cells)
     a, b = min(u, v), max(u, v)
-    slot = int(np.flatnonzero(state.vertex_neighbors[a] == b)[0])
-    *_, C1, C2, C3, C4 = topology.t1_cells(state.vertex_neighbors, state.vertex_cells, np.array([a]),
-                                           np.array([slot]))
+    slot = int(np.flatnonzero(vn[a] == b)[0])
+    *_, C1, C2, C3, C4 = topology.t1_cells(vn, vc, np.array([a]), np.array([slot]))
     return int(C1[0]), int(C2[0]), int(C3[0]), int(C4[0])
 
 

@@ -47,7 +47,7 @@ def flip_somewhere(state, rng, length=0.3):
     vn, vc, sides = (to_numpy(a) for a in (state.vertex_neighbors, state.vertex_cells, state.cell_sides))
     us, slots = [], []
     for r in range(state.n_replicas):
-        lo, hi = state.vertex_start_np()[r], state.vertex_start_np()[r + 1]
+        lo, hi = state.vertex_start[r], state.vertex_start[r + 1]
         while True:
             u, slot = int(rng.integers(lo, hi)), int(rng.integers(3))
             *_, C1, C2, C3, C4 = topology.t1_cells(vn, vc, np.array([u]), np.array([slot]))

@@ -55,7 +55,7 @@ def edge_cells(state, u, v):
 def short_edges(state, threshold):
     """Edges (u, v), u < v, geodesically shorter than threshold * sqrt(<A>) of their replica."""
     pos, vn = to_numpy(state.positions), to_numpy(state.vertex_neighbors)
-    unit = np.sqrt(4 * np.pi * state.radius_np() ** 2 / np.diff(state.cell_start_np()))
+    unit = np.sqrt(4 * np.pi * state.radius_np() ** 2 / np.diff(state.cell_start))
     rep = state.vertex_replica_np()
     return sorted((u, int(v)) for u in range(len(vn)) for v in vn[u]
                   if u < v and geodesic(pos[u], pos[v]) < threshold * unit[rep[u]])

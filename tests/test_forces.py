@@ -1,7 +1,7 @@
 """VertexModel energies and forces against finite differences and analytic values."""
 import numpy as np
 import pytest
-from conftest import finite_difference_forces
+from conftest import finite_difference_forces, to_numpy
 
 import spherevm as svm
 from spherevm.plugins.forces import VertexModel
@@ -12,9 +12,10 @@ from spherevm.plugins.forces import VertexModel
     VertexModel.dimensionless(kr=0.0, p0=3.9),
     VertexModel(kA=0.7, kP=1.3, A0=1.2, P0=3.1),
 ])
-def test_forces_match_finite_differences(tiling200, model):
+def test_forces_match_finite_differences(tiling200, model, device):
+    # finite differences on the CPU copy (NumPy in-place edits), forces on the device
     s = tiling200
-    forces = model.forces(s)
+    forces = to_numpy(model.forces(s.to(device)))
     rng = np.random.default_rng(0)
     verts = rng.choice(s.n_vertices, 25, replace=False)
     fd = finite_difference_forces(model, s, verts)
@@ -22,64 +23,64 @@ def test_forces_match_finite_differences(tiling200, model):
     assert np.abs(fd - forces[verts]).max() <= 1e-6 * scale
 
 
-def test_forces_are_tangent(tiling200):
-    f = VertexModel.dimensionless(kr=1.0, p0=3.8).forces(tiling200)
+def test_forces_are_tangent(tiling200, device):
+    f = to_numpy(VertexModel.dimensionless(kr=1.0, p0=3.8).forces(tiling200.to(device)))
     radial = np.abs((f * tiling200.positions).sum(1)) / np.linalg.norm(tiling200.positions, axis=1)
     assert radial.max() <= 1e-12 * np.linalg.norm(f, axis=1).max()
 
 
-def test_per_cell_parameters_match_scalar_ones(tiling200):
-    s = tiling200
+def test_per_cell_parameters_match_scalar_ones(tiling200, device):
+    s = tiling200.to(device)
     a = VertexModel(kA=0.5, kP=1.0, A0=1.0, P0=3.8)
     b = VertexModel(kA=np.full(s.n_cells, 0.5), kP=1.0, A0=np.ones(s.n_cells), P0=np.full(s.n_cells, 3.8))
-    assert np.array_equal(a.forces(s), b.forces(s))
+    assert np.array_equal(to_numpy(a.forces(s)), to_numpy(b.forces(s)))
     with pytest.raises(ValueError, match="per-cell P0 has length 3"):
         VertexModel(P0=[1.0, 2.0, 3.0]).forces(s)
 
 
-def test_energy_matches_definition_and_dimensionless_form():
-    s = svm.init.random_tiling(100, replicas=2, seed=3, radius=2.5)
+def test_energy_matches_definition_and_dimensionless_form(device):
+    s = svm.init.random_tiling(100, replicas=2, seed=3, radius=2.5, device=device)
     area, perim = svm.analysis.cell_shapes(s)
     mean_a = 4 * np.pi * 2.5 ** 2 / 100
     kr, p0 = 0.8, 3.75
     model = VertexModel.dimensionless(kr=kr, p0=p0)
-    e = model.energy(s)
+    e = to_numpy(model.energy(s))
     a, p = area / mean_a, perim / np.sqrt(mean_a)
     per_cell = mean_a * (kr * (a - 1) ** 2 + (p - p0) ** 2)
     assert np.allclose(e, [per_cell[:100].sum(), per_cell[100:].sum()], rtol=1e-12)
     direct = VertexModel(kA=kr / mean_a, kP=1.0, A0=mean_a, P0=p0 * np.sqrt(mean_a))
-    assert np.allclose(direct.energy(s), e, rtol=1e-12)
+    assert np.allclose(to_numpy(direct.energy(s)), e, rtol=1e-12)
 
 
-def test_regular_tiling_at_its_own_shape_has_zero_energy_and_force():
-    s = svm.init.regular_tiling("dodecahedron")
+def test_regular_tiling_at_its_own_shape_has_zero_energy_and_force(device):
+    s = svm.init.regular_tiling("dodecahedron", device=device)
     area, perim = svm.analysis.cell_shapes(s)
     model = VertexModel(kA=1.0, kP=1.0, A0=area[0], P0=perim[0])
-    assert model.energy(s)[0] < 1e-28
-    assert np.abs(model.forces(s)).max() < 1e-13
+    assert to_numpy(model.energy(s))[0] < 1e-28
+    assert np.abs(to_numpy(model.forces(s))).max() < 1e-13
 
 
-def test_symmetric_tiling_forces_vanish_by_symmetry():
+def test_symmetric_tiling_forces_vanish_by_symmetry(device):
     # each dodecahedron vertex has a three-fold axis through it: no tangent force for any parameters
-    s = svm.init.regular_tiling("dodecahedron")
-    f = VertexModel.dimensionless(kr=1.0, p0=3.0).forces(s)
+    s = svm.init.regular_tiling("dodecahedron", device=device)
+    f = to_numpy(VertexModel.dimensionless(kr=1.0, p0=3.0).forces(s))
     assert np.abs(f).max() < 1e-13
     # truncated icosahedron vertices only have a mirror plane: forces lie in it, with equal size
-    s = svm.init.regular_tiling("truncated_icosahedron")
-    f = VertexModel.dimensionless(kr=1.0, p0=3.0).forces(s)
+    s = svm.init.regular_tiling("truncated_icosahedron", device=device)
+    f = to_numpy(VertexModel.dimensionless(kr=1.0, p0=3.0).forces(s))
     mag = np.linalg.norm(f, axis=1)
     assert np.ptp(mag) < 1e-12 * mag.max()
 
 
-def test_replicas_are_independent():
-    ens = svm.init.random_tiling(60, replicas=3, seed=8)
+def test_replicas_are_independent(device):
+    ens = svm.init.random_tiling(60, replicas=3, seed=8, device=device)
     model = VertexModel.dimensionless(kr=1.0, p0=3.8)
-    f_all, e_all = model.forces(ens), model.energy(ens)
+    f_all, e_all = to_numpy(model.forces(ens)), to_numpy(model.energy(ens))
     for r in range(3):
         one = ens.replica(r)
         v0, v1 = ens.vertex_start[r], ens.vertex_start[r + 1]
-        assert np.array_equal(model.forces(one), f_all[v0:v1])
-        assert np.isclose(model.energy(one)[0], e_all[r], rtol=1e-14)
+        assert np.array_equal(to_numpy(model.forces(one)), f_all[v0:v1])
+        assert np.isclose(to_numpy(model.energy(one))[0], e_all[r], rtol=1e-14)
 
 
 @pytest.mark.parametrize("kw", [dict(kA=-1), dict(kP=float("nan")), dict(P0=-3.0), dict(A0=[[1.0]])])
@@ -89,7 +90,7 @@ def test_bad_parameters(kw):
 
 
 def test_threaded_blocks_give_the_same_forces(monkeypatch):
-    # large NumPy states are split into per-core vertex blocks: the result must not change
+    # CPU only: large NumPy states are split into per-core vertex blocks: the result must not change
     import spherevm.constraints.sphere as sphere
     s = svm.init.random_tiling(500, replicas=2, seed=21)
     model = VertexModel.dimensionless(kr=0.7, p0=3.7)

@@ -5,6 +5,7 @@ import sys
 import gsd.hoomd
 import numpy as np
 import pytest
+from conftest import to_numpy
 
 import spherevm as svm
 from spherevm import topology
@@ -16,8 +17,8 @@ from spherevm.gsdio import FrameIndexError, read_cell_values, read_state
 TOPOLOGY = ("cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cells", "vertex_start", "cell_start")
 
 
-def make_sim(state=None):
-    sim = svm.Simulation(device="cpu", seed=1)
+def make_sim(state=None, device="cpu"):
+    sim = svm.Simulation(device=device, seed=1)
     sim.state = state if state is not None else svm.init.random_tiling(64, replicas=3, seed=1)
     sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
     sim.operations.integrator = FIRE(dt=0.02)
@@ -89,18 +90,18 @@ class Snapshots(svm.plugins.Writer):
 
 
 @pytest.fixture
-def written(tmp_path):
-    """A run writing 4 frames, then frames with a hand-made T1, the original topology again, and
-    a different ensemble (other sizes, replica count and max_sides)."""
+def written(tmp_path, device):
+    """A run on the device writing 4 frames, then frames with a hand-made T1, the original topology
+    again, and a different ensemble (other sizes, replica count and max_sides)."""
     path = tmp_path / "run.gsd"
-    sim = make_sim()
+    sim = make_sim(device=device)
     snaps = Snapshots(trigger=3)
     writer = GSD(path, trigger=3)
     sim.operations.writers.extend([snaps, writer])
     sim.run(9)                            # frames at timesteps 0, 3, 6, 9
     assert snaps.steps == [0, 3, 6, 9]
     original = sim.state
-    for state in (manual_t1(original), original,
+    for state in (manual_t1(original.to("cpu")), original,
                   svm.State.concatenate([svm.init.random_tiling(20, seed=4), svm.init.random_tiling(31, seed=5)])):
         sim.state = state
         snaps.write(sim, sim.timestep)
@@ -108,12 +109,16 @@ def written(tmp_path):
     return path, sim, writer, snaps.refs
 
 
-def test_restore_every_frame_exactly(written):
+def test_restore_every_frame_exactly(written, device):
     path, sim, writer, refs = written
     assert svm.gsdio.n_frames(path) == len(refs)
     for i, ref in enumerate(refs):
         assert_same_state(read_state(path, frame=i), ref)
-        assert_same_state(svm.init.from_gsd(path, frame=i - len(refs)), ref)
+        assert_same_state(svm.init.from_gsd(path, frame=i - len(refs), device=device), ref)
+    # a Simulation on the device restores a frame onto its device
+    sim.create_state_from_gsd(path, frame=4)
+    assert sim.state.device.name == device
+    assert_same_state(sim.state, refs[4])
     # the T1 frame really changed the topology, the next one restored it from frame 0's chunks
     assert not np.array_equal(refs[4]["vertex_neighbors"], refs[0]["vertex_neighbors"])
     with gsd.hoomd.open(path) as t:
@@ -126,7 +131,7 @@ def test_restore_every_frame_exactly(written):
     assert isinstance(last.constraint, svm.constraints.Sphere)
 
 
-def test_hoomd_layout_lengths_box_and_log(written):
+def test_hoomd_layout_lengths_box_and_log(written, device):
     path, sim, writer, refs = written
     with gsd.hoomd.open(path) as t:
         assert len(t) == len(refs)
@@ -155,29 +160,35 @@ def test_hoomd_layout_lengths_box_and_log(written):
             assert np.all(np.abs(frame.particles.position) < half)
             d = frame.particles.position[bonds[:, 0]] - frame.particles.position[bonds[:, 1]]
             assert np.all(np.linalg.norm(d, axis=1) < half)
-    # log values are the simulation's, per replica; cell values exact and consistent
-    state0 = svm.init.from_gsd(path, frame=0)
+    # log values are the simulation's, per replica; cell values exact and consistent (recomputed
+    # on the device that wrote them; the GPU sums a cell's corners with atomics, in cupy.bincount,
+    # so there the same positions give the same areas to rounding, not bitwise)
+    state0 = svm.init.from_gsd(path, frame=0, device=device)
     area, perimeter = svm.analysis.cell_shapes(state0)
     cells = read_cell_values(path, frame=0)
-    assert np.array_equal(cells["area"], area) and np.array_equal(cells["perimeter"], perimeter)
+    if device == "cpu":
+        assert np.array_equal(cells["area"], area) and np.array_equal(cells["perimeter"], perimeter)
+    else:
+        assert np.allclose(cells["area"], area, rtol=1e-14, atol=0)
+        assert np.allclose(cells["perimeter"], perimeter, rtol=1e-14, atol=0)
     with gsd.hoomd.open(path) as t:
         f0 = t[0]
         model = VertexModel.dimensionless(kr=1.0, p0=3.8)
         res = model.compute(state0)
-        assert np.allclose(f0.log["energy"], res.energy, rtol=1e-12)
-        assert np.allclose(cells["energy"], res.cell_energy, rtol=1e-12)
-        assert np.allclose(f0.log["particles/cell_area"], area[state0.vertex_cells].mean(axis=1))
+        assert np.allclose(f0.log["energy"], to_numpy(res.energy), rtol=1e-12)
+        assert np.allclose(cells["energy"], to_numpy(res.cell_energy), rtol=1e-12)
+        assert np.allclose(f0.log["particles/cell_area"], area[to_numpy(state0.vertex_cells)].mean(axis=1))
         assert np.allclose(f0.log["bonds/length"].sum(), perimeter.sum() / 2)
 
 
-def test_readable_after_flush_without_close_and_append(tmp_path):
+def test_readable_after_flush_without_close_and_append(tmp_path, device):
     path = tmp_path / "open.gsd"
-    sim = make_sim(svm.init.random_tiling(16, replicas=2, seed=3))
+    sim = make_sim(svm.init.random_tiling(16, replicas=2, seed=3), device)
     writer = GSD(str(path), trigger=2, log=("energy_per_cell", "timestep"))
     sim.operations.writers.append(writer)
     assert not path.exists()            # opened lazily
     sim.run(4)                          # frames at 0, 2, 4; not closed
-    assert read_state(path).positions.tobytes() == sim.state.positions.tobytes()
+    assert read_state(path).positions.tobytes() == to_numpy(sim.state.positions).tobytes()
     with gsd.hoomd.open(path) as t:
         assert len(t) == 3 and [int(f.configuration.step) for f in t] == [0, 2, 4]
         assert np.array_equal(t[2].log["timestep"], [4])
@@ -197,6 +208,7 @@ def test_readable_after_flush_without_close_and_append(tmp_path):
 
 
 def test_crash_leaves_readable_file(tmp_path):
+    # CPU only: a child process killed mid-run; what is on disk does not depend on the device
     path = tmp_path / "crash.gsd"
     code = (
         "import os, spherevm as svm\n"
@@ -263,8 +275,8 @@ def test_bad_input(tmp_path, written):
     assert not target.exists()
 
 
-def test_writer_without_forces(tmp_path):
-    sim = svm.Simulation(device="cpu")
+def test_writer_without_forces(tmp_path, device):
+    sim = svm.Simulation(device=device)
     sim.state = svm.init.random_tiling(12, seed=1)
     w = GSD(tmp_path / "init.gsd")
     w.write(sim, 0)
@@ -275,9 +287,9 @@ def test_writer_without_forces(tmp_path):
     assert read_state(tmp_path / "init.gsd").n_cells == 12
 
 
-def test_box_grows_for_long_edges(tmp_path):
+def test_box_grows_for_long_edges(tmp_path, device):
     """In a 4-cell tiling edges are longer than 1.1 R: the box grows so that none reaches half of it."""
-    sim = make_sim(svm.init.random_tiling(4, seed=0))
+    sim = make_sim(svm.init.random_tiling(4, seed=0), device)
     with GSD(tmp_path / "tiny.gsd") as w:
         w.write(sim, 0)
     with gsd.hoomd.open(tmp_path / "tiny.gsd") as t:
@@ -288,11 +300,11 @@ def test_box_grows_for_long_edges(tmp_path):
     assert_same_state(read_state(tmp_path / "tiny.gsd"), snapshot(sim.state))
 
 
-def test_per_item_keys_persist_with_right_lengths(tmp_path):
+def test_per_item_keys_persist_with_right_lengths(tmp_path, device):
     """A per-vertex key missing from a frame would take frame 0's array (wrong length after a
     topology change): the writer keeps writing every key it has written, NaN when unknown."""
     path = tmp_path / "keys.gsd"
-    sim = make_sim(svm.init.random_tiling(16, seed=1))
+    sim = make_sim(svm.init.random_tiling(16, seed=1), device)
     w = GSD(path, log=("mean_shape_index",))
     w.write(sim, 0)
     sim.operations.forces.remove(sim.operations.forces[0])

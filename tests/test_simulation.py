@@ -44,8 +44,8 @@ class Counter(Updater):
         self.calls.append(timestep)
 
 
-def test_run_order_triggers_and_logging():
-    sim = svm.Simulation(device="cpu")
+def test_run_order_triggers_and_logging(device):
+    sim = svm.Simulation(device=device)
     sim.state = svm.init.random_tiling(40, seed=1)
     sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.9))
     sim.operations.integrator = FIRE(dt=0.01)
@@ -75,7 +75,7 @@ def test_operation_type_checks():
         sim.state = np.zeros((3, 3))
 
 
-def test_mean_shape_index_of_regular_tiling():
-    s = svm.init.regular_tiling("dodecahedron")
+def test_mean_shape_index_of_regular_tiling(device):
+    s = svm.init.regular_tiling("dodecahedron", device=device)
     expected = svm.analysis.pentagon_perimeter(12)  # unit-area pentagons at the default radius
     assert np.isclose(svm.analysis.mean_shape_index(s)[0], expected, rtol=1e-13)

@@ -1,12 +1,13 @@
 """State construction, validation and the errors bad input gets."""
 import numpy as np
 import pytest
+from conftest import to_numpy
 
 import spherevm as svm
 
 
-def test_random_tiling_layout_and_euler():
-    s = svm.init.random_tiling(100, replicas=3, seed=2)
+def test_random_tiling_layout_and_euler(device):
+    s = svm.init.random_tiling(100, replicas=3, seed=2, device=device)
     assert s.n_replicas == 3 and s.n_cells == 300
     assert s.n_vertices == 3 * (2 * 100 - 4)  # V = 2F - 4 for a trivalent sphere
     nv, nc = s.vertices_per_replica, s.cells_per_replica
@@ -14,7 +15,8 @@ def test_random_tiling_layout_and_euler():
     assert s.positions.dtype == np.float64 and s.cell_vertices.dtype == np.int32
     assert np.allclose(s.radius_np(), np.sqrt(100 / (4 * np.pi)))
     assert np.allclose(s.mean_cell_area, 1.0)
-    assert np.allclose(np.linalg.norm(s.positions, axis=1), s.radius_np()[s.vertex_replica_np()], rtol=1e-14)
+    assert np.allclose(np.linalg.norm(to_numpy(s.positions), axis=1), s.radius_np()[s.vertex_replica_np()],
+                       rtol=1e-14)
 
 
 def test_same_seed_same_tiling_and_replicas_independent_of_count():
@@ -26,13 +28,13 @@ def test_same_seed_same_tiling_and_replicas_independent_of_count():
     assert not np.array_equal(a.positions[:c.n_vertices], c.positions)
 
 
-def test_replica_extraction_roundtrip():
-    s = svm.init.random_tiling(40, replicas=3, seed=1)
+def test_replica_extraction_roundtrip(device):
+    s = svm.init.random_tiling(40, replicas=3, seed=1, device=device)
     parts = [s.replica(r) for r in range(3)]
     back = svm.State.concatenate(parts)
-    assert np.array_equal(back.positions, s.positions)
-    assert np.array_equal(back.vertex_neighbors, s.vertex_neighbors)
-    assert np.array_equal(back.vertex_cells, s.vertex_cells)
+    assert back.device.name == s.device.name
+    for name in ("positions", "vertex_neighbors", "vertex_cells"):
+        assert np.array_equal(to_numpy(getattr(back, name)), to_numpy(getattr(s, name))), name
     back.validate()
 
 
@@ -88,22 +90,22 @@ def test_random_tiling_bad_input(bad, match):
         svm.init.random_tiling(**bad)
 
 
-def test_validate_names_nan_vertex():
-    s = svm.init.random_tiling(20, seed=0)
+def test_validate_names_nan_vertex(device):
+    s = svm.init.random_tiling(20, seed=0, device=device)
     s.positions[7] = np.nan
     with pytest.raises(ValueError, match="vertex 7"):
         s.validate()
 
 
-def test_validate_names_vertex_off_surface():
-    s = svm.init.random_tiling(20, seed=0)
+def test_validate_names_vertex_off_surface(device):
+    s = svm.init.random_tiling(20, seed=0, device=device)
     s.positions[5] *= 1.01
     with pytest.raises(ValueError, match="vertex 5 is off the surface"):
         s.validate()
 
 
-def test_validate_catches_broken_reciprocity():
-    s = svm.init.random_tiling(20, seed=0)
+def test_validate_catches_broken_reciprocity(device):
+    s = svm.init.random_tiling(20, seed=0, device=device)
     s.vertex_neighbors[4, 0] = s.vertex_neighbors[4, 1]
     with pytest.raises(ValueError, match="vertex 4"):
         s.validate()

@@ -2,6 +2,8 @@
 import numpy as np
 import pytest
 
+from conftest import to_numpy
+
 import spherevm as svm
 from spherevm import topology
 from spherevm.plugins.forces import VertexModel
@@ -12,7 +14,7 @@ from spherevm.plugins.updaters import T1
 def _cells(state):
     """Cell vertex lists, each rotated to start at its smallest vertex (a canonical form)."""
     out = []
-    for row, n in zip(state.cell_vertices, state.cell_sides):
+    for row, n in zip(to_numpy(state.cell_vertices), to_numpy(state.cell_sides)):
         r = row[:n].tolist()
         i = r.index(min(r))
         out.append(tuple(r[i:] + r[:i]))
@@ -21,7 +23,7 @@ def _cells(state):
 
 def _vertex_tables(state):
     """vertex_neighbors / vertex_cells rows rotated to a canonical starting slot."""
-    vn, vc = state.vertex_neighbors, state.vertex_cells
+    vn, vc = to_numpy(state.vertex_neighbors), to_numpy(state.vertex_cells)
     k = vn.argmin(axis=1)
     idx = (k[:, None] + np.arange(3)[None, :]) % 3
     return np.take_along_axis(vn, idx, 1), np.take_along_axis(vc, idx, 1)
@@ -32,11 +34,17 @@ def _check_invariants(state, orientation=True):
     area, _ = svm.analysis.cell_shapes(state)
     per_rep = np.bincount(state.cell_replica_np(), weights=area)
     assert np.allclose(per_rep, 4 * np.pi * state.radius_np() ** 2, rtol=1e-10, atol=0)
-    assert state.cell_sides.min() >= 3
+    assert to_numpy(state.cell_sides).min() >= 3
 
 
-def _sim_with_t1(state, t1, force=None):
-    sim = svm.Simulation(device="cpu")
+def _table(state):
+    """The cell table trimmed to the widest cell (the GPU may keep a spare column)."""
+    cv = to_numpy(state.cell_vertices)
+    return cv[:, :int(to_numpy(state.cell_sides).max())]
+
+
+def _sim_with_t1(state, t1, force=None, device="cpu"):
+    sim = svm.Simulation(device=device)
     sim.state = state
     sim.operations.updaters.append(t1)
     sim.operations.forces.append(force or VertexModel.dimensionless(kr=1.0, p0=3.8))
@@ -103,17 +111,18 @@ def test_flip_then_inverse_restores_the_network_and_positions():
         s = ref.copy()
 
 
-def test_triangles_may_not_lose_a_side_refusals_are_counted():
+def test_triangles_may_not_lose_a_side_refusals_are_counted(device):
     s = svm.init.random_tiling(4, seed=0)          # a tetrahedral tiling: four triangles
     assert s.cell_sides.tolist() == [3, 3, 3, 3]
     t1 = T1(threshold=100.0, new_length=101.0)
-    sim = _sim_with_t1(s, t1)
+    sim = _sim_with_t1(s, t1, device=device)
     sim.run(1)
     assert sim.log("t1_flips").tolist() == [0] and sim.log("t1_refused").tolist() == [6]
-    assert np.array_equal(sim.state.cell_vertices, s.cell_vertices)
+    assert np.array_equal(to_numpy(sim.state.cell_sides), s.cell_sides)
+    assert np.array_equal(_table(sim.state), s.cell_vertices)
 
 
-def test_conflicting_flips_lowest_edge_first_one_per_cell():
+def test_conflicting_flips_lowest_edge_first_one_per_cell(device):
     s = svm.init.regular_tiling("truncated_icosahedron")
     # shrink two edges of the same hexagon: only the lower-index edge may flip this pass
     hexagon = int(np.flatnonzero(s.cell_sides == 6)[0])
@@ -130,15 +139,15 @@ def test_conflicting_flips_lowest_edge_first_one_per_cell():
     u, slot, _ = t1.short_edges(s)
     assert len(u) == 2
     index = 3 * u + slot
-    sim = _sim_with_t1(s, t1)
+    sim = _sim_with_t1(s, t1, device=device)
     sim.run(0)
     sim._update()
     assert sim.log("t1_flips").tolist() == [1]
     low = int(np.argmin(index))
     high = 1 - low
-    assert sim.state.cell_sides[hexagon] == 5
+    assert to_numpy(sim.state.cell_sides)[hexagon] == 5
     # the low edge's vertices were rotated: they moved; the high edge's did not
-    moved = np.abs(sim.state.positions - s.positions).max(axis=1) > 0
+    moved = np.abs(to_numpy(sim.state.positions) - s.positions).max(axis=1) > 0
     lo_pair = [u[low], s.vertex_neighbors[u[low], slot[low]]]
     hi_pair = [u[high], s.vertex_neighbors[u[high], slot[high]]]
     assert moved[lo_pair].all() and not moved[hi_pair].any()
@@ -150,6 +159,7 @@ def test_conflicting_flips_lowest_edge_first_one_per_cell():
 
 
 def test_at_most_one_flip_per_cell_per_pass_under_stress():
+    # CPU only: the host helpers short_edges / select (the GPU pass does this in t1_detect)
     s = svm.init.random_tiling(200, seed=5)
     t1 = T1(threshold=0.5, new_length=0.6)
     u, slot, _ = t1.short_edges(s)
@@ -164,53 +174,53 @@ def test_at_most_one_flip_per_cell_per_pass_under_stress():
         assert np.isin(cells[i], cells[others]).any()
 
 
-def _random_walk_with_t1(state, seed, passes, kick=0.08, threshold=0.25):
+def _random_walk_with_t1(state, seed, passes, kick=0.08, threshold=0.25, device="cpu"):
     """Random tangent kicks followed by a T1 pass, `passes` times."""
     rng = np.random.default_rng(seed)
     t1 = T1(threshold=threshold, new_length=1.5 * threshold, max_flip_backs=10 ** 9)
-    sim = svm.Simulation(device="cpu")
+    sim = svm.Simulation(device=device)
     sim.state = state
     sim.operations.updaters.append(t1)
     con, st = sim.state.constraint, sim.state
     for _ in range(passes):
-        noise = rng.normal(scale=kick, size=st.positions.shape)
-        rad = st.radius_np()[st.vertex_replica_np()]
+        noise = st.device.asarray(rng.normal(scale=kick, size=st.positions.shape))
+        rad = st.radius[st.vertex_replica]
         st.positions = con.project_normal(st.positions + con.project_tangent(st.positions, noise), rad)
         sim._update()
         yield sim, t1
 
 
-def test_thousands_of_random_flips_keep_every_invariant():
+def test_thousands_of_random_flips_keep_every_invariant(device):
     total = 0
     for seed in range(8):
         state = svm.init.random_tiling(40 + 10 * seed, seed=seed)
-        for sim, t1 in _random_walk_with_t1(state, seed, passes=80):
+        for sim, t1 in _random_walk_with_t1(state, seed, passes=80, device=device):
             _check_invariants(sim.state, orientation=False)
-        total += int(t1.total_flips.sum())
-        assert sim.state.max_sides >= sim.state.cell_sides.max()
+        total += int(sim.log("t1_total_flips").sum())
+        assert sim.state.max_sides >= to_numpy(sim.state.cell_sides).max()
     assert total > 1000
 
 
-def test_ensemble_and_single_replicas_flip_identically():
+def test_ensemble_and_single_replicas_flip_identically(device):
     ens = svm.init.random_tiling(50, replicas=3, seed=7)
     t1 = T1(threshold=0.3, new_length=0.45)
-    sim_e = _sim_with_t1(ens, t1)
+    sim_e = _sim_with_t1(ens, t1, device=device)
     sim_e.run(30)
     for r in range(3):
         t1r = T1(threshold=0.3, new_length=0.45)
-        sim_r = _sim_with_t1(ens.replica(r), t1r)
+        sim_r = _sim_with_t1(ens.replica(r), t1r, device=device)
         sim_r.run(30)
-        assert t1r.total_flips[0] == t1.total_flips[r] > 0
+        assert sim_r.log("t1_total_flips")[0] == sim_e.log("t1_total_flips")[r] > 0
         mine = sim_e.state.replica(r)
         assert _cells(mine) == _cells(sim_r.state)
-        assert np.allclose(mine.positions, sim_r.state.positions, rtol=0, atol=1e-12)
+        assert np.allclose(to_numpy(mine.positions), to_numpy(sim_r.state.positions), rtol=0, atol=1e-12)
 
 
-def test_reference_preset():
+def test_reference_preset(device):
     t1 = T1(preset="reference")
     assert t1.threshold == 0.1 and t1.length_factor == 2.0 and t1.new_length is None
     s = svm.init.random_tiling(100, seed=3)
-    sim = _sim_with_t1(s, t1)
+    sim = _sim_with_t1(s, t1, device=device)
     u, slot, lengths = t1.short_edges(sim.state)
     sim._update()
     if len(u):
@@ -218,23 +228,23 @@ def test_reference_preset():
 
 
 @pytest.mark.parametrize("n_cells", [32, 64, 128] + [pytest.param(n, marks=pytest.mark.slow) for n in (256, 512, 1024)])
-def test_fire_with_t1_converges(n_cells):
+def test_fire_with_t1_converges(n_cells, device):
     sim = _sim_with_t1(svm.init.random_tiling(n_cells, replicas=2, seed=n_cells), T1(),
-                       VertexModel.dimensionless(kr=1.0, p0=3.7))
+                       VertexModel.dimensionless(kr=1.0, p0=3.7), device=device)
     sim.operations.integrator = FIRE(dt=0.02)
     res = sim.minimize(force_tol=1e-10, max_steps=50000)
     assert res.all_converged, res.table()
     _check_invariants(sim.state)
 
 
-def test_flipping_back_and_forth_is_detected_and_reported():
+def test_flipping_back_and_forth_is_detected_and_reported(device):
     # every edge is "short" and every new edge too: the same pairs flip back and forth forever
     t1 = T1(threshold=50.0, new_length=60.0, max_flip_backs=5)
-    sim = _sim_with_t1(svm.init.random_tiling(16, replicas=2, seed=1), t1)
+    sim = _sim_with_t1(svm.init.random_tiling(16, replicas=2, seed=1), t1, device=device)
     res = sim.minimize(force_tol=1e-14, max_steps=5000, check_every=1)
     assert list(res.reason) == ["t1_oscillation", "t1_oscillation"]
     assert not res.converged.any() and np.all(res.steps < 5000)
-    assert np.all(t1.flip_backs >= 5)
+    assert np.all(sim.log("t1_flip_backs") >= 5)
 
 
 @pytest.mark.parametrize("kw, match", [

@@ -45,18 +45,14 @@ class Device:
 
     def to_numpy(self, a):
         """Return ``a`` as a NumPy array (a device-to-host copy on the GPU)."""
-        if self.is_gpu and not isinstance(a, np.ndarray):
+        if self.is_gpu and type(a).__module__.startswith("cupy"):
             return a.get()
         return np.asarray(a)
 
     def segment_max(self, values, segments, n_segments):
         """Per-segment maximum of non-negative ``values`` (0 for an empty segment)."""
         out = self.xp.zeros(n_segments)
-        if self.is_gpu:
-            import cupyx
-            cupyx.scatter_max(out, segments, values)
-        else:
-            np.maximum.at(out, segments, values)
+        self.xp.maximum.at(out, segments, values)
         return out
 
     def synchronize(self):

@@ -43,7 +43,7 @@ class State:
         self.vertex_cells = xp.asarray(vertex_cells, dtype=xp.int32)
         self.vertex_start = np.asarray(vertex_start, dtype=np.int64)
         self.cell_start = np.asarray(cell_start, dtype=np.int64)
-        self.radius = xp.asarray(np.broadcast_to(np.asarray(radius, dtype=np.float64),
+        self.radius = xp.asarray(np.broadcast_to(np.asarray(self.device.to_numpy(radius), dtype=np.float64),
                                                  (len(self.vertex_start) - 1,)).copy())
         self.topology_version = 0   # bumped by every topology edit (T1 flips): caches key on it
         self._cached = {}

@@ -36,7 +36,11 @@ def counting_narrowings(monkeypatch):
 
 
 def test_narrowed_minimisation_is_bitwise_the_full_one(monkeypatch, device):
-    # on the same device, narrowing must not change a single bit
+    """On the CPU, narrowing must not change a single bit. On the GPU the per-replica sums (FIRE's
+    power and norms, the energies) are atomics whose order varies from run to run, so two full
+    runs already differ in the last bits (measured on an H200: positions 8e-13 apart after a
+    minimisation); there the narrowed run must agree with the full one as two full runs agree:
+    same outcome per replica, the stopping check at most one interval apart, energies to 1e-12."""
     full = mixed_ensemble(device)
     ref = full.minimize(force_tol=1e-12, max_steps=3000, narrow=False)
     calls = counting_narrowings(monkeypatch)
@@ -44,17 +48,24 @@ def test_narrowed_minimisation_is_bitwise_the_full_one(monkeypatch, device):
     res = sim.minimize(force_tol=1e-12, max_steps=3000)
     assert len(calls) >= 2 and calls[-1] < 8          # it did narrow, more than once
     assert len(set(ref.steps)) > 2                      # replicas finished at different steps
-    for name in ("converged", "reason", "steps", "energy", "max_force", "mean_shape_index"):
-        assert np.array_equal(getattr(res, name), getattr(ref, name)), name
-    a, b = sim.state, full.state
-    for name in ("positions", "cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cells"):
-        assert np.array_equal(to_numpy(getattr(a, name)), to_numpy(getattr(b, name))), name
+    fire, fire_ref = sim.operations.integrator, full.operations.integrator
+    assert np.array_equal(res.converged, ref.converged) and np.array_equal(res.reason, ref.reason)
     assert sim.log("t1_total_flips").sum() > 0
     for name in ("t1_total_flips", "t1_total_refused", "t1_flip_backs"):
         assert np.array_equal(sim.log(name), full.log(name)), name
-    fire, fire_ref = sim.operations.integrator, full.operations.integrator
-    assert np.array_equal(to_numpy(fire.velocities), to_numpy(fire_ref.velocities))
-    assert np.array_equal(to_numpy(fire.replica_dt), to_numpy(fire_ref.replica_dt))
+    a, b = sim.state, full.state
+    for name in ("cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cells"):
+        assert np.array_equal(to_numpy(getattr(a, name)), to_numpy(getattr(b, name))), name
+    if device == "cpu":
+        for name in ("steps", "energy", "max_force", "mean_shape_index"):
+            assert np.array_equal(getattr(res, name), getattr(ref, name)), name
+        assert np.array_equal(a.positions, b.positions)
+        assert np.array_equal(fire.velocities, fire_ref.velocities)
+        assert np.array_equal(fire.replica_dt, fire_ref.replica_dt)
+    else:
+        assert np.all(np.abs(res.steps - ref.steps) <= fire.check_every)
+        assert np.allclose(res.energy_per_cell, ref.energy_per_cell, rtol=1e-9, atol=1e-12)
+        assert np.abs(to_numpy(a.positions) - to_numpy(b.positions)).max() < 1e-9
     sim.state.validate(orientation=False)
     assert sim.state.n_replicas == 8
     assert np.array_equal(fire.active, ~fire.stopped)     # replicas at max_steps still active

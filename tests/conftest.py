@@ -61,3 +61,51 @@ def finite_difference_forces(force, state, vertices, h=1e-6):
             out[i, d] = -(ep - em) / (2 * h)
     state.positions = pos0
     return out
+
+
+# ------------------------------------------------------------------ shared by the GSD tests
+STATE_TOPOLOGY = ("cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cells", "vertex_start", "cell_start")
+
+
+def snapshot(state):
+    """NumPy copies of every array of a State (either device)."""
+    return {k: np.array(v, copy=True) for k, v in state._arrays_np().items()}
+
+
+def assert_same_state(restored, ref, where=""):
+    """``restored`` holds exactly the arrays of the snapshot ``ref``: positions bitwise."""
+    a = restored._arrays_np()
+    assert a["positions"].dtype == np.float64
+    assert a["positions"].tobytes() == ref["positions"].tobytes(), f"positions {where}"
+    for k in STATE_TOPOLOGY:
+        assert a[k].shape == ref[k].shape and np.array_equal(a[k], ref[k]), f"{k} {where}"
+    assert np.array_equal(a["radius"], ref["radius"]), f"radius {where}"
+
+
+class Snapshots(svm.plugins.Writer):
+    """Records the arrays of every state a GSD writer with the same trigger sees."""
+
+    def __init__(self, trigger):
+        super().__init__(trigger)
+        self.refs, self.steps = [], []
+
+    def write(self, simulation, timestep):
+        self.refs.append(snapshot(simulation.state))
+        self.steps.append(timestep)
+
+
+# Random123 kat_vectors, "philox4x32 R" lines: counter (4 words), key (2 words), expected (4 words).
+PHILOX_KAT = [
+    (10, [0x00000000, 0x00000000, 0x00000000, 0x00000000], [0x00000000, 0x00000000],
+     [0x6627e8d5, 0xe169c58d, 0xbc57ac4c, 0x9b00dbd8]),
+    (10, [0xffffffff, 0xffffffff, 0xffffffff, 0xffffffff], [0xffffffff, 0xffffffff],
+     [0x408f276d, 0x41c83b0e, 0xa20bc7c6, 0x6d5451fd]),
+    (10, [0x243f6a88, 0x85a308d3, 0x13198a2e, 0x03707344], [0xa4093822, 0x299f31d0],
+     [0xd16cfe09, 0x94fdcceb, 0x5001e420, 0x24126ea1]),
+    (7, [0x00000000, 0x00000000, 0x00000000, 0x00000000], [0x00000000, 0x00000000],
+     [0x5f6fb709, 0x0d893f64, 0x4f121f81, 0x4f730a48]),
+    (7, [0xffffffff, 0xffffffff, 0xffffffff, 0xffffffff], [0xffffffff, 0xffffffff],
+     [0x5207ddc2, 0x45165e59, 0x4d8ee751, 0x8c52f662]),
+    (7, [0x243f6a88, 0x85a308d3, 0x13198a2e, 0x03707344], [0xa4093822, 0x299f31d0],
+     [0x4dfccaba, 0x190a87f0, 0xc47362ba, 0xb6b5242a]),
+]

@@ -25,6 +25,8 @@ import subprocess
 import numpy as np
 import pytest
 
+from conftest import PHILOX_KAT as KAT
+
 import spherevm as svm
 from spherevm import random as svr
 from spherevm.constraints import sphere as csphere
@@ -47,20 +49,6 @@ RTOL = 1e-14
 # measured <= 2 ulp for the header's host path).
 NORMAL_ULP = 4
 
-KAT = [   # Random123 tests/kat_vectors: rounds, counter (4 words), key (2 words), expected (4 words)
-    (10, [0x00000000, 0x00000000, 0x00000000, 0x00000000], [0x00000000, 0x00000000],
-     [0x6627e8d5, 0xe169c58d, 0xbc57ac4c, 0x9b00dbd8]),
-    (10, [0xffffffff, 0xffffffff, 0xffffffff, 0xffffffff], [0xffffffff, 0xffffffff],
-     [0x408f276d, 0x41c83b0e, 0xa20bc7c6, 0x6d5451fd]),
-    (10, [0x243f6a88, 0x85a308d3, 0x13198a2e, 0x03707344], [0xa4093822, 0x299f31d0],
-     [0xd16cfe09, 0x94fdcceb, 0x5001e420, 0x24126ea1]),
-    (7, [0x00000000, 0x00000000, 0x00000000, 0x00000000], [0x00000000, 0x00000000],
-     [0x5f6fb709, 0x0d893f64, 0x4f121f81, 0x4f730a48]),
-    (7, [0xffffffff, 0xffffffff, 0xffffffff, 0xffffffff], [0xffffffff, 0xffffffff],
-     [0x5207ddc2, 0x45165e59, 0x4d8ee751, 0x8c52f662]),
-    (7, [0x243f6a88, 0x85a308d3, 0x13198a2e, 0x03707344], [0xa4093822, 0x299f31d0],
-     [0x4dfccaba, 0x190a87f0, 0xc47362ba, 0xb6b5242a]),
-]
 
 # Timesteps: small, both sides of 2**32 (where the high counter word starts to move), the two words
 # swapped into each other, and the extremes. A swap of the counter's timestep words changes every

@@ -5,7 +5,7 @@ import sys
 import gsd.hoomd
 import numpy as np
 import pytest
-from conftest import to_numpy
+from conftest import Snapshots, assert_same_state, snapshot, to_numpy
 
 import spherevm as svm
 from spherevm import topology
@@ -14,7 +14,6 @@ from spherevm.plugins.integrators import FIRE
 from spherevm.plugins.writers import GSD
 from spherevm.gsdio import FrameIndexError, read_cell_values, read_state
 
-TOPOLOGY = ("cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cells", "vertex_start", "cell_start")
 
 
 def make_sim(state=None, device="cpu"):
@@ -23,20 +22,6 @@ def make_sim(state=None, device="cpu"):
     sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
     sim.operations.integrator = FIRE(dt=0.02)
     return sim
-
-
-def snapshot(state):
-    return {k: np.array(v, copy=True) for k, v in state._arrays_np().items()}
-
-
-def assert_same_state(restored, ref):
-    a = restored._arrays_np()
-    assert a["positions"].dtype == np.float64
-    assert a["positions"].tobytes() == ref["positions"].tobytes()  # bitwise
-    for k in TOPOLOGY:
-        assert a[k].shape == ref[k].shape, k
-        assert np.array_equal(a[k], ref[k]), k
-    assert np.array_equal(a["radius"], ref["radius"])
 
 
 def manual_t1(state):
@@ -75,18 +60,6 @@ def manual_t1(state):
         except ValueError:
             continue
     raise AssertionError("could not build a valid T1 state")
-
-
-class Snapshots(svm.plugins.Writer):
-    """Records the arrays of every state a GSD writer with the same trigger sees."""
-
-    def __init__(self, trigger):
-        super().__init__(trigger)
-        self.refs, self.steps = [], []
-
-    def write(self, simulation, timestep):
-        self.refs.append(snapshot(simulation.state))
-        self.steps.append(timestep)
 
 
 @pytest.fixture

@@ -8,38 +8,19 @@ writer leaves topology chunks out only when they equal frame 0's.
 """
 import gsd.hoomd
 import numpy as np
-import pytest
 
 import spherevm as svm
 from spherevm import topology
 from spherevm.gsdio import Reader, read_state
-from spherevm.plugins.base import Writer
 from spherevm.plugins.forces import VertexModel
 from spherevm.plugins.integrators import FIRE
 from spherevm.plugins.updaters import T1
 from spherevm.plugins.writers import GSD
 
-from conftest import to_numpy
-
-KEYS = ("positions", "cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cells", "vertex_start",
-        "cell_start", "radius")
-TOPOLOGY = ("cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cells")
-
-
-def snapshot(state):
-    return {k: np.array(to_numpy(getattr(state, k)), copy=True) for k in KEYS}
-
-
-def assert_same(state, ref, where=""):
-    got = snapshot(state)
-    assert got["positions"].dtype == np.float64
-    assert got["positions"].tobytes() == ref["positions"].tobytes(), f"positions {where}"
-    for k in KEYS[1:]:
-        assert got[k].shape == ref[k].shape and np.array_equal(got[k], ref[k]), f"{k} {where}"
-
+from conftest import STATE_TOPOLOGY, Snapshots, assert_same_state, snapshot, to_numpy
 
 def same_topology(a, b):
-    return all(a[k].shape == b[k].shape and np.array_equal(a[k], b[k]) for k in TOPOLOGY)
+    return all(a[k].shape == b[k].shape and np.array_equal(a[k], b[k]) for k in STATE_TOPOLOGY)
 
 
 def flip_somewhere(state, rng, length=0.3):
@@ -57,18 +38,6 @@ def flip_somewhere(state, rng, length=0.3):
                 slots.append(slot)
                 break
     topology.t1_flip(state, np.array(us), np.array(slots), length)
-
-
-class Recorder(Writer):
-    """The arrays of every state written by a GSD writer with the same trigger."""
-
-    def __init__(self, trigger):
-        super().__init__(trigger)
-        self.refs, self.steps = [], []
-
-    def write(self, simulation, timestep):
-        self.refs.append(snapshot(simulation.state))
-        self.steps.append(timestep)
 
 
 def _sim(state):
@@ -90,11 +59,11 @@ def _check_all_frames(path, refs):
     with Reader(path) as r:
         assert len(r) == n
         for i, ref in enumerate(refs):
-            assert_same(r.state(i), ref, f"frame {i}")
-            assert_same(r.state(i - n), ref, f"frame {i - n}")
+            assert_same_state(r.state(i), ref, f"frame {i}")
+            assert_same_state(r.state(i - n), ref, f"frame {i - n}")
     for i in (0, n // 2, n - 1):
-        assert_same(svm.init.from_gsd(path, frame=i), refs[i], f"from_gsd frame {i}")
-        assert_same(read_state(path, frame=i), refs[i], f"read_state frame {i}")
+        assert_same_state(svm.init.from_gsd(path, frame=i), refs[i], f"from_gsd frame {i}")
+        assert_same_state(read_state(path, frame=i), refs[i], f"read_state frame {i}")
 
 
 def test_write_then_append_across_topology_changes(tmp_path):
@@ -122,7 +91,7 @@ def test_write_then_append_across_topology_changes(tmp_path):
     writer2 = GSD(path, trigger=1, mode="ab")
     for s in (C, A, B):
         sim.state.positions = s.positions.copy()
-        for k in TOPOLOGY:
+        for k in STATE_TOPOLOGY:
             setattr(sim.state, k, getattr(s, k).copy())
         sim.state.topology_version += 1
         sim.state_changed()
@@ -175,7 +144,7 @@ def test_restart_appends_after_t1s(tmp_path, device):
     """Run with T1s writing every 5 steps; restart a new Simulation from the last frame, append to
     the same file while flipping more; every frame reads back as written."""
     path = tmp_path / "restart.gsd"
-    rec1 = Recorder(trigger=5)
+    rec1 = Snapshots(trigger=5)
     sim, t1 = _t1_sim(svm.init.random_tiling(50, replicas=2, seed=7), device, [rec1, GSD(path, trigger=5)])
     sim.run(30)
     sim.operations.writers[1].close()
@@ -185,11 +154,11 @@ def test_restart_appends_after_t1s(tmp_path, device):
 
     sim2 = svm.Simulation(device=device)
     sim2.create_state_from_gsd(path)
-    assert_same(sim2.state, rec1.refs[-1], "restart")
+    assert_same_state(sim2.state, rec1.refs[-1], "restart")
     with Reader(path) as r:
         sim2.timestep = r.step(-1)
     assert sim2.timestep == 30
-    rec2 = Recorder(trigger=5)
+    rec2 = Snapshots(trigger=5)
     writer2 = GSD(path, trigger=5, mode="ab")
     sim2, t1b = _t1_sim(sim2.state, device, [rec2, writer2])
     sim2.timestep = 30

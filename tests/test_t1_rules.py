@@ -363,7 +363,6 @@ def test_default_rule_new_edge_is_0_12_sqrt_mean_area(device):
     t1 = T1()
     assert (t1.threshold, t1.new_length, t1.length_factor) == (0.04, 0.12, None)
     ens, edges, units = _two_spheres([0.01, 0.035])
-    old = [geodesic(ens.positions[u], ens.positions[v]) for u, v in edges]
     assert short_edges(ens, 0.04) == sorted(edges)
     sim = t1_sim(ens, t1, device)
     sim.run(1)

@@ -90,9 +90,9 @@ def random_planar_tiling(n_cells: int, replicas: int = 1, seed: int = 0, box=Non
     """Random Voronoi tilings of the periodic box: ``n_cells`` uniform random points each.
 
     Default box: the square of area ``n_cells`` (``<A> = 1``); ``box`` is a side or ``(Lx, Ly)``.
-    Replica ``r`` uses the random stream ``(seed, r)`` (redrawn from ``(seed, r, attempt)`` in the
-    rare draw whose Voronoi network is not simple or has an edge longer than half the box), so it does not depend on how many replicas are
-    made. ``n_cells >= MIN_PLANAR_CELLS`` (8; see there). ``sort=True`` numbers cells and vertices along a 2-D
+    Replica ``r`` uses the random stream ``(seed, r)`` (redrawn from ``(seed, r, attempt)`` when the
+    Voronoi network is not simple or has an edge longer than half the box: common at small N or in a
+    box only a few cells wide), so it does not depend on how many replicas are made. ``n_cells >= MIN_PLANAR_CELLS`` (8; see there). ``sort=True`` numbers cells and vertices along a 2-D
     Morton curve.
     """
     n = integer("n_cells", n_cells, minimum=MIN_PLANAR_CELLS)

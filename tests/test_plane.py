@@ -279,3 +279,16 @@ def test_surface_and_size_must_match():
     sphere = svm.init.random_tiling(20)
     with pytest.raises(ValueError, match="one constraint type"):
         svm.State.concatenate([sphere, s])
+
+
+def test_minimize_narrows_a_planar_ensemble_bitwise():
+    def run(narrow):
+        state = svm.State.concatenate([svm.init.random_planar_tiling(16, seed=k, box=(4.0, 4.0 + k)) for k in range(4)])
+        sim = _sim(state, 3.7, kr=1.0)
+        sim.operations.integrator = FIRE(dt=0.01, force_tol=1e-9)
+        sim.operations.updaters.append(T1(trigger=10))
+        sim.minimize(max_steps=20000, narrow=narrow)
+        return sim.state
+    a, b = run(True), run(False)
+    np.testing.assert_array_equal(a.positions, b.positions)
+    np.testing.assert_array_equal(a.box_np(), b.box_np())

@@ -40,6 +40,8 @@ DIAMETER_FACTOR = 0.15
 PREFIX = "spherevm/"
 # chunks written every frame (the restore needs them) and chunks left out when equal to frame 0's
 ALWAYS = ("format_version", "constraint", "position", "vertex_start", "cell_start", "radius")
+# the surface size chunk is named after the State's size array: "radius" (n_replicas,) on a sphere,
+# "box" (n_replicas, 2) on a periodic plane; the constraint (read first) says which
 TOPOLOGY = ("cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cells")
 CELL_QUANTITIES = ("area", "perimeter", "shape_index", "energy")
 
@@ -125,7 +127,9 @@ class FrameWriter:
         vc = np.ascontiguousarray(to_np(state.vertex_cells), dtype=np.int32)
         cv = np.ascontiguousarray(to_np(state.cell_vertices), dtype=np.int32)
         sides = np.ascontiguousarray(to_np(state.cell_sides), dtype=np.int32)
-        radius = np.ascontiguousarray(state.radius_np(), dtype=np.float64)
+        planar = state.box is not None
+        size = np.ascontiguousarray(state.box_np() if planar else state.radius_np(), dtype=np.float64)
+        radius = size if not planar else np.zeros(1)
         n_v = len(pos)
         vrep = state.vertex_replica_np()
         bonds = _edges(vn)
@@ -140,10 +144,14 @@ class FrameWriter:
         frame.configuration.step = int(timestep)
         frame.configuration.dimensions = 3
         frame.configuration.box = np.array([self._box] * 3 + [0.0] * 3, dtype=np.float32)
+        if planar:   # the real periodic box (the largest replica's), HOOMD's 2D convention: Lz = 0, centred
+            lx, ly = size.max(axis=0)
+            frame.configuration.dimensions = 2
+            frame.configuration.box = np.array([lx, ly, 0.0, 0.0, 0.0, 0.0], dtype=np.float32)
         frame.particles.N = n_v
         frame.particles.types = ["V"]
         frame.particles.typeid = np.zeros(n_v, dtype=np.uint32)
-        frame.particles.position = pos.astype(np.float32)
+        frame.particles.position = (pos - np.array([lx / 2, ly / 2, 0.0]) if planar else pos).astype(np.float32)
         frame.particles.diameter = _diameters(state, chord, bonds)[vrep]
         frame.bonds.N = len(bonds)
         frame.bonds.types = ["E"]
@@ -178,7 +186,7 @@ class FrameWriter:
                   "position": pos,
                   "vertex_start": np.asarray(state.vertex_start, dtype=np.int64),
                   "cell_start": np.asarray(state.cell_start, dtype=np.int64),
-                  "radius": radius}
+                  state.size_name: size}
         first = len(traj) == 0
         for name, arr in zip(TOPOLOGY, (cv, sides, vn, vc)):
             if first or name not in self._frame0 or not np.array_equal(self._frame0[name], arr):
@@ -287,8 +295,10 @@ class Reader:
         if version > FORMAT_VERSION:
             raise ValueError(f"{path!r} uses spherevm GSD format version {version}, newer than this spherevm "
                              f"reads ({FORMAT_VERSION}); upgrade spherevm")
-        data = {name: chunk(name) for name in ALWAYS[1:] + TOPOLOGY}
+        data = {name: chunk(name) for name in ALWAYS[1:-1] + TOPOLOGY}
         constraint = _constraint_from_json(data.pop("constraint"), path)
+        size_name = getattr(constraint, "size_name", "radius")
+        size = {size_name: chunk(size_name)}
         pos = data["position"]
         nv, nc = len(pos), len(data["cell_sides"])
         cv = data["cell_vertices"]
@@ -304,7 +314,7 @@ class Reader:
         try:
             return State(positions=pos, cell_vertices=cv, cell_sides=data["cell_sides"],
                          vertex_neighbors=data["vertex_neighbors"], vertex_cells=data["vertex_cells"],
-                         vertex_start=data["vertex_start"], cell_start=data["cell_start"], radius=data["radius"],
+                         vertex_start=data["vertex_start"], cell_start=data["cell_start"], **size,
                          constraint=constraint, device=device, validate=validate)
         except ValueError as exc:
             raise ValueError(f"{path!r}, frame {idx}: the stored state is invalid: {exc}") from exc

@@ -40,7 +40,6 @@ def dual_of_triangulation(points, triangles, radius, vertices="centroid"):
     """
     tri = np.asarray(triangles, dtype=np.int64)
     pts = np.asarray(points, dtype=np.float64)
-    n_tri = len(tri)
     p = pts[tri]
     if vertices == "centroid":
         direction = p.mean(axis=1)
@@ -49,20 +48,7 @@ def dual_of_triangulation(points, triangles, radius, vertices="centroid"):
     else:
         raise ValueError(f"vertices must be 'centroid' or 'circumcenter', got {vertices!r}")
     positions = radius * direction / np.linalg.norm(direction, axis=1)[:, None]
-    # neighbour across the directed edge (i, j) of triangle t is the triangle holding (j, i)
-    n_pts = len(pts)
-    key = tri * n_pts + np.roll(tri, -1, axis=1)          # edge (t[k], t[k+1]) sits in slot k
-    rev = np.roll(tri, -1, axis=1) * n_pts + tri
-    order = np.argsort(key.reshape(-1))
-    sorted_keys = key.reshape(-1)[order]
-    across = order[np.searchsorted(sorted_keys, rev.reshape(-1))] // 3
-    across = across.reshape(n_tri, 3)
-    # cells around triangle t=(i, j, k) counter-clockwise are (i, j, k); cell i lies between the
-    # neighbours across (k, i) and (i, j)
-    vertex_cells = tri.astype(np.int32)
-    vertex_neighbors = np.roll(across, 1, axis=1).astype(np.int32)
-    table, sides = topology.cell_table(vertex_neighbors, vertex_cells, n_pts)
-    return positions, table, sides, vertex_neighbors, vertex_cells
+    return (positions,) + topology.dual_network(tri, len(pts))
 
 
 def _oriented_hull(points):
@@ -173,12 +159,23 @@ def _batched_dual(n, hulls, R, vertices, sort):
                  constraint=Sphere(), validate=False)
 
 
-def from_polygons(vertices, cells, radius, device=CPU, validate=True) -> State:
+def from_polygons(vertices, cells, radius=None, device=CPU, validate=True, box=None) -> State:
     """A single-replica State from vertex positions and counter-clockwise cell vertex lists.
 
     ``vertices`` (V, 3) are projected onto the sphere of the given radius; ``cells`` is a list of
     vertex-index lists, each counter-clockwise seen from outside. The network must be trivalent.
+
+    With ``box=(Lx, Ly)`` instead of a radius the State lives on a :class:`PeriodicPlane`:
+    ``vertices`` are (V, 2) or (V, 3) with z = 0, inside ``[0, Lx) x [0, Ly)``, and cells are
+    counter-clockwise seen from +z, their edges the minimum images (see :mod:`spherevm.init_plane`).
     """
+    if box is not None or radius is None:
+        if radius is not None:
+            raise ValueError("give radius (a sphere) or box (a periodic plane), not both")
+        if box is None:
+            raise ValueError("from_polygons needs radius (a sphere) or box (a periodic plane)")
+        from .init_plane import planar_from_polygons
+        return planar_from_polygons(vertices, cells, box, device=device, validate=validate)
     R = float(radius)
     if not np.isfinite(R) or R <= 0:
         raise ValueError(f"radius must be positive and finite, got {radius}")
@@ -253,6 +250,9 @@ def regular_tiling(name: str, radius=None, device=CPU) -> State:
     R = _check_radius(radius, n_cells)
     verts = verts / np.linalg.norm(verts, axis=1)[:, None]
     return from_polygons(verts, _ccw_cells(verts, groups), R, device=device)
+
+
+from .init_plane import MIN_PLANAR_CELLS, hexagonal_tiling, random_planar_tiling  # noqa: E402,F401  (re-exported)
 
 
 def from_gsd(path, frame: int = -1, device=CPU, validate: bool = False) -> State:

@@ -31,20 +31,36 @@ class State:
     """
 
     def __init__(self, positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells,
-                 vertex_start, cell_start, radius, constraint=None, device=CPU, validate=True):
+                 vertex_start, cell_start, radius=None, constraint=None, device=CPU, validate=True, box=None):
         from .constraints import Sphere
         self.device = resolve(device)
         self.constraint = constraint if constraint is not None else Sphere()
         xp = self.device.xp
+        self.vertex_start = np.asarray(vertex_start, dtype=np.int64)
+        self.radius = self.box = None
+        if getattr(self.constraint, "size_name", "radius") == "box":
+            if radius is not None or box is None:
+                raise ValueError(f"a State on {self.constraint!r} needs box (Lx, Ly per replica) and no radius; "
+                                 f"got radius={'None' if radius is None else 'given'}, "
+                                 f"box={'None' if box is None else 'given'}")
+            b = np.asarray(self.device.to_numpy(box), dtype=np.float64)
+            if b.ndim not in (1, 2) or b.shape[-1] != 2:
+                raise ValueError(f"box must be (Lx, Ly) or one (Lx, Ly) per replica, got shape {b.shape}")
+            self.box = xp.asarray(np.broadcast_to(b, (len(self.vertex_start) - 1, 2)).copy())
+        elif box is not None:
+            raise ValueError(f"box is given, but {self.constraint!r} takes a radius; a periodic box needs "
+                             "constraint=PeriodicPlane()")
+        elif radius is None:
+            raise ValueError(f"a State on {self.constraint!r} needs radius")
         self.positions = xp.asarray(positions, dtype=xp.float64)
         self.cell_vertices = xp.asarray(cell_vertices, dtype=xp.int32)
         self.cell_sides = xp.asarray(cell_sides, dtype=xp.int32)
         self.vertex_neighbors = xp.asarray(vertex_neighbors, dtype=xp.int32)
         self.vertex_cells = xp.asarray(vertex_cells, dtype=xp.int32)
-        self.vertex_start = np.asarray(vertex_start, dtype=np.int64)
         self.cell_start = np.asarray(cell_start, dtype=np.int64)
-        self.radius = xp.asarray(np.broadcast_to(np.asarray(self.device.to_numpy(radius), dtype=np.float64),
-                                                 (len(self.vertex_start) - 1,)).copy())
+        if self.box is None:
+            self.radius = xp.asarray(np.broadcast_to(np.asarray(self.device.to_numpy(radius), dtype=np.float64),
+                                                     (len(self.vertex_start) - 1,)).copy())
         self.topology_version = 0   # bumped by every topology edit (T1 flips): caches key on it
         self._cached = {}
         self._derive_layout()
@@ -61,9 +77,11 @@ class State:
         if vs[-1] != len(self.positions) or cs[-1] != len(self.cell_sides):
             raise ValueError(f"replica layout covers {vs[-1]} vertices and {cs[-1]} cells, "
                              f"but the arrays hold {len(self.positions)} and {len(self.cell_sides)}")
-        r = np.asarray(self.device.to_numpy(self.radius))
+        size = self.box if self.box is not None else self.radius
+        r = np.asarray(self.device.to_numpy(size))
         if not np.all(np.isfinite(r)) or np.any(r <= 0):
-            raise ValueError(f"radius must be positive and finite, got {r[~(np.isfinite(r) & (r > 0))][0]}")
+            name = "box" if self.box is not None else "radius"
+            raise ValueError(f"{name} must be positive and finite, got {r[~(np.isfinite(r) & (r > 0))][0]}")
         xp = self.device.xp
         self._vertex_replica = np.repeat(np.arange(self.n_replicas, dtype=np.int32), np.diff(vs))
         self._cell_replica = np.repeat(np.arange(self.n_replicas, dtype=np.int32), np.diff(cs))
@@ -78,6 +96,15 @@ class State:
 
     def radius_np(self):
         return np.asarray(self.device.to_numpy(self.radius))
+
+    def box_np(self):
+        """``(n_replicas, 2)`` (Lx, Ly) of a periodic plane; None on other surfaces."""
+        return None if self.box is None else np.asarray(self.device.to_numpy(self.box))
+
+    @property
+    def size_name(self) -> str:
+        """``"box"`` on a periodic plane, ``"radius"`` otherwise: the per-replica size array's name."""
+        return "box" if self.box is not None else "radius"
 
     @property
     def n_vertices(self) -> int:
@@ -106,7 +133,8 @@ class State:
     @property
     def mean_cell_area(self):
         """<A> per replica: total surface area over the number of cells."""
-        return self.constraint.total_area_np(self.radius_np()) / self.cells_per_replica
+        size = self.box_np() if self.box is not None else self.radius_np()
+        return self.constraint.total_area_np(size) / self.cells_per_replica
 
     def cached(self, key, build, topology: bool = False):
         """``build()``, computed once and kept with this State under ``key`` (recomputed after a
@@ -144,7 +172,7 @@ class State:
         return dict(positions=self.positions.copy(), cell_vertices=self.cell_vertices.copy(),
                     cell_sides=self.cell_sides.copy(), vertex_neighbors=self.vertex_neighbors.copy(),
                     vertex_cells=self.vertex_cells.copy(), vertex_start=self.vertex_start.copy(),
-                    cell_start=self.cell_start.copy(), radius=self.radius.copy())
+                    cell_start=self.cell_start.copy(), **{self.size_name: getattr(self, self.size_name).copy()})
 
     def _arrays_np(self):
         return {k: self.device.to_numpy(v) for k, v in self._arrays().items()}
@@ -183,7 +211,8 @@ class State:
                      cmap[self.vertex_cells[v]],
                      np.concatenate(([0], np.cumsum(self.vertex_start[r + 1] - self.vertex_start[r]))),
                      np.concatenate(([0], np.cumsum(self.cell_start[r + 1] - self.cell_start[r]))),
-                     self.radius_np()[r], constraint=self.constraint, device=self.device, validate=False)
+                     constraint=self.constraint, device=self.device, validate=False,
+                     **{self.size_name: np.asarray(self.device.to_numpy(getattr(self, self.size_name)))[r]})
 
     def write_back(self, selection: ReplicaSelection, part: "State"):
         """Copy ``part`` (made by :meth:`select` with ``selection``, then evolved, T1 flips
@@ -210,8 +239,12 @@ class State:
         if not states:
             raise ValueError("states must hold at least one State")
         width = max(s.max_sides for s in states)
+        size = states[0].size_name
+        kinds = {type(s.constraint).__name__ for s in states}
+        if len(kinds) > 1:
+            raise ValueError(f"states must share one constraint type to be concatenated, got {sorted(kinds)}")
         parts = {k: [] for k in ("positions", "cell_vertices", "cell_sides", "vertex_neighbors",
-                                 "vertex_cells", "radius")}
+                                 "vertex_cells", size)}
         vstart, cstart = [0], [0]
         for s in states:
             a = s._arrays_np()
@@ -223,7 +256,7 @@ class State:
             parts["cell_sides"].append(a["cell_sides"])
             parts["vertex_neighbors"].append(a["vertex_neighbors"] + v0)
             parts["vertex_cells"].append(a["vertex_cells"] + c0)
-            parts["radius"].append(a["radius"])
+            parts[size].append(a[size])
             vstart.extend((s.vertex_start[1:] + v0).tolist())
             cstart.extend((s.cell_start[1:] + c0).tolist())
         return cls(**{k: np.concatenate(v) for k, v in parts.items()}, vertex_start=vstart,

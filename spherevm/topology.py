@@ -74,6 +74,25 @@ def build_vertex_tables(cell_vertices, cell_sides, n_vertices: int):
     return nx3.astype(np.int32), c3.astype(np.int32)
 
 
+def dual_network(tri, n_pts):
+    """The trivalent network dual to counter-clockwise triangles ``tri`` of ``n_pts`` points (each
+    directed edge once): ``(cell_vertices, cell_sides, vertex_neighbors, vertex_cells)``."""
+    n_tri = len(tri)
+    # neighbour across the directed edge (i, j) of triangle t is the triangle holding (j, i)
+    key = tri * n_pts + np.roll(tri, -1, axis=1)          # edge (t[k], t[k+1]) sits in slot k
+    rev = np.roll(tri, -1, axis=1) * n_pts + tri
+    order = np.argsort(key.reshape(-1))
+    sorted_keys = key.reshape(-1)[order]
+    across = order[np.searchsorted(sorted_keys, rev.reshape(-1))] // 3
+    across = across.reshape(n_tri, 3)
+    # cells around triangle t=(i, j, k) counter-clockwise are (i, j, k); cell i lies between the
+    # neighbours across (k, i) and (i, j)
+    vertex_cells = tri.astype(np.int32)
+    vertex_neighbors = np.roll(across, 1, axis=1).astype(np.int32)
+    table, sides = cell_table(vertex_neighbors, vertex_cells, n_pts)
+    return table, sides, vertex_neighbors, vertex_cells
+
+
 def edges(vertex_neighbors):
     """Unique undirected edges ``(E, 2)`` with ``u < v``, in order of ``u`` then of ``v``'s slot."""
     vn = np.asarray(vertex_neighbors)
@@ -133,19 +152,27 @@ def check(state, tol: float = 1e-9, orientation: bool = True):
         v = int(np.flatnonzero(~back.all(axis=1))[0])
         raise ValueError(f"vertex {v} lists neighbours {vn[v].tolist()} that do not list it back")
     # on the surface
-    dist = state.constraint.distance_to_surface(pos, state.radius_np()[vrep])
-    off = np.abs(dist) > tol * state.radius_np()[vrep]
+    con = state.constraint
+    size = con.size_np(state)[vrep]
+    dist = con.distance_to_surface(pos, size)
+    off = np.abs(dist) > tol * con.length_scale(size)
     if off.any():
         v = int(np.flatnonzero(off)[0])
         raise ValueError(f"vertex {v} is off the surface by {dist[v]:.3g} (allowed {tol:g} R); "
                          "project positions with the constraint first")
+    outside = getattr(con, "outside_box", None)
+    if outside is not None and outside(pos, size).any():
+        v = int(np.flatnonzero(outside(pos, size))[0])
+        raise ValueError(f"vertex {v} at {pos[v, :2].tolist()} lies outside its periodic box "
+                         f"{size[v].tolist()}: wrap positions into [0, Lx) x [0, Ly) (constraint.project_normal)")
     # Euler characteristic per replica: V - E + F with E = 3V/2
     nvr = np.diff(state.vertex_start)
     ncr = np.diff(state.cell_start)
     chi = nvr - 3 * nvr // 2 + ncr
-    if np.any(nvr % 2) or np.any(chi != 2):
-        r = int(np.flatnonzero((chi != 2) | (nvr % 2 == 1))[0])
-        raise ValueError(f"replica {r} has Euler characteristic V - E + F = {int(chi[r])}, a sphere needs 2")
+    want = getattr(con, "euler_characteristic", 2)
+    if np.any(nvr % 2) or np.any(chi != want):
+        r = int(np.flatnonzero((chi != want) | (nvr % 2 == 1))[0])
+        raise ValueError(f"replica {r} has Euler characteristic V - E + F = {int(chi[r])}, {con!r} needs {want}")
     if not orientation:
         return
     # orientation: counter-clockwise cells have positive area
@@ -155,6 +182,14 @@ def check(state, tol: float = 1e-9, orientation: bool = True):
         c = int(np.flatnonzero(neg)[0])
         raise ValueError(f"cell {c} has area {areas[c]:.3g} <= 0: it is listed clockwise seen from outside "
                          "(list cell vertices counter-clockwise) or it is folded")
+    if want == 0:   # a periodic plane: the cells tile the box exactly once
+        total = np.bincount(state.cell_replica_np(), weights=areas, minlength=state.n_replicas)
+        box = con.total_area_np(con.size_np(state))
+        wrong = np.abs(total - box) > 1e-9 * box
+        if wrong.any():
+            r = int(np.flatnonzero(wrong)[0])
+            raise ValueError(f"replica {r}: the cells cover an area {total[r]:.12g}, but the box's is {box[r]:.12g}; "
+                             "some cell wraps around the box or overlaps another")
 
 
 def cell_table(vertex_neighbors, vertex_cells, n_cells: int, min_width: int = 0):
@@ -274,15 +309,17 @@ def t1_flip(state, u, slot, new_length, sense: int = 1):
     _split_in_rows(table, sides, C3, u, Y, X)
     _split_in_rows(table, sides, C4, v, X, Y)
     # positions: rotate the edge about the normal at its midpoint
-    radius = state.radius_np()[state.vertex_replica_np()[u]]
     con = state.constraint
-    mid = con.project_normal(0.5 * (pos[u] + pos[v]), radius)
+    radius = con.size_np(state)[state.vertex_replica_np()[u]]     # the surface size (a box on a plane)
+    pu = pos[u]
+    pv, pa, pb, pc, pd = (con.unwrap(pos[w], pu, radius) for w in (v, a, b, c, d))  # nearest images
+    mid = con.project_normal(0.5 * (pu + pv), radius)
     normal = con.normal(mid)
-    along = con.project_tangent(mid, pos[v] - pos[u])
+    along = con.project_tangent(mid, pv - pu)
     norm = np.linalg.norm(along, axis=1)
     # a zero-length edge has no direction: fall back to the direction between the cells' sides
-    across_c1 = con.project_tangent(mid, 0.5 * (pos[a] + pos[d]) - 0.5 * (pos[b] + pos[c]))
-    tiny = norm <= 1e-12 * radius
+    across_c1 = con.project_tangent(mid, 0.5 * (pa + pd) - 0.5 * (pb + pc))
+    tiny = norm <= 1e-12 * con.length_scale(radius)
     perp = np.cross(normal, along / np.where(tiny, 1.0, norm)[:, None])
     perp[tiny] = across_c1[tiny]
     perp /= np.linalg.norm(perp, axis=1)[:, None]
@@ -307,6 +344,32 @@ def _spread_bits(x):
                         (4, 0x10C30C30C30C30C3), (2, 0x1249249249249249)):
         x = (x | (x << np.uint64(shift))) & np.uint64(mask)
     return x
+
+
+def morton_codes_2d(points, box, bits: int = 16):
+    """2-D Z-order codes of points in the box ``[0, Lx) x [0, Ly)`` (``box`` per point or one), uint64."""
+    p = np.asarray(points, dtype=np.float64)[:, :2] / np.asarray(box, dtype=np.float64)
+    q = np.clip(np.floor(p * 2 ** bits), 0, 2 ** bits - 1).astype(np.uint64)
+    return _spread_bits(q[:, 0]) | (_spread_bits(q[:, 1]) << np.uint64(1))
+
+
+def repeated_adjacency(vertex_neighbors, vertex_cells):
+    """The first edge ``(u, v)`` whose two cells are one cell or already share another edge, or None.
+
+    A simple network has neither (on a sphere it cannot happen above a few cells; on a small
+    periodic box a cell can meet itself or a neighbour across two of its edges through the images).
+    """
+    vn, vc = np.asarray(vertex_neighbors), np.asarray(vertex_cells)
+    u = np.repeat(np.arange(len(vn)), 3)
+    keep = u < vn.reshape(-1)
+    left, right = vc.reshape(-1)[keep], np.roll(vc, 1, axis=1).reshape(-1)[keep]
+    key = np.minimum(left, right).astype(np.int64) * (int(vc.max(initial=0)) + 1) + np.maximum(left, right)
+    unique, count = np.unique(key, return_counts=True)
+    bad = (left == right) | (count[np.searchsorted(unique, key)] > 1)
+    if not bad.any():
+        return None
+    i = int(np.flatnonzero(bad)[0])
+    return int(u[keep][i]), int(vn.reshape(-1)[keep][i])
 
 
 def morton_codes(points, bits: int = 16):

@@ -18,7 +18,7 @@ LAYERS = [
     ["constraints"],
     ["topology"],
     ["state"],
-    ["shapes", "gsdio", "init"],
+    ["shapes", "gsdio", "init", "init_plane"],
     ["plugins"],
     ["simulation"],
     ["analysis", "protocols", "sweeps"],

@@ -1,7 +1,8 @@
 """Constraint surfaces: they hold the vertices and own the metric (lengths, areas, gradients)."""
 from .base import Constraint
 from .bump import GaussianBump
+from .plane import PeriodicPlane
 from .sphere import Sphere
 from .torus import Torus
 
-__all__ = ["Constraint", "GaussianBump", "Sphere", "Torus"]
+__all__ = ["Constraint", "GaussianBump", "PeriodicPlane", "Sphere", "Torus"]

@@ -1,6 +1,8 @@
 """The interface every constraint surface implements."""
 from __future__ import annotations
 
+import numpy as np
+
 
 class Constraint:
     """A surface that holds the vertices and measures lengths and areas on itself.
@@ -17,6 +19,27 @@ class Constraint:
     """
 
     name = "constraint"
+    #: the State attribute holding each replica's surface size: ``"radius"`` (n_replicas,) or
+    #: ``"box"`` (n_replicas, 2); generic code passes ``size(state, index)`` where it passes a size
+    size_name = "radius"
+    #: V - E + F of every network on this surface (2 on a sphere, 0 on a torus or periodic plane)
+    euler_characteristic = 2
+
+    def size(self, state, index):
+        """The surface size of the given replicas (per vertex when ``index`` is vertex_replica)."""
+        return getattr(state, self.size_name)[index]
+
+    def size_np(self, state):
+        """Every replica's surface size as a NumPy array (``(n_replicas,)`` or ``(n_replicas, 2)``)."""
+        return np.asarray(state.device.to_numpy(getattr(state, self.size_name)))
+
+    def length_scale(self, size):
+        """A length per entry of ``size`` (tolerances scale with it): the radius itself here."""
+        return size
+
+    def unwrap(self, x, reference, size):
+        """The image of ``x`` nearest ``reference`` (periodic surfaces); ``x`` itself otherwise."""
+        return x
 
     def normal(self, x):
         raise NotImplementedError(f"{type(self).__name__}.normal is not implemented yet")

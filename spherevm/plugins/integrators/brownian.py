@@ -61,7 +61,7 @@ class Brownian(Integrator):
                                     np.arange(state.n_vertices), 3))
         dr = con.project_tangent(state.positions, self.dt * self._drift(simulation, forces) + amp[:, None] * eta)
         self._guard(simulation, dr)
-        state.positions = con.project_normal(state.positions + dr, state.radius[state.vertex_replica])
+        state.positions = con.project_normal(state.positions + dr, con.size(state, state.vertex_replica))
         self._after_move(simulation)
         simulation.state_changed()
 

@@ -126,7 +126,8 @@ class FIRE(Minimizer):
         dt = xp.where(on, self.replica_dt, 0.0)
         per_vertex = xp.take(xp.stack((keep, scale, dt)), rep, axis=1)[..., None]
         v = per_vertex[0] * v + (per_vertex[1] + per_vertex[2]) * forces
-        x = state.constraint.project_normal(state.positions + per_vertex[2] * v, state.radius[rep])
+        x = state.constraint.project_normal(state.positions + per_vertex[2] * v,
+                                              state.constraint.size(state, rep))
         v = state.constraint.project_tangent(x, v)
         if bool(on.all()):
             state.positions, self.velocities = x, v

@@ -105,7 +105,7 @@ class T1(Updater):
         uses the same test.
         """
         L = self.threshold * np.sqrt(state.mean_cell_area)
-        return state.constraint.chord_length(L, state.radius_np()) ** 2
+        return state.constraint.chord_length(L, state.constraint.size_np(state)) ** 2
 
     def _edge_list(self, state):
         """Each undirected edge once, as the corner ``3 u + slot`` with ``u < neighbour``, in edge
@@ -124,9 +124,14 @@ class T1(Updater):
         dev = state.device
         xp = dev.xp
         e = self._edge_list(state)
-        comp = xp.ascontiguousarray(state.positions.T)
-        d = xp.take(comp, e["u"], axis=1) - xp.take(comp, e["v"], axis=1)
-        chord2 = xp.einsum("ij,ij->j", d, d)
+        periodic = getattr(state.constraint, "displacement", None)     # minimum images on a periodic box
+        if periodic is not None:
+            d = periodic(state, e["u"], e["v"])
+            chord2 = (d * d).sum(axis=1)
+        else:
+            comp = xp.ascontiguousarray(state.positions.T)
+            d = xp.take(comp, e["u"], axis=1) - xp.take(comp, e["v"], axis=1)
+            chord2 = xp.einsum("ij,ij->j", d, d)
         limit = xp.asarray(self.chord_threshold2(state))
         flat = dev.to_numpy(e["corner"][chord2 < limit[e["replica"]]])
         if len(flat) == 0:

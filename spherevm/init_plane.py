@@ -1,0 +1,181 @@
+"""Initial States on the periodic plane: random Voronoi tilings, the honeycomb, and from polygons.
+
+Re-exported by :mod:`spherevm.init` (``svm.init.random_planar_tiling``, ``svm.init.hexagonal_tiling``,
+``svm.init.from_polygons(..., box=...)``).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import topology
+from .constraints import PeriodicPlane
+from .device import CPU
+from .state import State
+from .validation import integer
+
+MAX_ATTEMPTS = 1000
+#: the fewest cells a random periodic tiling may have. Trivalent cells on a torus average 6 sides and
+#: a simple network (no cell bordering itself, no two cells sharing two edges through the periodic
+#: images) needs >= 6 distinct neighbours for some cell, so N >= 7 (met only by the Heawood map, seven
+#: hexagons all adjacent). Measured fraction of random Voronoi draws that are simple with every edge
+#: shorter than half the box (300 each): N <= 7: 0, 8: 2%, 9: 6%, 10: 21%, 12: 48%, 16: 87%, 20: 97%;
+#: other draws are redrawn, which conditions the small-N ensemble.
+MIN_PLANAR_CELLS = 8
+_SHIFTS = np.array([(i, j) for j in (-1, 0, 1) for i in (-1, 0, 1)], dtype=np.float64)
+
+
+def check_box(box, n_cells=None, name="box") -> np.ndarray:
+    """``(Lx, Ly)`` as float64 from a pair or a side (square); the square of area ``n_cells`` if None."""
+    if box is None:
+        side = float(np.sqrt(n_cells))
+        return np.array([side, side])
+    b = np.asarray(box, dtype=np.float64).reshape(-1)
+    if b.size == 1:
+        b = np.repeat(b, 2)
+    if b.size != 2:
+        raise ValueError(f"{name} must be a side L or a pair (Lx, Ly), got {box!r}")
+    if not np.all(np.isfinite(b)) or np.any(b <= 0):
+        raise ValueError(f"{name} must be positive and finite, got {box!r}")
+    return b
+
+
+def _circumcenters(p):
+    """Circumcentres of triangles ``p`` (T, 3, 2)."""
+    b, c = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    d = 2.0 * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0])
+    b2, c2 = (b * b).sum(axis=1), (c * c).sum(axis=1)
+    x = (c[:, 1] * b2 - b[:, 1] * c2) / d
+    y = (b[:, 0] * c2 - c[:, 0] * b2) / d
+    return p[:, 0] + np.stack([x, y], axis=1)
+
+
+def periodic_voronoi(points, box):
+    """The Voronoi tessellation of ``points`` (n, 2) in the periodic ``box``, as a trivalent network.
+
+    Delaunay triangulation of the 3 x 3 periodic images (the Voronoi diagram's dual); each periodic
+    triangle is kept once, the image whose circumcentre (its Voronoi vertex) lies in the central box;
+    point indices are taken modulo n, which identifies the vertices across images. Returns local
+    ``(positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells)``, or None if the result
+    is not a simple trivalent network (small n: a cell meeting itself or a neighbour twice).
+    """
+    from scipy.spatial import Delaunay
+    pts = np.asarray(points, dtype=np.float64)
+    n = len(pts)
+    images = (pts[None] + _SHIFTS[:, None] * box).reshape(-1, 2)
+    tri = Delaunay(images).simplices.astype(np.int64)
+    p = images[tri]
+    cc = _circumcenters(p)
+    keep = ((cc >= 0) & (cc < box)).all(axis=1)
+    tri, p, cc = tri[keep], p[keep], cc[keep]
+    cw = ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+          - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0])) < 0
+    tri[cw] = tri[cw][:, [0, 2, 1]]
+    t = tri % n
+    if len(t) != 2 * n or np.any(t == np.roll(t, -1, axis=1)):
+        return None
+    key = t * n + np.roll(t, -1, axis=1)
+    if len(np.unique(key)) != key.size or not np.array_equal(np.sort(key.reshape(-1)),
+                                                            np.sort((np.roll(t, -1, axis=1) * n + t).reshape(-1))):
+        return None
+    table, sides, vn, vc = topology.dual_network(t, n)
+    if topology.repeated_adjacency(vn, vc) is not None:
+        return None
+    pos = np.zeros((len(t), 3))
+    pos[:, :2] = cc
+    return pos, table, sides, vn, vc
+
+
+def random_planar_tiling(n_cells: int, replicas: int = 1, seed: int = 0, box=None, sort: bool = True,
+                         device=CPU) -> State:
+    """Random Voronoi tilings of the periodic box: ``n_cells`` uniform random points each.
+
+    Default box: the square of area ``n_cells`` (``<A> = 1``); ``box`` is a side or ``(Lx, Ly)``.
+    Replica ``r`` uses the random stream ``(seed, r)`` (redrawn from ``(seed, r, attempt)`` when the
+    Voronoi network is not simple or has an edge longer than half the box: common at small N or in a
+    box only a few cells wide), so it does not depend on how many replicas are made. ``n_cells >= MIN_PLANAR_CELLS`` (8; see there). ``sort=True`` numbers cells and vertices along a 2-D
+    Morton curve.
+    """
+    n = integer("n_cells", n_cells, minimum=MIN_PLANAR_CELLS)
+    replicas = integer("replicas", replicas, minimum=1)
+    seed = integer("seed", seed)
+    b = check_box(box, n)
+    states = []
+    for r in range(replicas):    # initialisation only: one Delaunay triangulation per replica
+        for attempt in range(MAX_ATTEMPTS):
+            rng = np.random.default_rng([seed, r] + ([attempt] if attempt else []))
+            pts = rng.random((n, 2)) * b
+            net = periodic_voronoi(pts, b)
+            if net is None:
+                continue
+            try:       # edges must be shorter than half the box for their minimum images to be them
+                State(*net, [0, 2 * n], [0, n], box=b, constraint=PeriodicPlane())
+                break
+            except ValueError:
+                continue
+        else:
+            raise RuntimeError(f"no simple periodic Voronoi tiling of {n} cells in {MAX_ATTEMPTS} draws")
+        if sort:
+            net = topology.renumber(*net, np.argsort(topology.morton_codes_2d(net[0], b), kind="stable"),
+                                    np.argsort(topology.morton_codes_2d(pts, b), kind="stable"))
+        states.append(State(*net, [0, 2 * n], [0, n], box=b, constraint=PeriodicPlane(), validate=False))
+    state = states[0] if replicas == 1 else State.concatenate(states)
+    state.validate()
+    return state.to(device) if device is not CPU else state
+
+
+def hexagonal_tiling(nx: int, ny: int, device=CPU) -> State:
+    """The regular honeycomb of ``nx x ny`` unit-area hexagons on the periodic plane.
+
+    Pointy-top hexagons of side ``a = sqrt(2 / (3 sqrt 3))`` (area 1, perimeter ``sqrt(8 sqrt 3)``),
+    rows offset by half a cell; box ``(nx sqrt(3) a, ny 3a/2)``, so ``ny`` must be even. ``nx >= 3``
+    and ``ny >= 4`` keep the network simple (no cell its own neighbour twice through the images).
+    """
+    nx = integer("nx", nx, minimum=3)
+    ny = integer("ny", ny, minimum=4)
+    if ny % 2:
+        raise ValueError(f"ny must be even for the honeycomb to tile the periodic box, got {ny}")
+    a = np.sqrt(2.0 / (3.0 * np.sqrt(3.0)))
+    box = np.array([nx * np.sqrt(3.0) * a, ny * 1.5 * a])
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")
+    i, j = i.reshape(-1), j.reshape(-1)
+    # corners in integer units (sqrt(3) a / 2, a / 2) about the centre (2i + j % 2, 3j), counter-clockwise
+    dx = np.array([1, 0, -1, -1, 0, 1])
+    dy = np.array([1, 2, 1, -1, -2, -1])
+    ix = (2 * i + j % 2)[:, None] + dx
+    iy = (3 * j)[:, None] + dy
+    ix, iy = ix % (2 * nx), iy % (3 * ny)
+    key = ix * (3 * ny) + iy
+    unique, cells = np.unique(key.reshape(-1), return_inverse=True)
+    pos = np.stack([(unique // (3 * ny)) * (np.sqrt(3.0) * a / 2), (unique % (3 * ny)) * (a / 2)], axis=1)
+    return planar_from_polygons(pos, cells.reshape(-1, 6), box, device=device)
+
+
+def planar_from_polygons(vertices, cells, box, device=CPU, validate=True) -> State:
+    """A single-replica State on the periodic plane (see :func:`spherevm.init.from_polygons`)."""
+    b = check_box(box)
+    pos = np.asarray(vertices, dtype=np.float64)
+    if pos.ndim != 2 or pos.shape[1] not in (2, 3):
+        raise ValueError(f"vertices must have shape (n_vertices, 2) or (n_vertices, 3), got {pos.shape}")
+    if not np.isfinite(pos).all():
+        raise ValueError(f"vertices must be finite: vertex {int(np.flatnonzero(~np.isfinite(pos).all(1))[0])} is not")
+    if pos.shape[1] == 3 and np.any(pos[:, 2] != 0):
+        raise ValueError(f"vertices must lie in the plane z = 0: vertex {int(np.flatnonzero(pos[:, 2])[0])} does not")
+    out = ((pos[:, :2] < 0) | (pos[:, :2] >= b)).any(axis=1)
+    if out.any():
+        v = int(np.flatnonzero(out)[0])
+        raise ValueError(f"vertices must lie in the box [0, {b[0]:g}) x [0, {b[1]:g}): vertex {v} is at "
+                         f"{pos[v, :2].tolist()}")
+    full = np.zeros((len(pos), 3))
+    full[:, :2] = pos[:, :2]
+    cells = [list(map(int, c)) for c in cells]
+    short = [i for i, c in enumerate(cells) if len(c) < 3]
+    if short:
+        raise ValueError(f"cell {short[0]} has {len(cells[short[0]])} vertices; cells need at least 3")
+    table, sides = topology.pad_cells(cells)
+    vn, vc = topology.build_vertex_tables(table, sides, len(full))
+    bad = topology.repeated_adjacency(vn, vc)
+    if bad is not None:
+        raise ValueError(f"cells: the edge {bad} joins a cell to itself or to a cell it already borders: the "
+                         "network is not simple (the box is too small for these cells)")
+    return State(full, table, sides, vn, vc, [0, len(full)], [0, len(cells)], box=b, constraint=PeriodicPlane(),
+                 device=device, validate=validate)

@@ -62,6 +62,19 @@ def test_minimize_prints_one_row_per_replica_and_writes_gsd(tmp_path, capsys):
     assert steps == sorted(set(steps))
     state = svm.init.from_gsd(str(out))
     assert state.n_replicas == 3 and state.n_cells == 3 * 16
+    # the printed numbers are those of the last frame written, per replica, in the printed columns:
+    # energy per cell and max|F| of the default model (kr = 1, p0 = 3.8), and the mean shape index
+    from spherevm.plugins.forces import VertexModel
+    res = VertexModel.dimensionless(kr=1.0, p0=3.8).compute(state)
+    energy = np.asarray(res.energy) / 16
+    fmag = np.linalg.norm(np.asarray(res.forces), axis=1)
+    fmax = np.array([fmag[state.vertex_start[r]:state.vertex_start[r + 1]].max() for r in range(3)])
+    shape = np.asarray(svm.shapes.mean_shape_index(state))
+    printed = np.array([[float(r[1]), float(r[2]), float(r[3])] for r in rows])
+    assert np.all(energy > 0)                             # p0 = 3.8 at N = 16: rigid, E > 0
+    assert printed[:, 0] == pytest.approx(energy, rel=1e-5)
+    assert printed[:, 1] == pytest.approx(shape, abs=2e-6)
+    assert printed[:, 2] == pytest.approx(fmax, rel=2e-3)
 
 
 def test_minimize_defaults_are_quick_and_converge(capsys):

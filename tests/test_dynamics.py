@@ -37,6 +37,30 @@ def test_free_brownian_short_time_msd_and_long_time_decorrelation(device):
     assert np.allclose(np.linalg.norm(to_numpy(sim.state.positions), axis=1), 1.0, rtol=1e-14)
 
 
+def test_free_brownian_diffusion_constant_from_single_steps(device):
+    # D = mu T = 1 on the unit sphere, from single-step increments. A step moves x by a tangent dr
+    # (each component of variance 2 D dt) and projects back, so tan(angle(x, x'))^2 = |dr|^2 exactly and
+    # D_hat = <tan^2> / (4 dt) is unbiased. |dr|^2 is exponential (chi2_2): the relative standard error
+    # of D_hat is std(tan^2) / mean(tan^2) / sqrt(M) ~ 1 / sqrt(M), M = 10 steps x 3168 walkers ~ 3e4
+    # independent increments: ~0.56%. The bound 5 standard errors (~2.8%) lets a 10% error in D through
+    # with probability ~0 (it sits ~18 standard errors out); a correct D fails it with p ~ 6e-7.
+    state = svm.init.random_tiling(200, replicas=8, seed=1, radius=1.0)
+    dt = 2e-4
+    sim = _free(state, Brownian(dt=dt, T=1.0, mu=1.0, max_step=10.0), device=device)
+    x = to_numpy(sim.state.positions).copy()
+    tan2 = []
+    for _ in range(10):
+        sim.run(1, check_every=1)
+        y = to_numpy(sim.state.positions)
+        tan2.append((np.cross(x, y) ** 2).sum(axis=1) / (x * y).sum(axis=1) ** 2)
+        x = y
+    tan2 = np.concatenate(tan2)
+    d_hat = tan2.mean() / (4 * dt)
+    stderr = tan2.std() / tan2.mean() / np.sqrt(tan2.size)
+    assert 0.004 < stderr < 0.008                           # exponential increments: ~1 / sqrt(M)
+    assert abs(d_hat - 1.0) < 5 * stderr
+
+
 def test_brownian_noise_is_tangent_and_reproducible(device):
     state = svm.init.random_tiling(50, seed=2)
     a = _free(state, Brownian(dt=1e-3, T=0.1), seed=9, device=device)

@@ -82,11 +82,39 @@ def test_replicas_minimise_as_if_alone(device):
 @pytest.mark.parametrize("kw, match", [
     (dict(dt=0), "dt must be positive"), (dict(dt=-0.1), "dt must be positive"),
     (dict(dt=float("nan")), "dt must be positive"), (dict(dt=0.1, dt_max=0.01), "dt_max must be >= dt"),
-    (dict(n_min=-1), "n_min"), (dict(f_dec=1.5), "f_dec < 1"),
+    (dict(n_min=-1), "n_min"), (dict(f_dec=1.5), "f_dec < 1"), (dict(f_dec=1.0), "f_dec < 1"),
+    (dict(alpha_start=1.0), "alpha_start < 1"), (dict(alpha_start=1.5), "alpha_start < 1"),
+    (dict(f_alpha=1.0 + 1e-12), "f_alpha <= 1"), (dict(f_inc=0.999), "f_inc must be >= 1"),
 ])
 def test_fire_bad_parameters(kw, match):
     with pytest.raises(ValueError, match=match):
         FIRE(**kw)
+
+
+def test_fire_defaults_and_boundary_parameters():
+    # the defaults are Bitzek et al. (2006)'s, with dt_max = 10 dt and the documented tolerances
+    f = FIRE()
+    assert (f.dt, f.dt_max, f.n_min, f.f_inc, f.f_dec, f.alpha_start, f.f_alpha) == (0.01, 0.1, 5, 1.1, 0.5, 0.1, 0.99)
+    assert (f.force_tol, f.energy_tol, f.check_every) == (1e-10, 1e-20, 10)
+    assert FIRE(dt=0.03).dt_max == pytest.approx(0.3, rel=1e-15)
+    # the closed ends of the ranges are allowed
+    FIRE(dt=0.1, dt_max=0.1)
+    FIRE(f_inc=1.0)
+    FIRE(f_alpha=1.0)
+
+
+def test_reset_vertices_zeroes_only_those_vertices(device):
+    sim = _sim(svm.init.random_tiling(16, seed=2), VertexModel.dimensionless(kr=1.0, p0=3.6), device)
+    sim.run(5)
+    fire = sim.operations.integrator
+    v0 = to_numpy(fire.velocities).copy()
+    assert np.all(np.linalg.norm(v0, axis=1) > 0)
+    fire.reset_vertices(sim.state.device.xp.asarray(np.array([0, -1, 7], dtype=np.int32)))  # -1: padding
+    v1 = to_numpy(fire.velocities)
+    assert not v1[[0, 7]].any()
+    keep = np.ones(len(v0), bool)
+    keep[[0, 7]] = False
+    assert np.array_equal(v1[keep], v0[keep])
 
 
 def test_minimize_bad_arguments_and_missing_pieces(device):

@@ -82,11 +82,11 @@ REGIMES = [
 ]
 
 
-def _setup(device, seed=3):
+def _setup(device, seed=3, strength=1.0):
     rng = np.random.default_rng(seed)
     n_rep = len(REGIMES)
     state = svm.init.random_tiling(12, replicas=n_rep, seed=seed)
-    fields = rng.normal(size=(n_rep, 3))
+    fields = strength * rng.normal(size=(n_rep, 3))
     sim = svm.Simulation(device=device)
     sim.state = state
     sim.operations.forces.append(UniformField(fields))
@@ -102,9 +102,9 @@ def _setup(device, seed=3):
         w = rng.normal(size=F.shape)
         w -= np.sum(w * n, axis=1)[:, None] * n          # tangent, not along F: mixing matters
         if sign == "+":
-            v[m] = 0.8 * F + 0.5 * w
+            v[m] = 0.8 * F + 0.5 * strength * w
         elif sign == "-":
-            v[m] = -0.8 * F + 0.5 * w
+            v[m] = -0.8 * F + 0.5 * strength * w
         assert sign == "0" or np.sign(np.sum(F * v[m])) == (1 if sign == "+" else -1)
     xp = sim.state.device.xp
     fire.velocities = xp.asarray(v)
@@ -181,6 +181,18 @@ def test_several_steps_follow_the_reference(device):
     # something grew on the way, and a replica that started at rest picked up speed
     assert (ref["n_pos"][:4] >= PARAMS["n_min"]).all()
     assert ref["n_pos"][5] > 0
+
+
+def test_weak_forces_follow_the_reference(device):
+    """|F| < 1 per replica (the mixing divides by |F|): the same reference, fields 100 times weaker."""
+    sim, fire, fields, rep, ref = _setup(device, seed=5, strength=0.01)
+    assert all(np.sqrt(np.sum(reference_forces(ref["x"][rep == r], fields[r]) ** 2)) < 0.2
+               for r in range(len(REGIMES)))
+    radius = sim.state.radius_np()
+    for _ in range(3):
+        _reference_step(ref, fields, rep, radius)
+        sim.run(1)
+        _compare(fire, sim, ref, rep)
 
 
 def test_reset_restores_dt_alpha_counters_and_zeroes_velocities(device):

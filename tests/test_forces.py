@@ -69,7 +69,19 @@ def test_symmetric_tiling_forces_vanish_by_symmetry(device):
     s = svm.init.regular_tiling("truncated_icosahedron", device=device)
     f = to_numpy(VertexModel.dimensionless(kr=1.0, p0=3.0).forces(s))
     mag = np.linalg.norm(f, axis=1)
+    assert mag.min() > 1e-3                       # not zero by accident: the check below has content
     assert np.ptp(mag) < 1e-12 * mag.max()
+    # the mirror plane of a vertex holds the centre, the vertex and the centre of its pentagon
+    x = to_numpy(s.positions)
+    cells, sides = to_numpy(s.vertex_cells), to_numpy(s.cell_sides)
+    cv = to_numpy(s.cell_vertices)
+    pent = np.array([[c for c in row if c >= 0 and sides[c] == 5][0] for row in cells])
+    centre = np.array([x[cv[c, :5]].mean(axis=0) for c in pent])
+    normal = np.cross(x, centre)
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    assert np.abs((f * normal).sum(axis=1)).max() < 1e-12 * mag.max()
+    # and in the tangent plane
+    assert np.abs((f * x).sum(axis=1)).max() < 1e-12 * mag.max() * np.linalg.norm(x, axis=1).max()
 
 
 def test_replicas_are_independent(device):

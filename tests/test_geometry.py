@@ -417,16 +417,28 @@ def test_zero_length_edge_subgradient():
     """Coincident points: the length is a cone, any unit tangent (or less) is a subgradient; we return 0."""
     rng = np.random.default_rng(4)
     a = unit(rng.normal(size=(20, 3)))
+    # probes x = exp_a(h u) for unit tangents u in 16 directions around each a, h = 1e-3
+    t1 = unit(np.cross(a, rng.normal(size=a.shape)))
+    t2 = np.cross(a, t1)
+    phis = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    u = np.cos(phis)[:, None, None] * t1 + np.sin(phis)[:, None, None] * t2      # (16, 20, 3)
+    h = 1e-3
+    x = np.cos(h) * a + np.sin(h) * u
+    d = geo.geodesic_length(x, np.broadcast_to(a, x.shape))
+    assert np.allclose(d, h, rtol=1e-9)                 # the cone: d(exp_a(h u), a) = h
     for grad in (geo.geodesic_length_gradient, geo.geodesic_length_gradient_robust):
         g = grad(a, a.copy())
+        # the subgradient inequality d(x, a) >= d(a, a) + g.(x - a), at every probe
+        assert np.all(d >= 0.0 + (g * (x - a)).sum(axis=-1))
         assert np.all(g == 0.0)
+    # the inequality has teeth: a tangent of length 0.99 is a subgradient, one of length 1.01 is not
+    g_in, g_out = 0.99 * t1, 1.01 * t1
+    assert np.all(d >= (g_in * (x - a)).sum(axis=-1))
+    assert not np.all(d >= (g_out * (x - a)).sum(axis=-1))
     with np.errstate(invalid="ignore", divide="ignore"):
         g_acos = geo.geodesic_length_gradient_acos(a, a.copy())
     # a.a rounds to 1 (0/0: NaN) or to 1 - ulp (a tiny vector in an arbitrary direction)
     assert np.isnan(g_acos).any()
-    # the subgradient inequality d(x, a) >= d(a, a) + g.(x - a) holds for g = 0 and fails for |g| > 1
-    x = unit(a + 1e-3 * rng.normal(size=a.shape))
-    assert np.all(geo.geodesic_length(x, a) >= 0.0)
     # a polygon with a collapsed edge has a finite perimeter gradient (from its two other edges)
     verts = geo.regular_polygon(5, 0.4)[0]
     verts = np.insert(verts, 2, verts[2], axis=0)

@@ -7,6 +7,7 @@ import warnings
 import numpy as np
 import pytest
 
+import spherevm as svm
 from spherevm import sweeps
 from spherevm.analysis import pentagon_perimeter, rigidity
 from spherevm.provenance import source_fingerprint
@@ -200,9 +201,33 @@ def test_tiny_sweep_records_and_manifest(tiny_run):
     assert manifest["parameters"] == sweeps.RigiditySweep(**TINY).parameters()
     assert manifest["code"] == source_fingerprint()
     assert sorted(os.listdir(out / "chunks")) == ["N00016_u000000-000002.csv", "N00016_u000002-000004.csv"]
-    # the tiling of (N, p0, replica) depends on those numbers only
-    assert rec["tiling_seed"][0] == sweeps.tiling_seed(0, 16, 3.3, 0)
-    assert rec["tiling_seed"][0] != rec["tiling_seed"][2]
+    # every (N, p0, replica) has its own tiling
+    assert len(set(rec["tiling_seed"])) == 4
+
+
+def test_tiling_depends_on_n_p0_replica_only(tiny_run, tmp_path):
+    """Another grid (one more p0 before the others, one more replica, other chunks): the same (N, p0, replica) gets the
+    same tiling seed and the same minimised energy; and the seed is what builds the tiling."""
+    _, result, _ = tiny_run
+    other = sweeps.run_sweep(sweeps.RigiditySweep(cells=[16], p0=[3.0, 3.3, 4.2], replicas=3), tmp_path / "other",
+                             executor=sweeps.InProcessExecutor(), device="cpu", batch_cells=16)
+
+    def by_unit(rec):
+        return {(round(float(p), 9), int(r)): (int(s), float(e)) for p, r, s, e in
+                zip(rec["p0"], rec["replica"], rec["tiling_seed"], rec["energy_per_cell"])}
+    mine, theirs = by_unit(result.records), by_unit(other.records)
+    assert len(mine) == 4 and len(theirs) == 9
+    for key, (seed, energy) in mine.items():
+        assert theirs[key][0] == seed, key
+        assert theirs[key][1] == pytest.approx(energy, rel=1e-9, abs=1e-15), key
+    from spherevm.sweeps.execution import build_chunk_state
+    sweep = sweeps.RigiditySweep(**TINY)
+    chunk = sweeps.plan_chunks(sweep, batch_cells=32)[0]
+    state, _, _, _, seeds = build_chunk_state(sweep, chunk)
+    for i, seed in enumerate(seeds):
+        one = svm.init.random_tiling(16, seed=seed)
+        v0, v1 = state.vertex_start[i], state.vertex_start[i + 1]
+        assert np.array_equal(np.asarray(state.positions)[v0:v1], np.asarray(one.positions))
 
 
 def test_resume_with_other_code_warns(tmp_path):

@@ -34,6 +34,11 @@ def test_philox_vectorised_and_broadcast():
     assert out.shape == (2, 3, 4)
     np.testing.assert_array_equal(out[0, 2], expected[2])
     np.testing.assert_array_equal(out[1, 0], expected[2])
+    # and one counter broadcast over a (2, 3) batch of keys
+    out = svr.philox4x32(ctrs[1], np.stack([keys, keys[::-1]]))
+    assert out.shape == (2, 3, 4)
+    np.testing.assert_array_equal(out[0, 1], expected[1])
+    np.testing.assert_array_equal(out[1, 1], expected[1])
 
 
 def test_philox_rejects_bad_shapes_and_values():
@@ -91,6 +96,13 @@ def test_shape_dtype_and_determinism(draw):
     assert draw(42, 0, 17, 5, count=2).shape == (1, 2)   # a scalar id is one id
     assert draw(42, 0, 17, np.array([], dtype=np.int64), count=2).shape == (0, 2)
     assert draw(42, 0, 17, [], count=2).shape == (0, 2)
+    # many draws per id are allowed (up to 2**32), and the first ones do not change
+    many = draw(42, 0, 17, ids[:2], count=101)
+    assert many.shape == (2, 101)
+    np.testing.assert_array_equal(many[:, :3], a[:2])
+    for bad in (0, -1):
+        with pytest.raises(ValueError, match="count"):
+            draw(42, 0, 17, [], count=bad)
 
 
 @pytest.mark.parametrize("draw", [svr.uniform, svr.normal])

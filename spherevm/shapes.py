@@ -71,6 +71,22 @@ def pentagon_perimeter(n_cells) -> float:
     return values[0] if n.ndim == 0 else np.array(values)
 
 
+def planar_pentagon_perimeter() -> float:
+    """Perimeter of the flat regular pentagon of unit area, ``sqrt(20 tan(pi/5)) = 3.81194``: the
+    N-independent value of the pentagon bound on the periodic plane."""
+    return float(np.sqrt(20.0 * np.tan(np.pi / 5.0)))
+
+
+def surface_pentagon_perimeter(n_cells, surface: str = "sphere"):
+    """The unit-area regular pentagon's perimeter on ``surface`` with N cells: the spherical one
+    (:func:`pentagon_perimeter`) or, on ``"plane"``, the flat one (the same for every N)."""
+    if surface == "plane":
+        n = np.asarray(n_cells)
+        value = planar_pentagon_perimeter()
+        return value if n.ndim == 0 else np.full(n.shape, value)
+    return pentagon_perimeter(n_cells)
+
+
 # ======================================================================================== centroids
 def cell_centroids(state, method: str = "area"):
     """Cell positions on the sphere, ``(n_cells, 3)`` NumPy float64, each at distance R from the centre.

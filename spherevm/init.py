@@ -252,7 +252,7 @@ def regular_tiling(name: str, radius=None, device=CPU) -> State:
     return from_polygons(verts, _ccw_cells(verts, groups), R, device=device)
 
 
-from .init_plane import MIN_PLANAR_CELLS, hexagonal_tiling, random_planar_tiling  # noqa: E402,F401  (re-exported)
+from .init_plane import MIN_PLANAR_CELLS, hexagonal_tiling, random_planar_tiling, random_planar_tilings  # noqa: E402,F401  (re-exported)
 
 
 def from_gsd(path, frame: int = -1, device=CPU, validate: bool = False) -> State:

@@ -98,11 +98,26 @@ def random_planar_tiling(n_cells: int, replicas: int = 1, seed: int = 0, box=Non
     n = integer("n_cells", n_cells, minimum=MIN_PLANAR_CELLS)
     replicas = integer("replicas", replicas, minimum=1)
     seed = integer("seed", seed)
-    b = check_box(box, n)
+    return _planar_tilings(n, [(seed, r) for r in range(replicas)], check_box(box, n), sort, device)
+
+
+def random_planar_tilings(n_cells: int, seeds, box=None, sort: bool = True, device=CPU) -> State:
+    """One random planar tiling per seed, as an ensemble: replica ``i`` equals
+    ``random_planar_tiling(n_cells, seed=seeds[i], box=box)`` (sweeps give every (N, p0, replica)
+    its own seed, as :func:`spherevm.init.random_tilings` does on the sphere)."""
+    n = integer("n_cells", n_cells, minimum=MIN_PLANAR_CELLS)
+    seeds = [int(x) for x in seeds]
+    if not seeds or min(seeds) < 0:
+        raise ValueError("seeds must be a non-empty list of non-negative integers")
+    return _planar_tilings(n, [(x, 0) for x in seeds], check_box(box, n), sort, device)
+
+
+def _planar_tilings(n, keys, b, sort, device):
+    """The tilings of the random streams ``keys`` (one (seed, replica) pair each), as one State."""
     states = []
-    for r in range(replicas):    # initialisation only: one Delaunay triangulation per replica
+    for key in keys:    # initialisation only: one Delaunay triangulation per replica
         for attempt in range(MAX_ATTEMPTS):
-            rng = np.random.default_rng([seed, r] + ([attempt] if attempt else []))
+            rng = np.random.default_rng(list(key) + ([attempt] if attempt else []))
             pts = rng.random((n, 2)) * b
             net = periodic_voronoi(pts, b)
             if net is None:
@@ -118,7 +133,7 @@ def random_planar_tiling(n_cells: int, replicas: int = 1, seed: int = 0, box=Non
             net = topology.renumber(*net, np.argsort(topology.morton_codes_2d(net[0], b), kind="stable"),
                                     np.argsort(topology.morton_codes_2d(pts, b), kind="stable"))
         states.append(State(*net, [0, 2 * n], [0, n], box=b, constraint=PeriodicPlane(), validate=False))
-    state = states[0] if replicas == 1 else State.concatenate(states)
+    state = states[0] if len(states) == 1 else State.concatenate(states)
     state.validate()
     return state.to(device) if device is not CPU else state
 

@@ -41,7 +41,7 @@ class DynamicsResult:
 
 def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=0, device="auto",
                     relax_steps=10_000, equilibrate_steps=None, b=0.5, points_per_decade=10, out=None,
-                    frames=50, t1=True, progress=None) -> DynamicsResult:
+                    frames=50, t1=True, progress=None, surface: str = "sphere") -> DynamicsResult:
     """Overdamped Brownian dynamics of random tilings, measured as in the paper (Fig. 3).
 
     1. **relax**: FIRE (+ T1) from a random tiling for at most ``relax_steps`` steps, so the run
@@ -49,18 +49,32 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
     2. **equilibrate**: ``equilibrate_steps`` Brownian steps at temperature ``T`` (default
        ``steps // 10``), discarded;
     3. **production**: ``steps`` Brownian steps, cell centroids recorded at log-spaced times; MSD and
-       self-overlap Q_s (window ``b``) in the co-rotating frame (global rotation removed), and
+       self-overlap Q_s (window ``b``) in the co-rotating frame (global rotation removed; on the
+       plane, the centre-of-mass drift), and
        tau_alpha where Q_s reaches 1/e (NaN if it does not within the run).
 
     ``T`` may hold one temperature per replica: a whole temperature series runs as one ensemble.
     ``out``: GSD trajectory of the production run (``frames`` frames, log-spaced). ``progress``:
     ``progress(stage, done, total)``. Time unit: 1/(mu kP) with mu = 1; dt in that unit.
+
+    ``surface="plane"``: random periodic Voronoi tilings (:func:`spherevm.init.random_planar_tiling`,
+    square box of side sqrt(N), <A> = 1, N >= 8) instead of the sphere's; MSD and Q_s then use the
+    unwrapped centroids with each replica's centre-of-mass drift removed instead of its rotation
+    (docs/plane.md). The plane runs on the CPU only for now: ``device="auto"`` picks it there.
     """
+    if surface not in ("sphere", "plane"):
+        raise ValueError(f"surface must be 'sphere' or 'plane', got {surface!r}")
+    if surface == "plane":
+        if device not in ("auto", "cpu") and getattr(device, "name", device) != "cpu":
+            raise ValueError("surface='plane' runs on the CPU only for now (the CUDA kernels do not support the "
+                             f"periodic plane yet), got device={device!r}")
+        device = "cpu"
     if steps < 1 or int(steps) != steps:
         raise ValueError(f"steps must be a positive integer, got {steps!r}")
     equilibrate_steps = steps // 10 if equilibrate_steps is None else int(equilibrate_steps)
     sim = Simulation(device=device, seed=seed)
-    sim.state = init.random_tiling(n_cells, replicas=replicas, seed=seed)
+    tiling = init.random_planar_tiling if surface == "plane" else init.random_tiling
+    sim.state = tiling(n_cells, replicas=replicas, seed=seed)
     sim.operations.forces.append(VertexModel.dimensionless(kr=kr, p0=p0))
     if t1:
         sim.operations.updaters.append(T1())

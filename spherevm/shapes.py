@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .constraints import Sphere
+from .constraints import PeriodicPlane, Sphere
+from .constraints.plane import _wrap, minimum_image
 
 CENTROID_METHODS = ("area", "vertex")
 
@@ -70,6 +71,22 @@ def pentagon_perimeter(n_cells) -> float:
     return values[0] if n.ndim == 0 else np.array(values)
 
 
+def planar_pentagon_perimeter() -> float:
+    """Perimeter of the flat regular pentagon of unit area, ``sqrt(20 tan(pi/5)) = 3.81194``: the
+    N-independent value of the pentagon bound on the periodic plane."""
+    return float(np.sqrt(20.0 * np.tan(np.pi / 5.0)))
+
+
+def surface_pentagon_perimeter(n_cells, surface: str = "sphere"):
+    """The unit-area regular pentagon's perimeter on ``surface`` with N cells: the spherical one
+    (:func:`pentagon_perimeter`) or, on ``"plane"``, the flat one (the same for every N)."""
+    if surface == "plane":
+        n = np.asarray(n_cells)
+        value = planar_pentagon_perimeter()
+        return value if n.ndim == 0 else np.full(n.shape, value)
+    return pentagon_perimeter(n_cells)
+
+
 # ======================================================================================== centroids
 def cell_centroids(state, method: str = "area"):
     """Cell positions on the sphere, ``(n_cells, 3)`` NumPy float64, each at distance R from the centre.
@@ -95,12 +112,18 @@ def cell_centroids(state, method: str = "area"):
     A cell folded over (non-positive area, allowed at kA = 0) has no meaningful area centroid (its
     area vector vanishes or points inward); such cells fall back to the vertex centroid.
 
-    Works on either device (the sums run where the state lives); only the Sphere is supported.
+    On a :class:`~spherevm.constraints.PeriodicPlane` (:func:`planar_cell_centroids`) each polygon
+    is unwrapped from its first vertex along its minimum-image edges; the area centroid (or the
+    vertex centroid) of the unwrapped polygon is wrapped back into the box, ``z = 0``.
+
+    Works on either device (the sums run where the state lives); Sphere and PeriodicPlane.
     """
     if method not in CENTROID_METHODS:
         raise ValueError(f"method must be one of {CENTROID_METHODS}, got {method!r}")
+    if isinstance(state.constraint, PeriodicPlane):
+        return planar_cell_centroids(state, method)
     if not isinstance(state.constraint, Sphere):
-        raise NotImplementedError(f"cell_centroids supports the Sphere constraint only, got "
+        raise NotImplementedError(f"cell_centroids supports the Sphere and PeriodicPlane constraints only, got "
                                   f"{type(state.constraint).__name__}")
     xp = state.device.xp
     pos = state.positions
@@ -126,4 +149,40 @@ def cell_centroids(state, method: str = "area"):
         direction = xp.where(ok[:, None], area_vec, vertex_centroid)
     direction = direction / xp.sqrt((direction * direction).sum(axis=1))[:, None]
     out = state.radius[state.cell_replica][:, None] * direction
+    return np.asarray(state.device.to_numpy(out), dtype=np.float64)
+
+
+def planar_cell_centroids(state, method: str = "area"):
+    """Cell centroids on the periodic plane, ``(n_cells, 3)`` NumPy float64, wrapped into the box, z = 0.
+
+    Each polygon is unwrapped edge by edge from its first vertex (vertex j at ``sum_{i<j} e_i``,
+    ``e_i`` the minimum-image edges, as for its area), so a cell straddling the boundary is whole.
+    ``method="area"``: the centroid of the polygon's area, ``sum_i (r_i + r_{i+1}) (r_i x r_{i+1}) / 6A``
+    (continuous through a T1, see :func:`cell_centroids`); a cell of non-positive area falls back to
+    the vertex centroid. ``method="vertex"``: the mean of the unwrapped vertices. The point is then
+    wrapped back into ``[0, Lx) x [0, Ly)``.
+    """
+    xp = state.device.xp
+    pos = state.positions[:, :2]
+    cv, sides = state.cell_vertices, state.cell_sides
+    col = xp.arange(cv.shape[1])[None, :]
+    valid = col < sides[:, None]
+    first = cv[:, :1]
+    cur = xp.where(valid, cv, first)                                   # padding -> the first vertex
+    nxt = xp.where(valid, xp.take_along_axis(cv, (col + 1) % sides[:, None], axis=1), first)
+    box = state.box[state.cell_replica]
+    e = minimum_image(pos[nxt] - pos[cur], box[:, None, :])           # (C, W, 2); padding: zero
+    r = xp.cumsum(e, axis=1) - e                                        # vertex j about vertex 0
+    mean = xp.where(valid[..., None], r, 0.0).sum(axis=1) / sides[:, None].astype(xp.float64)
+    centre = mean
+    if method == "area":
+        r1 = r + e                                                      # vertex j + 1
+        cross = r[..., 0] * r1[..., 1] - r[..., 1] * r1[..., 0]         # padding rows do not count
+        cross = xp.where(valid, cross, 0.0)
+        area = 0.5 * cross.sum(axis=1)
+        ok = area > 0
+        c = ((r + r1) * cross[..., None]).sum(axis=1) / (6.0 * xp.where(ok, area, 1.0))[:, None]
+        centre = xp.where(ok[:, None], c, mean)
+    out = xp.zeros((state.n_cells, 3))
+    out[:, :2] = _wrap(xp, pos[first[:, 0]] + centre, box)
     return np.asarray(state.device.to_numpy(out), dtype=np.float64)

@@ -23,6 +23,12 @@ Conventions
   makes it diffuse as a whole; measured in the lab frame, that diffusion decorrelates Q_s without
   any cell leaving its cage. The best proper rotation about the centre (Kabsch) between the two
   configurations of each pair ``(r(t0), r(t0 + t))`` is removed, per replica.
+* On the periodic plane (a Trajectory with a ``box``) displacements are those of the unwrapped
+  centroids (:attr:`Trajectory.positions`: minimum images of the frame-to-frame displacements,
+  summed), Euclidean in the plane (``geodesic`` makes no difference). There is no rigid rotation to
+  remove (``remove_rotation=True`` raises there); the zero modes are the two translations, and
+  ``remove_drift`` (default: on, on the plane) subtracts each replica's mean cell displacement
+  between the two frames of every pair, the analogue of the sphere's rotation removal.
 * Averages run over every cell of every replica (replicas of equal size weigh equally); the
   per-replica curves come along in :attr:`TimeCorrelation.per_replica`.
 """
@@ -34,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .trajectory import Trajectory, _replica_sum, remove_rigid_rotation
+from .trajectory import Trajectory, _replica_sum, remove_rigid_rotation, replica_mean
 
 
 # ======================================================================================== correlations
@@ -74,8 +80,37 @@ def _origin_frames(origins, n):
     return np.unique(np.where(idx < 0, idx + n, idx))
 
 
-def _displacements(traj, origin, remove_rotation, geodesic, scaled):
+def _zero_modes(traj, remove_rotation, remove_drift):
+    """``(remove_rotation, remove_drift)`` resolved for the trajectory's surface (None: the default
+    of the surface, rotation on a sphere, drift on the plane); the other surface's refused."""
+    if traj.planar:
+        if remove_rotation:
+            raise ValueError("remove_rotation=True: a trajectory on the periodic plane has no rigid rotation to "
+                             "remove (its zero modes are the translations); use remove_drift (default on the plane)")
+        return False, True if remove_drift is None else bool(remove_drift)
+    if remove_drift:
+        raise ValueError("remove_drift=True: a tissue on a sphere has no centre-of-mass drift (the sphere's centre "
+                         "is fixed); its zero modes are rigid rotations, removed by remove_rotation")
+    return True if remove_rotation is None else bool(remove_rotation), False
+
+
+def _planar_displacements(traj, origin, remove_drift, scaled):
+    rep = traj.cell_replica
+    pos = traj.positions
+    dr = pos[origin:] - pos[origin]
+    if remove_drift:
+        dr = dr - replica_mean(dr, rep, traj._order, traj._starts)[:, rep, :]
+    d = np.linalg.norm(dr, axis=-1)
+    if scaled:
+        d = d / traj.length_unit[rep]
+    d[0] = 0.0
+    return d
+
+
+def _displacements(traj, origin, remove_rotation, geodesic, scaled, remove_drift=False):
     """Distances ``(T - origin, n_cells)`` of every cell between frame ``origin`` and each later frame."""
+    if traj.planar:
+        return _planar_displacements(traj, origin, remove_drift, scaled)
     rep = traj.cell_replica
     ref = traj.centroids[origin]
     cur = traj.centroids[origin:]
@@ -93,10 +128,11 @@ def _displacements(traj, origin, remove_rotation, geodesic, scaled):
     return d
 
 
-def _correlate(traj, func, origins, remove_rotation, geodesic, scaled, name):
+def _correlate(traj, func, origins, remove_rotation, geodesic, scaled, name, remove_drift=None):
     """Average ``func(distance)`` over cells, per replica and over all, for every lag of the pairs."""
     if not isinstance(traj, Trajectory):
         raise TypeError(f"expected a spherevm.analysis.Trajectory, got {type(traj).__name__}")
+    remove_rotation, remove_drift = _zero_modes(traj, remove_rotation, remove_drift)
     T = traj.n_frames
     t = traj.times
     frames = _origin_frames(origins, T)
@@ -121,7 +157,7 @@ def _correlate(traj, func, origins, remove_rotation, geodesic, scaled, name):
     count = np.zeros(len(lags_unique), dtype=np.int64)
     cells = traj.cells_per_replica
     for i in frames:                     # loop over time origins; each is vectorised over lags and cells
-        d = _displacements(traj, int(i), remove_rotation, geodesic, scaled)
+        d = _displacements(traj, int(i), remove_rotation, geodesic, scaled, remove_drift)
         per_rep = _replica_sum(func(d), traj._order, traj._starts) / cells
         np.add.at(sums, inverse[int(i)], per_rep)
         np.add.at(count, inverse[int(i)], 1)
@@ -131,8 +167,8 @@ def _correlate(traj, func, origins, remove_rotation, geodesic, scaled, name):
                            per_replica=per_replica, count=count, name=name)
 
 
-def msd(traj, remove_rotation: bool = True, geodesic: bool = False, origins="first",
-        scaled: bool = True) -> TimeCorrelation:
+def msd(traj, remove_rotation: bool = None, geodesic: bool = False, origins="first",
+        scaled: bool = True, remove_drift: bool = None) -> TimeCorrelation:
     """Mean squared displacement ``<|r_i(t0 + t) - r_i(t0)|^2>`` of the cell centroids.
 
     geodesic : False for the chord (straight 3D distance, the paper's ``|r_i(t) - r_i(0)|``), True
@@ -140,14 +176,18 @@ def msd(traj, remove_rotation: bool = True, geodesic: bool = False, origins="fir
         arc at ``pi R`` (the mean over a uniform sphere is ``2 R^2`` for the chord squared).
     origins : ``"first"`` (lags from frame 0 only; suits log-spaced sampling), ``"all"`` (every pair
         of frames ``t0 <= t1``, grouped by equal lag ``t1 - t0``) or a sequence of origin frames.
-    remove_rotation : remove each replica's rigid rotation between the two frames first.
+    remove_rotation : remove each replica's rigid rotation between the two frames first (sphere;
+        None = True there; refused on the plane).
     scaled : lengths in units of ``sqrt(<A>)`` per replica (default) rather than simulation units.
+    remove_drift : periodic plane: subtract each replica's mean cell displacement between the two
+        frames (None = True on the plane; refused on a sphere). Displacements on the plane are
+        unwrapped across the boundary.
     """
-    return _correlate(traj, np.square, origins, remove_rotation, geodesic, scaled, "msd")
+    return _correlate(traj, np.square, origins, remove_rotation, geodesic, scaled, "msd", remove_drift)
 
 
-def self_overlap(traj, b: float = 0.5, geodesic: bool = False, remove_rotation: bool = True, origins="first",
-                 scaled: bool = True) -> TimeCorrelation:
+def self_overlap(traj, b: float = 0.5, geodesic: bool = False, remove_rotation: bool = None, origins="first",
+                 scaled: bool = True, remove_drift: bool = None) -> TimeCorrelation:
     """Self-overlap ``Q_s(t)``: the fraction of cells displaced by at most ``b`` (paper: ``b = 1/2``).
 
     ``w(d) = 1`` for ``d <= b``, else 0, on the chord ``|r_i(t) - r_i(0)|`` (or the arc with
@@ -156,11 +196,12 @@ def self_overlap(traj, b: float = 0.5, geodesic: bool = False, remove_rotation: 
     if not np.isfinite(b) or b <= 0:
         raise ValueError(f"b must be positive and finite, got {b!r}")
     return _correlate(traj, lambda d: (d <= b).astype(np.float64), origins, remove_rotation, geodesic, scaled,
-                      "self_overlap")
+                      "self_overlap", remove_drift)
 
 
-def self_intermediate_scattering(traj, q: float = 2 * np.pi, remove_rotation: bool = True, average: str = "2d",
-                                 geodesic: bool = False, origins="first", scaled: bool = True) -> TimeCorrelation:
+def self_intermediate_scattering(traj, q: float = 2 * np.pi, remove_rotation: bool = None, average: str = "2d",
+                                 geodesic: bool = False, origins="first", scaled: bool = True,
+                                 remove_drift: bool = None) -> TimeCorrelation:
     """Self-intermediate scattering function ``F_s(q, t) = < exp(i q . (r_i(t) - r_i(0))) >``.
 
     The average over the directions of ``q`` makes it a function of ``d = |dr|`` only:
@@ -187,7 +228,8 @@ def self_intermediate_scattering(traj, q: float = 2 * np.pi, remove_rotation: bo
         func = lambda d: np.sinc(q * d / np.pi)  # noqa: E731  (np.sinc(x) = sin(pi x) / (pi x))
     else:
         raise ValueError(f"average must be '2d' (J0, tangent wave vectors) or '3d' (sin x / x), got {average!r}")
-    return _correlate(traj, func, origins, remove_rotation, geodesic, scaled, "self_intermediate_scattering")
+    return _correlate(traj, func, origins, remove_rotation, geodesic, scaled, "self_intermediate_scattering",
+                      remove_drift)
 
 
 # ======================================================================================== tau_alpha

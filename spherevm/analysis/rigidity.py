@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..shapes import pentagon_perimeter
+from ..shapes import pentagon_perimeter, surface_pentagon_perimeter
 
 #: Energy per cell (units kP <A>^2) below which a minimised state counts as zero energy. The
 #: measured distribution is bimodal with a gap of many decades: floppy states stop at the
@@ -287,13 +287,14 @@ P0STAR_COLUMNS = ("n_cells", "p0_star", "p0_star_err", "std", "std_unsmoothed", 
                   "pentagon_perimeter", "F_first", "F_last", "bracketed", "n_replicas", "n_unconverged")
 
 
-def summarize(n_cells, p0, status, sigma=None, grid_points: int = 401, resamples: int = 400):
+def summarize(n_cells, p0, status, sigma=None, grid_points: int = 401, resamples: int = 400, surface: str = "sphere"):
     """The three tables of a sweep from per-replica records.
 
     Returns ``(fractions, p0star, density)``: F(p0, N) (:func:`zero_fraction`), one row per N with
     p0* beside :func:`~spherevm.analysis.pentagon_perimeter` (:data:`P0STAR_COLUMNS`), and the
     smoothed distributions on a common grid (columns ``n_cells``, ``p0``, ``density``). ``sigma``
-    (None: :func:`smoothing_width` per N) may be a number used for every N.
+    (None: :func:`smoothing_width` per N) may be a number used for every N. ``surface="plane"`` puts
+    the flat unit-area pentagon (3.81194, every N) in the pentagon column.
     """
     frac = zero_fraction(n_cells, p0, status)
     sizes = np.unique(frac["n_cells"])
@@ -312,7 +313,7 @@ def summarize(n_cells, p0, status, sigma=None, grid_points: int = 401, resamples
         estimates[int(n)] = est
         for col, val in (("n_cells", int(n)), ("p0_star", est.mean), ("p0_star_err", est.mean_err),
                          ("std", est.std), ("std_unsmoothed", est.std_unsmoothed), ("sigma", est.sigma),
-                         ("p0_half", est.p0_half), ("pentagon_perimeter", pentagon_perimeter(int(n))),
+                         ("p0_half", est.p0_half), ("pentagon_perimeter", surface_pentagon_perimeter(int(n), surface)),
                          ("F_first", est.F_first), ("F_last", est.F_last), ("bracketed", est.bracketed),
                          ("n_replicas", int(frac["n_replicas"][sel].sum())),
                          ("n_unconverged", int(frac["n_unconverged"][sel].sum()))):
@@ -340,9 +341,10 @@ def size_colors(sizes):
     return {n: cmap(i / (len(sizes) - 1)) for i, n in enumerate(sizes)}
 
 
-def plot_transition(fractions, p0star, density, ax=None, inset=True):
+def plot_transition(fractions, p0star, density, ax=None, inset=True, pentagons=True):
     """Fig. 2 (right) of the paper: distributions of p0* per N with F(p0) in an inset, and a
-    pentagon marker at the regular-pentagon perimeter of each N. Returns the figure."""
+    pentagon marker at the regular-pentagon perimeter of each N (``pentagons=False``: none, as the
+    paper's planar panel). Returns the figure."""
     import matplotlib.pyplot as plt
     if ax is None:
         fig, ax = plt.subplots(figsize=(6.4, 4.6))
@@ -356,7 +358,7 @@ def plot_transition(fractions, p0star, density, ax=None, inset=True):
         if sel.any():
             ax.plot(density["p0"][sel], density["density"][sel], color=colors[n], lw=1.8, label=f"N = {n}")
             ymax = max(ymax, float(np.nanmax(density["density"][sel])))
-    for n in sizes:
+    for n in sizes if pentagons else ():
         ax.plot([pentagon_perimeter(n)], [-0.04 * max(ymax, 1.0)], marker="p", ms=9, color=colors[n],
                 mec="k", mew=0.5, ls="none", clip_on=False)
     ax.set_xlabel(r"$p_0^*$")
@@ -402,7 +404,7 @@ def plot_fraction(fractions, ax=None):
     return fig
 
 
-def plot_p0_star(p0star, ax=None):
+def plot_p0_star(p0star, ax=None, surface: str = "sphere"):
     """p0*(N) (mean, error bar: spread of the distribution; thick bar: error of the mean) against
     the regular-pentagon perimeter of unit area on the sphere of N cells. Returns the figure."""
     import matplotlib.pyplot as plt
@@ -412,8 +414,8 @@ def plot_p0_star(p0star, ax=None):
         fig = ax.figure
     n = np.asarray(p0star["n_cells"], dtype=np.float64)
     nn = np.geomspace(max(n.min() / 1.3, 8), n.max() * 1.3, 200)
-    ax.plot(nn, pentagon_perimeter(nn), color="k", lw=1, ls="--",
-            label="regular pentagon, unit area")
+    ax.plot(nn, surface_pentagon_perimeter(nn, surface), color="k", lw=1, ls="--",
+            label="regular pentagon, unit area" + (" (flat)" if surface == "plane" else ""))
     ax.errorbar(n, p0star["p0_star"], yerr=p0star["std"], fmt="none", ecolor="0.55", lw=1, capsize=3)
     ax.errorbar(n, p0star["p0_star"], yerr=p0star["p0_star_err"], fmt="o", color="C3", lw=2.5, ms=5,
                 label=r"$p_0^*(N)$: mean (bars: spread, error of mean)")

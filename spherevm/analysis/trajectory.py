@@ -1,4 +1,5 @@
-"""Cell centroids over time (:class:`Trajectory`) and the removal of each tissue's rigid rotation.
+"""Cell centroids over time (:class:`Trajectory`) and the removal of each tissue's rigid rotation
+(on a sphere) or centre-of-mass drift (on the periodic plane).
 
 A Trajectory is built from States, from a spherevm GSD file or from a Recorder's
 :class:`~spherevm.plugins.writers.recorder.Recording`; :mod:`spherevm.analysis.dynamics` measures it.
@@ -9,6 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..constraints.plane import _wrap, minimum_image
 from ..gsdio import Reader
 from ..plugins.writers.recorder import Recorder
 from ..shapes import cell_centroids
@@ -20,22 +22,39 @@ class Trajectory:
     """Cell centroids over time, for one tissue or an ensemble of replicas.
 
     times : (T,) sampling times (timesteps, or times in any unit), increasing.
-    centroids : (T, n_cells, 3) cell positions on the sphere of each replica.
+    centroids : (T, n_cells, 3) cell positions on the sphere of each replica, or in the periodic
+        box of each replica (stored wrapped, z = 0).
     cell_replica : (n_cells,) replica of each cell.
-    radius : (n_replicas,) sphere radius of each replica.
+    radius : (n_replicas,) sphere radius of each replica; None on the periodic plane.
+    box : (n_replicas, 2) periodic box (Lx, Ly) of each replica on the plane; None on a sphere.
+
+    On the plane the centroids are unwrapped across the boundary (:attr:`positions`): each
+    frame-to-frame displacement is taken as its minimum image and summed from frame 0, so a cell
+    that leaves the box on one side keeps its true displacement. This needs every cell to move
+    less than half the box between consecutive frames (sample often enough).
     """
     times: np.ndarray
     centroids: np.ndarray
     cell_replica: np.ndarray
-    radius: np.ndarray
+    radius: np.ndarray = None
+    box: np.ndarray = None
     _order: np.ndarray = field(default=None, init=False, repr=False, compare=False)
     _starts: np.ndarray = field(default=None, init=False, repr=False, compare=False)
+    _unwrapped: np.ndarray = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self):
         self.times = np.asarray(self.times, dtype=np.float64).reshape(-1)
         self.centroids = np.asarray(self.centroids, dtype=np.float64)
         self.cell_replica = np.asarray(self.cell_replica, dtype=np.int64).reshape(-1)
-        self.radius = np.atleast_1d(np.asarray(self.radius, dtype=np.float64))
+        if (self.radius is None) == (self.box is None):
+            raise ValueError("give the radius (sphere) or the box (periodic plane) of each replica, not "
+                             f"{'both' if self.box is not None else 'neither'}")
+        if self.box is not None:
+            self.box = np.asarray(self.box, dtype=np.float64)
+            if self.box.ndim == 1 and self.box.shape == (2,):
+                self.box = self.box[None, :]
+        else:
+            self.radius = np.atleast_1d(np.asarray(self.radius, dtype=np.float64))
         T = len(self.times)
         if self.centroids.ndim != 3 or self.centroids.shape[2] != 3 or self.centroids.shape[0] != T:
             raise ValueError(f"centroids must have shape (len(times), n_cells, 3) = ({T}, n_cells, 3), "
@@ -50,9 +69,14 @@ class Trajectory:
         if len(self.cell_replica) and self.cell_replica.min() < 0:
             raise ValueError("cell_replica must be non-negative")
         n_rep = int(self.cell_replica.max()) + 1 if len(self.cell_replica) else 0
-        if self.radius.shape != (n_rep,):
+        if self.box is not None:
+            if self.box.shape != (n_rep, 2):
+                raise ValueError(f"box must have one (Lx, Ly) per replica, shape ({n_rep}, 2), got {self.box.shape}")
+            if not np.all(np.isfinite(self.box)) or np.any(self.box <= 0):
+                raise ValueError("box must be positive and finite")
+        elif self.radius.shape != (n_rep,):
             raise ValueError(f"radius must have one value per replica ({n_rep}), got shape {self.radius.shape}")
-        if not np.all(np.isfinite(self.radius)) or np.any(self.radius <= 0):
+        elif not np.all(np.isfinite(self.radius)) or np.any(self.radius <= 0):
             raise ValueError("radius must be positive and finite")
         counts = np.bincount(self.cell_replica, minlength=n_rep)
         if np.any(counts == 0):
@@ -60,6 +84,20 @@ class Trajectory:
         if not np.all(np.isfinite(self.centroids)):
             raise ValueError("centroids contain NaN or inf")
         self._order, self._starts = _replica_layout(self.cell_replica, n_rep)
+        if self.box is not None:
+            self._unwrapped = unwrap_trajectory(self.centroids, self.box[self.cell_replica])
+
+    # ------------------------------------------------------------------ surface
+    @property
+    def planar(self) -> bool:
+        """True for a trajectory on the periodic plane (it has a box, no radius)."""
+        return self.box is not None
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(T, n_cells, 3) positions to measure displacements with: the centroids on a sphere, the
+        centroids unwrapped across the periodic boundary (continuous in time) on the plane."""
+        return self._unwrapped if self.planar else self.centroids
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -75,7 +113,7 @@ class Trajectory:
 
     @property
     def n_replicas(self) -> int:
-        return len(self.radius)
+        return len(self.box) if self.planar else len(self.radius)
 
     @property
     def cells_per_replica(self) -> np.ndarray:
@@ -83,7 +121,10 @@ class Trajectory:
 
     @property
     def length_unit(self) -> np.ndarray:
-        """sqrt(<A>) per replica, with <A> = 4 pi R^2 / N: the unit of every length the measures return."""
+        """sqrt(<A>) per replica, with <A> = 4 pi R^2 / N (sphere) or Lx Ly / N (plane): the unit of every
+        length the measures return."""
+        if self.planar:
+            return np.sqrt(self.box[:, 0] * self.box[:, 1] / self.cells_per_replica)
         return np.sqrt(4 * np.pi * self.radius ** 2 / self.cells_per_replica)
 
     # ------------------------------------------------------------------ builders
@@ -101,6 +142,9 @@ class Trajectory:
                 raise ValueError(f"state {k} has {s.n_cells} cells in {s.n_replicas} replicas, frame 0 "
                                  f"{first.n_cells} in {first.n_replicas}: the analysis follows fixed cells")
             cents.append(cell_centroids(s, method=method))
+        box = first.box_np()
+        if box is not None:
+            return cls(times, np.stack(cents), first.cell_replica_np(), box=box)
         return cls(times, np.stack(cents), first.cell_replica_np(), first.radius_np())
 
     @classmethod
@@ -144,6 +188,9 @@ class Trajectory:
             if not np.isfinite(dt) or dt <= 0:
                 raise ValueError(f"dt must be positive and finite, got {dt!r}")
             times = times * dt
+        box = getattr(recording, "box", None)
+        if box is not None:
+            return cls(times, recording.centroids, recording.cell_replica, box=box)
         return cls(times, recording.centroids, recording.cell_replica, recording.radius)
 
     # ------------------------------------------------------------------ helpers
@@ -151,10 +198,51 @@ class Trajectory:
         """A copy in which every frame is rigidly rotated (per replica) onto frame ``reference``.
 
         For viewing and for custom analyses; the measures below remove the rotation pair by pair.
+        Sphere only: a periodic plane has no rigid rotation (its zero modes are the two translations,
+        see :meth:`without_drift`), so this raises ValueError there.
         """
+        if self.planar:
+            raise ValueError("without_rotation: a trajectory on the periodic plane has no rigid rotation to remove "
+                             "(the box is not rotation invariant; its zero modes are the translations): use "
+                             "without_drift() or remove_drift=True in the measures")
         ref = self.centroids[reference]
         return Trajectory(self.times.copy(), remove_rigid_rotation(ref, self.centroids, self.cell_replica),
                           self.cell_replica.copy(), self.radius.copy())
+
+
+    def without_drift(self, reference: int = 0) -> "Trajectory":
+        """Plane only: a copy in which every frame is translated (per replica) so that the mean
+        unwrapped displacement of the replica's cells from frame ``reference`` is zero (centroids
+        wrapped back into the box). The measures do the same pair by pair with ``remove_drift``."""
+        if not self.planar:
+            raise ValueError("without_drift: a tissue on a sphere has no centre-of-mass drift (the centre is fixed); "
+                             "use without_rotation()")
+        pos = self._unwrapped
+        shift = replica_mean(pos - pos[reference], self.cell_replica, self._order, self._starts)
+        moved = pos - shift[:, self.cell_replica, :]
+        out = moved.copy()
+        out[..., :2] = _wrap(np, moved[..., :2], self.box[self.cell_replica])
+        return Trajectory(self.times.copy(), out, self.cell_replica.copy(), box=self.box.copy())
+
+
+def unwrap_trajectory(centroids, box_per_cell):
+    """Positions (T, n, 3) continuous in time: frame 0 as stored, then the cumulative sum of the
+    minimum images of the frame-to-frame displacements (``box_per_cell`` (n, 2))."""
+    out = np.array(centroids, dtype=np.float64, copy=True)
+    if len(out) > 1:
+        step = minimum_image(np.diff(out[..., :2], axis=0), box_per_cell)
+        out[1:, :, :2] = out[0, :, :2] + np.cumsum(step, axis=0)
+    return out
+
+
+def replica_mean(values, cell_replica, order=None, starts=None):
+    """The mean of ``values (..., n_cells, k)`` over the cells of each replica: ``(..., n_replicas, k)``."""
+    rep = np.asarray(cell_replica, dtype=np.int64)
+    if starts is None:
+        order, starts = _replica_layout(rep, int(rep.max()) + 1)
+    counts = np.diff(np.append(starts, len(rep)))
+    v = np.moveaxis(values, -1, -2)                                     # (..., k, n_cells)
+    return np.moveaxis(_replica_sum(v, order, starts), -1, -2) / counts[:, None]
 
 
 def _replica_layout(cell_replica, n_rep):

@@ -62,3 +62,25 @@ def check_out_path(path):
         raise CLIError(f"argument --out: folder {folder!r} does not exist; create it first")
     if not os.access(folder, os.W_OK | os.X_OK) or (os.path.exists(full) and not os.access(full, os.W_OK)):
         raise CLIError(f"argument --out: cannot write {path!r} (permission denied)")
+
+
+# ---------------------------------------------------------------------------------------- surface
+SURFACES = ("sphere", "plane")
+
+
+def add_surface(group, what="tilings"):
+    """``--surface {sphere,plane}``: random tilings of the sphere (radius sqrt(N/4 pi)) or of the
+    periodic plane (square box of side sqrt(N)); <A> = 1 on both."""
+    group.add_argument("--surface", choices=SURFACES, default="sphere",
+                       help=f"{what} on the sphere (radius sqrt(N/4 pi)) or the periodic plane (square box of side "
+                            "sqrt(N), N >= 8; CPU only for now) (default: %(default)s)")
+
+
+def surface_device(surface, device):
+    """The device for ``surface``: the plane runs on the CPU only for now (``auto`` picks it)."""
+    if surface != "plane":
+        return device
+    if device == "gpu":
+        raise CLIError("argument --device: the periodic plane runs on the CPU only for now (the CUDA kernels do "
+                       "not support it yet); use --device cpu or auto")
+    return "cpu"

@@ -5,7 +5,8 @@ import sys
 import time
 
 from ..progress import StatusLine
-from .arguments import RUNTIME_ERROR, USAGE_ERROR, CLIError, check_out_path, integer, one_line, real
+from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_surface, check_out_path, integer, one_line, real,
+                        surface_device)
 
 
 def add_parser(subparsers):
@@ -29,6 +30,7 @@ def add_parser(subparsers):
                         "new edges 3 x THRESHOLD long (default: %(default)s)")
     g.add_argument("--no-t1", dest="t1", action="store_const", const=None,
                    help="no T1 exchanges (edges may then collapse and stall the minimisation)")
+    add_surface(g)
     g = m.add_argument_group("minimiser")
     g.add_argument("--dt", type=real(strict=True), default=0.02, help="FIRE time step, > 0 (default: %(default)s)")
     g.add_argument("--force-tol", type=real(), default=1e-8,
@@ -125,9 +127,10 @@ def run(args) -> int:
     err = sys.stderr
     # set-up: anything the library refuses here is bad input (status 2)
     try:
-        device = svm.device.resolve(args.device)
+        device = svm.device.resolve(surface_device(args.surface, args.device))
         sim = svm.Simulation(device=device, seed=args.seed)
-        sim.state = svm.init.random_tiling(args.cells, replicas=args.replicas, seed=args.seed)
+        tiling = svm.init.random_planar_tiling if args.surface == "plane" else svm.init.random_tiling
+        sim.state = tiling(args.cells, replicas=args.replicas, seed=args.seed)
         sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=args.kr, p0=args.p0))
         if args.t1 is not None:
             sim.operations.updaters.append(svm.plugins.updaters.T1(threshold=args.t1, new_length=3.0 * args.t1))
@@ -141,7 +144,7 @@ def run(args) -> int:
         raise CLIError(one_line(exc), USAGE_ERROR) from exc
 
     if not args.quiet:
-        err.write(f"spherevm: minimizing {args.replicas} replica(s) of {args.cells} cells, p0={args.p0:g} "
+        err.write(f"spherevm: minimizing {args.replicas} replica(s) of {args.cells} cells on the {args.surface}, p0={args.p0:g} "
                   f"kr={args.kr:g}{'' if args.t1 is None else f' t1={args.t1:g}'} on {device.name}"
                   f"{'' if args.out is None else f', writing {args.out}'}\n")
         err.flush()

@@ -7,7 +7,7 @@ import sys
 
 from ..sweeps import (CPU_BATCH_CELLS, GPU_BATCH_CELLS, RigiditySweep, TextProgress, format_p0star_table,
                       open_sweep_folder, parse_p0_grid, run_sweep, write_tables)
-from .arguments import integer, real
+from .arguments import add_surface, integer, real, surface_device
 
 DEFAULT_CELLS = (16, 32)
 DEFAULT_P0 = "3.5:4.0:0.025"
@@ -32,6 +32,7 @@ def add_parser(subparsers):
                    help="random tilings per (N, p0) (default: %(default)s)")
     g.add_argument("--kr", type=real(), default=0.0, help="area stiffness kA <A>/kP (default: %(default)s)")
     g.add_argument("--seed", type=integer(0), default=0, help="random seed (default: %(default)s)")
+    add_surface(g)
     g.add_argument("--shared-tilings", action="store_true",
                    help="use the same tilings at every p0 (default: independent tilings per p0)")
     g = r.add_argument_group("minimiser")
@@ -94,7 +95,7 @@ def sweep_from_args(args) -> RigiditySweep:
     return RigiditySweep(cells=args.cells, p0=parse_p0_grid(args.p0), replicas=args.replicas, kr=args.kr,
                          seed=args.seed, shared_tilings=args.shared_tilings, dt=args.dt, force_tol=args.force_tol,
                          energy_tol=args.energy_tol, max_steps=args.max_steps, t1_max_flip_backs=args.max_flip_backs,
-                         **t1)
+                         surface=getattr(args, "surface", "sphere"), **t1)
 
 
 def run(args) -> int:
@@ -106,13 +107,14 @@ def run(args) -> int:
     try:
         if not args.quiet:
             where = f"Dask cluster {args.scheduler}" if client else f"device {args.device}"
-            err.write(f"spherevm: rigidity sweep of N = {list(sweep.cells)}, {len(sweep.p0)} p0 values "
+            err.write(f"spherevm: rigidity sweep on the {sweep.surface} of N = {list(sweep.cells)}, {len(sweep.p0)} p0 values "
                       f"({sweep.p0[0]:g}..{sweep.p0[-1]:g}), {sweep.replicas} replicas, kr = {sweep.kr:g}: "
                       f"{sweep.total_units} minimisations on {where}, writing {args.out}\n")
             err.flush()
         bar = TextProgress(err) if not args.quiet else None
         try:
-            result = run_sweep(sweep, args.out, executor=client, device=args.device, workers=args.workers,
+            result = run_sweep(sweep, args.out, executor=client, device=surface_device(sweep.surface, args.device),
+                               workers=args.workers,
                                batch_cells=args.batch_cells, progress=bar)
         finally:
             if bar is not None:
@@ -121,7 +123,7 @@ def run(args) -> int:
         if client is not None:
             client.close()
     tables = write_tables(args.out, result.records, zero_tol=args.zero_tol, plots=not args.no_plots,
-                          sigma=args.sigma)
+                          sigma=args.sigma, surface=sweep.surface)
     print(format_p0star_table(tables["p0star"]))
     if not args.quiet:
         frac = tables["fractions"]

@@ -28,10 +28,11 @@ GPU_BATCH_CELLS = 1 << 18
 # ---------------------------------------------------------------------------------------- one chunk
 def build_chunk_state(sweep: RigiditySweep, chunk: Chunk):
     """The batched State of a chunk and its per-replica (p0, p0_index, replica, tiling_seed)."""
-    from ..init import random_tilings
+    from ..init import random_planar_tilings, random_tilings
     units = [sweep.unit(u) for u in range(chunk.start, chunk.stop)]
     seeds = [tiling_seed(sweep.seed, chunk.n_cells, sweep.p0[k], r, sweep.shared_tilings) for k, r in units]
-    state = random_tilings(chunk.n_cells, seeds)   # shared tilings: a repeated seed gives the same tiling
+    tilings = random_planar_tilings if sweep.surface == "plane" else random_tilings
+    state = tilings(chunk.n_cells, seeds)   # shared tilings: a repeated seed gives the same tiling
     p0 = np.array([sweep.p0[k] for k, _ in units])
     return state, p0, [k for k, _ in units], [r for _, r in units], seeds
 
@@ -183,7 +184,7 @@ class SweepResult:
 
     def summarize(self, zero_tol=None, **kwargs):
         """``(fractions, p0star, density)`` tables, see :func:`spherevm.analysis.rigidity.summarize`."""
-        return summarize_records(self.records, zero_tol=zero_tol, **kwargs)
+        return summarize_records(self.records, zero_tol=zero_tol, **{"surface": self.sweep.surface, **kwargs})
 
 
 def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=None, batch_cells=None,
@@ -207,6 +208,12 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
     from ..device import DEVICE_NAMES, Device
     if not isinstance(device, Device) and (not isinstance(device, str) or device.lower() not in DEVICE_NAMES):
         raise ValueError(f"device must be one of {DEVICE_NAMES}, got {device!r}")
+    if sweep.surface == "plane":       # the CUDA kernels refuse the periodic plane for now
+        if not isinstance(device, Device) and device.lower() == "auto":
+            device = "cpu"
+        elif getattr(device, "is_gpu", False) or (isinstance(device, str) and device.lower() == "gpu"):
+            raise ValueError("a sweep on the periodic plane runs on the CPU only for now (the CUDA kernels do not "
+                             "support it yet); use device='cpu'")
     if workers is not None:
         integer("workers", workers, 1)
     if batch_cells is not None:

@@ -6,6 +6,7 @@ from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
+from ..init_plane import MIN_PLANAR_CELLS
 from ..plugins.updaters.t1 import PRESETS
 from ..validation import integer, positive, real
 
@@ -27,6 +28,9 @@ class RigiditySweep:
       sqrt(<A>); ``t1_length_factor`` instead makes a new edge that many times the old one (the
       paper code's rule is ``t1_threshold=0.1, t1_length_factor=2``, :meth:`reference_t1`).
       Defaults from docs/rigidity.md.
+    * ``surface``: ``"sphere"`` (default; random convex-hull tilings of radius sqrt(N / 4 pi)) or
+      ``"plane"`` (random periodic Voronoi tilings, :func:`spherevm.init.random_planar_tilings`, in
+      the square box of side sqrt(N), so <A> = 1 on both; N >= 8 there).
 
     The energy is ``E = sum_c kr/<A> (A_c - <A>)^2 + (P_c - p0 sqrt(<A>))^2`` per tiling (kP = 1), so
     that ``energy_per_cell`` is in units of kP <A>^2 (<A> = 1 at the default radius sqrt(N/4 pi)).
@@ -46,6 +50,7 @@ class RigiditySweep:
     t1_new_length: float = 0.12
     t1_max_flip_backs: int = 100
     t1_length_factor: float = None
+    surface: str = "sphere"
 
     def __post_init__(self):
         set_ = object.__setattr__
@@ -61,6 +66,11 @@ class RigiditySweep:
         if len(set(cells)) != len(cells):
             raise ValueError(f"cells must not repeat a size, got {list(self.cells)}")
         set_(self, "cells", tuple(sorted(cells)))
+        if self.surface not in SURFACES:
+            raise ValueError(f"surface must be one of {SURFACES}, got {self.surface!r}")
+        if self.surface == "plane" and cells and min(cells) < MIN_PLANAR_CELLS:
+            raise ValueError(f"cells must be >= {MIN_PLANAR_CELLS} on the periodic plane (a simple random tiling of "
+                             f"the torus needs them), got {min(cells)}")
         p0 = self.p0
         if isinstance(p0, (int, float, np.floating, np.integer)):
             p0 = (p0,)
@@ -128,6 +138,10 @@ class RigiditySweep:
     def unit(self, u: int):
         """``(p0_index, replica)`` of unit ``u`` (p0-major order)."""
         return divmod(int(u), self.replicas)
+
+
+#: the surfaces a sweep can run on
+SURFACES = ("sphere", "plane")
 
 
 def _p0_key(p0: float) -> int:

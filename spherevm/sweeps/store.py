@@ -142,7 +142,13 @@ def open_sweep_folder(sweep: RigiditySweep, out, create: bool = True) -> str:
         if manifest.get("version") != FORMAT_VERSION:
             raise ValueError(f"{manifest_path} has format version {manifest.get('version')}, "
                              f"this spherevm writes {FORMAT_VERSION}")
-        diffs = _manifest_mismatch(manifest.get("parameters", {}), params)
+        old = dict(manifest.get("parameters", {}))
+        old.setdefault("surface", "sphere")          # folders from before the plane are sphere sweeps
+        if old["surface"] != params.get("surface", "sphere"):
+            raise ValueError(f"output folder {out!r} holds a sweep on the {old['surface']}, not on the "
+                             f"{params.get('surface', 'sphere')} requested; use another folder (or resume it with "
+                             f"surface={old['surface']!r})")
+        diffs = _manifest_mismatch(old, params)
         if diffs:
             raise ValueError(f"output folder {out!r} holds a sweep with different parameters ("
                              + "; ".join(diffs) + "); use another folder, or the folder's parameters to resume it")

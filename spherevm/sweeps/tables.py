@@ -2,23 +2,37 @@
 (the statistics themselves are in :mod:`spherevm.analysis.rigidity`)."""
 from __future__ import annotations
 
+import json
 import os
 
 from ..analysis import rigidity
-from .store import RECORD_COLUMNS, sorted_records, write_columns
+from .store import MANIFEST, RECORD_COLUMNS, sorted_records, write_columns
 
 
-def summarize_records(records: dict, zero_tol=None, sigma=None, resamples: int = 400):
+def summarize_records(records: dict, zero_tol=None, sigma=None, resamples: int = 400, surface: str = "sphere"):
     """``(fractions, p0star, density)`` from per-replica records (see analysis.rigidity.summarize)."""
     tol = rigidity.ZERO_ENERGY_TOL if zero_tol is None else zero_tol
     status = rigidity.classify(records["energy_per_cell"], records["reason"], tol)
-    return rigidity.summarize(records["n_cells"], records["p0"], status, sigma=sigma, resamples=resamples)
+    return rigidity.summarize(records["n_cells"], records["p0"], status, sigma=sigma, resamples=resamples,
+                              surface=surface)
 
 
-def write_tables(out, records: dict, zero_tol=None, plots=True, sigma=None) -> dict:
+def folder_surface(out) -> str:
+    """The surface recorded in the sweep folder's manifest ("sphere" for folders without one)."""
+    try:
+        with open(os.path.join(os.fspath(out), MANIFEST)) as fh:
+            return json.load(fh).get("parameters", {}).get("surface", "sphere")
+    except (OSError, ValueError):
+        return "sphere"
+
+
+def write_tables(out, records: dict, zero_tol=None, plots=True, sigma=None, surface=None) -> dict:
     """Write ``replicas.csv``, ``fraction.csv`` (F(p0,N)), ``p0star.csv`` (p0*(N) beside the pentagon
     bound), ``p0star_density.csv`` and, with matplotlib, ``fraction.png``, ``p0star_distribution.png``
     (Fig. 2 style, F in the inset), ``p0star_vs_N.png`` and ``critical_perimeter.png`` (Fig. 4).
+
+    ``surface`` (None: the folder manifest's, else "sphere") picks the pentagon bound: spherical per
+    N, or the flat one on the plane (and no pentagon markers on the planar distributions).
 
     Returns a dict with the tables (``fractions``, ``p0star``, ``density``), the ``files`` written
     and ``plot_note`` (why plots were skipped, or None).
@@ -26,9 +40,11 @@ def write_tables(out, records: dict, zero_tol=None, plots=True, sigma=None) -> d
     path = os.path.abspath(os.fspath(out))
     os.makedirs(path, exist_ok=True)
     records = sorted_records(records)
+    surface = folder_surface(path) if surface is None else surface
     tol = rigidity.ZERO_ENERGY_TOL if zero_tol is None else zero_tol
     status = rigidity.classify(records["energy_per_cell"], records["reason"], tol)
-    frac, p0star, density = rigidity.summarize(records["n_cells"], records["p0"], status, sigma=sigma)
+    frac, p0star, density = rigidity.summarize(records["n_cells"], records["p0"], status, sigma=sigma,
+                                               surface=surface)
     files = []
     rec = dict(records)
     write_columns(os.path.join(path, "replicas.csv"), {**rec, "status": status}, RECORD_COLUMNS + ("status",))
@@ -46,8 +62,9 @@ def write_tables(out, records: dict, zero_tol=None, plots=True, sigma=None) -> d
             note = "matplotlib is not installed: plots skipped (pip install 'spherevm[plot]')"
         else:
             for name, fig in (("fraction.png", lambda: rigidity.plot_fraction(frac)),
-                              ("p0star_distribution.png", lambda: rigidity.plot_transition(frac, p0star, density)),
-                              ("p0star_vs_N.png", lambda: rigidity.plot_p0_star(p0star)),
+                              ("p0star_distribution.png", lambda: rigidity.plot_transition(frac, p0star, density,
+                                                                                      pentagons=surface != "plane")),
+                              ("p0star_vs_N.png", lambda: rigidity.plot_p0_star(p0star, surface=surface)),
                               ("critical_perimeter.png", lambda: rigidity.plot_critical_perimeter(p0star))):
                 f = fig()
                 f.tight_layout()

@@ -42,12 +42,15 @@ class Recording:
     """Cell centroids recorded over time: what a :class:`Recorder` holds and its CSV file stores.
 
     timesteps : (T,) int64; centroids : (T, n_cells, 3) float64; cell_replica : (n_cells,) replica
-    of each cell; radius : (n_replicas,) sphere radius of each replica.
+    of each cell; radius : (n_replicas,) sphere radius of each replica (None on the periodic plane);
+    box : (n_replicas, 2) periodic box (Lx, Ly) of each replica on the plane (None on a sphere), what
+    the analysis needs to unwrap the centroids across the boundary.
     """
     timesteps: np.ndarray
     centroids: np.ndarray
     cell_replica: np.ndarray
     radius: np.ndarray
+    box: np.ndarray = None
 
 
 class Recorder(Writer):
@@ -83,7 +86,7 @@ class Recorder(Writer):
         self.csv = None if csv is None else os.fspath(csv)
         self.method = method
         self._times, self._centroids = [], []
-        self._cell_replica = self._radius = self._cell_start = None
+        self._cell_replica = self._radius = self._box = self._cell_start = None
         self._file = None
 
     @classmethod
@@ -106,7 +109,9 @@ class Recorder(Writer):
         if self._cell_start is None:
             self._cell_start = np.array(state.cell_start, copy=True)
             self._cell_replica = state.cell_replica_np().copy()
-            self._radius = state.radius_np().copy()
+            box = state.box_np()      # a periodic plane stores its box (for unwrapping), a sphere its radius
+            self._radius = None if box is not None else state.radius_np().copy()
+            self._box = None if box is None else box.copy()
         elif not np.array_equal(self._cell_start, state.cell_start):
             raise ValueError(f"Recorder: the state at timestep {timestep} has {state.n_cells} cells in "
                              f"{state.n_replicas} replicas, not the {int(self._cell_start[-1])} cells recorded "
@@ -161,11 +166,16 @@ class Recorder(Writer):
         """The centroids recorded so far (copies)."""
         if not self._times:
             raise RuntimeError("Recorder has recorded nothing yet: append it to sim.operations.writers and run")
-        return Recording(self.timesteps, np.stack(self._centroids), self._cell_replica.copy(), self._radius.copy())
+        return Recording(self.timesteps, np.stack(self._centroids), self._cell_replica.copy(),
+                         None if self._radius is None else self._radius.copy(),
+                         None if self._box is None else self._box.copy())
 
     @staticmethod
-    def read_csv(path) -> Recording:
-        """The Recording in a Recorder CSV (radius from the centroids' distance to the centre)."""
+    def read_csv(path, box=None) -> Recording:
+        """The Recording in a Recorder CSV (radius from the centroids' distance to the centre).
+
+        A CSV recorded on the periodic plane does not hold the box: pass it as ``box`` (a side, a
+        pair (Lx, Ly), or one pair per replica), e.g. ``state.box_np()``."""
         data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
         times, first = np.unique(data[:, 0], return_index=True)
         n_cells = int(data[:, 1].max()) + 1
@@ -176,6 +186,11 @@ class Recorder(Writer):
         data = data[order]
         cent = data[:, 3:6].reshape(len(times), n_cells, 3)
         rep = data[:n_cells, 2].astype(np.int64)
+        if box is not None:
+            n_rep = int(rep.max()) + 1
+            b = np.asarray(box, dtype=np.float64)
+            b = np.broadcast_to(np.repeat(b, 2) if b.size == 1 else b.reshape(-1, 2), (n_rep, 2)).copy()
+            return Recording(times.astype(np.int64), cent, rep, None, b)
         r = np.linalg.norm(cent[0], axis=1)
         radius = np.bincount(rep, weights=r) / np.bincount(rep)
         return Recording(times.astype(np.int64), cent, rep, radius)

@@ -7,6 +7,7 @@ import sys
 
 from ..sweeps import (CPU_BATCH_CELLS, GPU_BATCH_CELLS, RigiditySweep, TextProgress, format_p0star_table,
                       open_sweep_folder, parse_p0_grid, run_sweep, write_tables)
+from ..sweeps import cluster
 from .arguments import add_surface, integer, real, surface_device
 
 DEFAULT_CELLS = (16, 32)
@@ -70,21 +71,12 @@ def add_parser(subparsers):
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run the chunks on a Dask cluster (needs spherevm[cluster]): a scheduler address "
                         "such as tcp://host:8786, or 'local' for a LocalCluster on this machine")
+    g.add_argument("--gpus", type=integer(1), default=None, metavar="N",
+                   help="one Dask worker per GPU of this host, GPUs 0..N-1 (needs spherevm[cluster-cuda])")
     g.add_argument("--no-plots", action="store_true", help="write the CSV tables only")
     g.add_argument("--quiet", "-q", action="store_true", help="no progress bar or notes on standard error")
     r.set_defaults(func=run)
     return r
-
-
-def _dask_client(address):
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError:
-        raise ValueError("--scheduler needs Dask: pip install 'spherevm[cluster]' "
-                         "(dask[distributed])") from None
-    if address == "local":
-        return Client(LocalCluster(threads_per_worker=1, processes=True))
-    return Client(address)
 
 
 def sweep_from_args(args) -> RigiditySweep:
@@ -103,17 +95,21 @@ def run(args) -> int:
     err = sys.stderr
     sweep = sweep_from_args(args)
     open_sweep_folder(sweep, args.out, create=False)        # a bad folder or a mismatch fails before any work
-    client = _dask_client(args.scheduler) if args.scheduler else None
+    client = None
+    if args.scheduler or args.gpus:
+        client = cluster.client(scheduler=args.scheduler, gpus=args.gpus, workers=args.workers)
     try:
         if not args.quiet:
-            where = f"Dask cluster {args.scheduler}" if client else f"device {args.device}"
+            where = (f"{args.gpus} GPU worker(s)" if args.gpus else f"Dask cluster {args.scheduler}") if client \
+                else f"device {args.device}"
             err.write(f"spherevm: rigidity sweep on the {sweep.surface} of N = {list(sweep.cells)}, {len(sweep.p0)} p0 values "
                       f"({sweep.p0[0]:g}..{sweep.p0[-1]:g}), {sweep.replicas} replicas, kr = {sweep.kr:g}: "
                       f"{sweep.total_units} minimisations on {where}, writing {args.out}\n")
             err.flush()
         bar = TextProgress(err) if not args.quiet else None
         try:
-            result = run_sweep(sweep, args.out, executor=client, device=surface_device(sweep.surface, args.device),
+            device = "gpu" if args.gpus else surface_device(sweep.surface, args.device)
+            result = run_sweep(sweep, args.out, executor=client, device=device,
                                workers=args.workers,
                                batch_cells=args.batch_cells, progress=bar)
         finally:

@@ -27,6 +27,7 @@ Modules: :mod:`.spec` (the parameters, seeds and chunks), :mod:`.store` (the fol
 :mod:`.execution` (running chunks and sweeps), :mod:`.tables` (summaries and plots). The command
 ``spherevm rigidity`` (:mod:`spherevm.cli.rigidity`) runs a sweep from the shell.
 """
+from . import cluster
 from .execution import (CPU_BATCH_CELLS, GPU_BATCH_CELLS, InProcessExecutor, SweepProgress, SweepResult,
                         TextProgress, build_chunk_state, default_executor, run_chunk, run_sweep)
 from .spec import Chunk, RigiditySweep, parse_p0_grid, plan_chunks, tiling_seed

@@ -1,0 +1,115 @@
+"""Sweeps on Dask clusters: a worker killed mid-chunk loses nothing, and a scheduler started the
+way the SLURM recipe starts one (docs/rigidity.md) gives the same tables. CPU only; the one-worker-
+per-GPU path (``--gpus``) needs dask-cuda and several GPUs and is checked here only for its error."""
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from spherevm import cli, sweeps
+
+distributed = pytest.importorskip("distributed")
+
+# 3 sizes x 2 p0 x 2 replicas, one chunk per (N, replica range): several chunks, each a second or two
+SWEEP = dict(cells=[16, 20, 24], p0=[3.7, 3.9], replicas=2, seed=3)
+COLUMNS = [c for c in sweeps.RECORD_COLUMNS if c not in ("chunk", "chunk_seconds")]
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ref") / "sweep"
+    return sweeps.run_sweep(sweeps.RigiditySweep(**SWEEP), out, executor=sweeps.InProcessExecutor(),
+                            device="cpu", batch_cells=40).records
+
+
+def same(records, reference):
+    for col in COLUMNS:
+        assert np.array_equal(np.asarray(records[col]), np.asarray(reference[col])), col
+
+
+def test_a_worker_killed_mid_sweep_loses_no_chunk(tmp_path, reference):
+    client = sweeps.cluster.client(scheduler="local", workers=2)
+    try:
+        pids = client.run(os.getpid)
+        out = tmp_path / "sweep"
+        box = {}
+
+        def run():
+            box["result"] = sweeps.run_sweep(sweeps.RigiditySweep(**SWEEP), out, executor=client, device="cpu",
+                                             batch_cells=40)
+
+        worker = threading.Thread(target=run)
+        worker.start()
+        chunks = out / "chunks"
+        deadline = time.time() + 120
+        while time.time() < deadline and not (chunks.exists() and any(chunks.iterdir())):
+            time.sleep(0.05)
+        assert chunks.exists() and any(chunks.iterdir()), "no chunk finished in time"
+        finished_before = {p.name: p.read_bytes() for p in chunks.iterdir()}
+        victim = sorted(pids.values())[0]
+        os.kill(victim, signal.SIGKILL)                  # a worker dies while chunks are still running
+        worker.join(timeout=300)
+        assert not worker.is_alive()
+        result = box["result"]
+    finally:
+        client.close()
+    same(result.records, reference)
+    for name, data in finished_before.items():           # nothing finished before the kill was redone
+        assert (chunks / name).read_bytes() == data
+
+
+def _free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_scheduler_and_workers_started_like_the_slurm_recipe(tmp_path, reference, capsys):
+    """docs/rigidity.md's recipe runs ``dask scheduler`` on one node and ``dask worker`` in each job;
+    here both run on this machine's loopback address, and ``spherevm rigidity --scheduler`` uses them."""
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                               "--port", str(port), "--no-dashboard"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nworkers", "2",
+                                       "--nthreads", "1", "--no-dashboard"],
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        from distributed import Client
+        with Client(address, timeout=60) as c:
+            c.wait_for_workers(2, timeout=60)
+        out = tmp_path / "sweep"
+        rc = cli.main(["rigidity", "--cells", *map(str, SWEEP["cells"]), "--p0", *map(str, SWEEP["p0"]), "--replicas", "2",
+                       "--seed", "3", "--scheduler", address, "--batch-cells", "40", "--out", str(out),
+                       "--no-plots", "--quiet"])
+        assert rc == 0, capsys.readouterr().err
+        resumed = sweeps.run_sweep(sweeps.RigiditySweep(**SWEEP), out, executor=sweeps.InProcessExecutor(),
+                                   device="cpu", batch_cells=40)
+        assert resumed.computed == []                    # every chunk came from the cluster run
+        same(resumed.records, reference)
+    finally:
+        for p in procs[::-1]:
+            p.terminate()
+        for p in procs:
+            p.wait(timeout=30)
+
+
+def test_gpus_without_dask_cuda_is_a_clean_error(tmp_path, capsys):
+    try:
+        import dask_cuda  # noqa: F401
+        pytest.skip("dask-cuda is installed here")
+    except ImportError:
+        pass
+    rc = cli.main(["rigidity", "--cells", "16", "--p0", "3.7", "3.9", "--replicas", "1", "--gpus", "2",
+                   "--out", str(tmp_path / "s"), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "dask-cuda" in err and "cluster-cuda" in err
+    with pytest.raises(ValueError, match="exactly one of scheduler"):
+        sweeps.cluster.client(scheduler="local", gpus=1)

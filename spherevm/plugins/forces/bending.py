@@ -11,26 +11,52 @@ from pathlib import Path
 import numpy as np
 
 from ...constraints import Sphere
-from ...device import launch, load_module
+from ...constraints.base import Constraint
+from ...device import array_module, launch, load_module
 from ..base import Force, ForceResult
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
 
-def _cross(xp, a, b):
-    """Cross products along the last axis (fast for small trailing dimension)."""
-    out = xp.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
-    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
-    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    return out
+def _cross(a, b):
+    """Cross products of component-major vectors: ``a``, ``b`` of shape (3, ...)."""
+    xp = array_module(a, b)
+    return xp.stack((a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]))
 
 
-def _relative(state, points, reference, index):
-    """``points - reference`` through the surface's ``unwrap`` (minimum images on a periodic plane);
-    ``index`` gives each row's replica."""
-    size = state.constraint.size(state, index)[:, None]
-    return state.constraint.unwrap(points, reference[:, None, :], size) - reference[:, None, :]
+def _dot(a, b):
+    return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
+
+
+def _difference(state, xb, xa, index):
+    """``xb - xa`` for component-major points (3, ...): through the surface's ``unwrap`` (minimum
+    images on a periodic plane) where it has one; ``index`` gives each point's replica."""
+    d = xb - xa
+    constraint = state.constraint
+    if type(constraint).unwrap is Constraint.unwrap:
+        return d
+    xp = state.device.xp
+    size = constraint.size(state, index.reshape(-1)).reshape(index.shape + (-1,))
+    b, a = xp.moveaxis(xb + 0 * xa, 0, -1), xp.moveaxis(xa + 0 * xb, 0, -1)
+    return xp.moveaxis(constraint.unwrap(b, a, size) - a, -1, 0)
+
+
+def _area_vectors(state, P, topo):
+    """Component-major area vectors (3, n_cells) from component-major positions P (3, V)."""
+    xp = state.device.xp
+    nv = state.n_vertices
+    apex = xp.take(P, topo["corner_apex"], axis=1).reshape(3, 3, nv)      # slot-major corners
+    nxt = xp.take(P, topo["corner_next"], axis=1).reshape(3, 3, nv)
+    rep = topo["corner_replica"]
+    rv = _difference(state, P[:, None, :], apex, rep)
+    rn = _difference(state, nxt, apex, rep)
+    c = _cross(rv, rn).reshape(3, -1)
+    cells = topo["corner_cell"]
+    return 0.5 * xp.stack([xp.bincount(cells, weights=c[k], minlength=state.n_cells) for k in range(3)])
+
+
+def _positions(state):
+    return state.device.xp.ascontiguousarray(state.positions.T)
 
 
 def cell_area_vectors(state):
@@ -41,21 +67,10 @@ def cell_area_vectors(state):
     to the cell's first vertex (``x_a x x_b`` summed over a closed polygon does not depend on the
     origin), so small cells keep full relative accuracy, and through the surface's ``unwrap`` so
     that on a periodic plane the polygon is built from minimum images. For a flat polygon ``|a_c|``
-    is its area; on the sphere it is the area of the flat polygon through the vertices projected
-    on the plane normal to ``a_c`` (the ``vector area``).
+    is its area; on the sphere it is the area of the polygon's projection on the plane normal to
+    ``a_c`` (the vector area).
     """
-    xp = state.device.xp
-    pos = state.positions
-    vc = state.vertex_cells                                      # (V, 3): corner (v, k) lies in cell vc[v, k]
-    vn = state.vertex_neighbors                                  # and runs v -> vn[v, k]
-    apex = state.cell_vertices[:, 0][vc]                         # (V, 3) the cell's first vertex
-    x_apex = pos[apex].reshape(-1, 3)
-    pts = xp.stack((xp.repeat(pos, 3, axis=0), pos[vn].reshape(-1, 3)), axis=1)   # (3V, 2, 3)
-    rel = _relative(state, pts, x_apex, xp.repeat(state.vertex_replica, 3))
-    c = _cross(xp, rel[:, 0], rel[:, 1])
-    cells = vc.reshape(-1)
-    return 0.5 * xp.stack([xp.bincount(cells, weights=c[:, d], minlength=state.n_cells) for d in range(3)],
-                          axis=1)
+    return _area_vectors(state, _positions(state), _topology(state)).T
 
 
 def cell_normals(state):
@@ -68,9 +83,8 @@ def cell_normals(state):
     centroid, the two differing at second order in the cell size over R for an irregular cell. On
     a periodic plane it is ``(0, 0, 1)`` for every (counter-clockwise) cell.
     """
-    a = cell_area_vectors(state)
-    xp = state.device.xp
-    return a / xp.sqrt((a * a).sum(axis=1))[:, None]
+    a = _area_vectors(state, _positions(state), _topology(state))
+    return (a / state.device.xp.sqrt(_dot(a, a))).T
 
 
 def neighbor_pairs(state):
@@ -96,8 +110,13 @@ def _build_topology(state):
     order = xp.argsort(both_i * n + both_j)
     start = xp.zeros(n + 1, dtype=xp.int64)
     start[1:] = xp.cumsum(xp.bincount(both_i, minlength=n))
+    corner_cell = xp.ascontiguousarray(vc.T).reshape(-1)                  # slot-major corners
     return dict(pairs=pairs, pair_replica=state.cell_replica[pairs[:, 0]],
-                start=start.astype(xp.int32), neighbors=both_j[order].astype(xp.int32))
+                start=start.astype(xp.int32), neighbors=both_j[order].astype(xp.int32),
+                both_i=both_i[order], both_j=both_j[order], corner_cell=corner_cell,
+                corner_next=xp.ascontiguousarray(vn.T).reshape(-1),
+                corner_apex=state.cell_vertices[:, 0].astype(xp.int64)[corner_cell],
+                corner_replica=xp.tile(state.vertex_replica, 3).reshape(3, -1))
 
 
 def _topology(state):
@@ -165,30 +184,29 @@ class Bending(Force):
         xp = state.device.xp
         B = self._device_B(state)
         topo = _topology(state)
-        pairs = topo["pairs"]
-        a = cell_area_vectors(state)
-        norm = xp.sqrt((a * a).sum(axis=1))
-        n = a / norm[:, None]
-        d = n[pairs[:, 0]] - n[pairs[:, 1]]                   # (P, 3)
-        Bp = B[topo["pair_replica"]]
-        pair_energy = 0.5 * Bp * (d * d).sum(axis=1)          # B (1 - n_i.n_j)
-        energy = xp.bincount(topo["pair_replica"], weights=pair_energy, minlength=state.n_replicas)
-        half = 0.5 * pair_energy
-        cell_energy = (xp.bincount(pairs[:, 0], weights=half, minlength=state.n_cells)
-                       + xp.bincount(pairs[:, 1], weights=half, minlength=state.n_cells))
+        nc, nv = state.n_cells, state.n_vertices
+        P = _positions(state)
+        a = _area_vectors(state, P, topo)                                # (3, C)
+        norm = xp.sqrt(_dot(a, a))
+        n = a / norm
+        # every pair from both ends (CSR order): d = n_i - n_j
+        i, j = topo["both_i"], topo["both_j"]
+        d = xp.take(n, i, axis=1) - xp.take(n, j, axis=1)
+        Bc = B[state.cell_replica]
+        # E = B sum_pairs |n_i - n_j|^2 / 2; each cell takes half of each of its pairs
+        cell_energy = 0.25 * Bc * xp.bincount(i, weights=_dot(d, d), minlength=nc)
+        energy = xp.bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)
         # dE/dn_i = B sum_j (n_i - n_j); through n = a/|a|: g_i = (I - n n^T) dE/dn_i / |a_i|
-        s = xp.stack([xp.bincount(pairs[:, 0], weights=d[:, k], minlength=state.n_cells)
-                      - xp.bincount(pairs[:, 1], weights=d[:, k], minlength=state.n_cells) for k in range(3)],
-                     axis=1)
-        s = s * B[state.cell_replica][:, None]
-        g = (s - (s * n).sum(axis=1)[:, None] * n) / norm[:, None]
+        sm = xp.stack([xp.bincount(i, weights=d[k], minlength=nc) for k in range(3)])
+        g = (Bc / norm) * (sm - _dot(sm, n) * n)
         # a_c depends on its vertex v through (x_next - x_prev) x g_c / 2 per corner:
         # in cell vc[v, k] the next vertex is vn[v, k], the previous vn[v, k + 1]
-        pos = state.positions
-        rel = _relative(state, pos[state.vertex_neighbors], pos, state.vertex_replica)   # (V, 3, 3)
+        nxt = xp.take(P, topo["corner_next"], axis=1).reshape(3, 3, nv)
+        rel = _difference(state, nxt, P[:, None, :], topo["corner_replica"])
         chord = rel - xp.roll(rel, -1, axis=1)
-        grad = 0.5 * _cross(xp, chord, g[state.vertex_cells]).sum(axis=1)
-        forces = -state.constraint.project_tangent(pos, grad)
+        gc = xp.take(g, topo["corner_cell"], axis=1).reshape(3, 3, nv)
+        grad = 0.5 * _cross(chord, gc).sum(axis=1)                      # (3, V)
+        forces = -state.constraint.project_tangent(state.positions, xp.ascontiguousarray(grad.T))
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
 
     def _compute_gpu(self, state) -> ForceResult:

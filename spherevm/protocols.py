@@ -41,7 +41,7 @@ class DynamicsResult:
 
 def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=0, device="auto",
                     relax_steps=10_000, equilibrate_steps=None, b=0.5, points_per_decade=10, out=None,
-                    frames=50, t1=True, progress=None) -> DynamicsResult:
+                    frames=50, t1=True, progress=None, extra_forces=()) -> DynamicsResult:
     """Overdamped Brownian dynamics of random tilings, measured as in the paper (Fig. 3).
 
     1. **relax**: FIRE (+ T1) from a random tiling for at most ``relax_steps`` steps, so the run
@@ -54,7 +54,8 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
 
     ``T`` may hold one temperature per replica: a whole temperature series runs as one ensemble.
     ``out``: GSD trajectory of the production run (``frames`` frames, log-spaced). ``progress``:
-    ``progress(stage, done, total)``. Time unit: 1/(mu kP) with mu = 1; dt in that unit.
+    ``progress(stage, done, total)``. ``extra_forces``: Force instances added to the vertex model
+    (e.g. ``Bending(B)``), in every stage. Time unit: 1/(mu kP) with mu = 1; dt in that unit.
     """
     if steps < 1 or int(steps) != steps:
         raise ValueError(f"steps must be a positive integer, got {steps!r}")
@@ -62,6 +63,7 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
     sim = Simulation(device=device, seed=seed)
     sim.state = init.random_tiling(n_cells, replicas=replicas, seed=seed)
     sim.operations.forces.append(VertexModel.dimensionless(kr=kr, p0=p0))
+    sim.operations.forces.extend(extra_forces)
     if t1:
         sim.operations.updaters.append(T1())
     if relax_steps:

@@ -7,7 +7,8 @@ import time
 
 import numpy as np
 
-from .arguments import RUNTIME_ERROR, USAGE_ERROR, CLIError, check_out_path, integer, one_line, real
+from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, build_forces, check_out_path,
+                        extra_forces, integer, one_line, real)
 
 
 def add_parser(subparsers):
@@ -24,6 +25,7 @@ def add_parser(subparsers):
     g.add_argument("--seed", type=integer(0), default=0, help="random seed (default: %(default)s)")
     g.add_argument("--p0", type=real(), default=3.775, metavar="P", help="target shape index (default: %(default)s)")
     g.add_argument("--kr", type=real(), default=0.0, metavar="K", help="area stiffness (default: %(default)s)")
+    add_force_arguments(g)
     g = d.add_argument_group("dynamics")
     g.add_argument("--T", "-T", dest="T", type=real(), default=0.01, help="temperature, >= 0 (default: %(default)s)")
     g.add_argument("--dt", type=real(strict=True), default=0.05, help="time step, > 0 (default: %(default)s)")
@@ -65,6 +67,7 @@ def run(args) -> int:
     for path in (args.out, args.csv):
         if path is not None:
             check_out_path(path)
+    specs = extra_forces(args)
     csv_path = args.csv or (os.path.splitext(args.out)[0] + ".csv" if args.out else None)
     err = sys.stderr
     if not args.quiet:
@@ -75,6 +78,7 @@ def run(args) -> int:
         res = glassy_dynamics(args.cells, args.p0, args.kr, args.T, dt=args.dt, steps=args.steps,
                               replicas=args.replicas, seed=args.seed, device=args.device, relax_steps=args.relax,
                               equilibrate_steps=args.equilibrate, b=args.b, out=args.out,
+                              extra_forces=build_forces(specs),
                               progress=_StageProgress(err, enabled=not args.quiet))
     except (ValueError, TypeError) as exc:
         raise CLIError(one_line(exc), USAGE_ERROR) from exc

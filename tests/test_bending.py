@@ -259,3 +259,74 @@ def test_gpu_refuses_the_plane():
     sim.state = svm.init.random_planar_tiling(64, seed=3, device="gpu")
     with pytest.raises(ValueError, match="Bending on the GPU supports Sphere"):
         sim.operations.forces.append(Bending(1.0))
+
+
+# ------------------------------------------------------------------ the command line
+from spherevm import cli, sweeps  # noqa: E402
+from spherevm.cli import rigidity as rigidity_cli  # noqa: E402
+
+
+def _energy_rows(text):
+    lines = [ln.split() for ln in text.splitlines() if ln.strip()]
+    assert lines[0][0] == "replica"
+    return np.array([float(r[1]) for r in lines[1:]])
+
+
+def test_cli_bending_shorthand_and_force_option_agree_and_change_the_result(capsys):
+    base = ["minimize", "-N", "32", "-R", "2", "--max-steps", "200", "--device", "cpu", "-q", "--seed", "3"]
+    outs = []
+    for extra in ([], ["--bending", "0.5"], ["--force", "bending:B=0.5"]):
+        assert cli.main(base + extra) == 0
+        outs.append(_energy_rows(capsys.readouterr().out))
+    assert np.array_equal(outs[1], outs[2])
+    assert not np.allclose(outs[0], outs[1])
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--force", "bending:B=-1"], ["bending", "B", ">= 0"]),
+    (["--force", "bending:C=1"], ["bending", "'C'", "B"]),
+    (["--force", "bending:B"], ["bending", "key=value"]),
+    (["--force", "no_such_force:x=1"], ["no_such_force"]),
+    (["--force", "fire:dt=0.1"], ["fire", "not a force"]),
+    (["--bending", "-0.5"], ["--bending"]),
+])
+@pytest.mark.parametrize("command", ["minimize", "dynamics"])
+def test_cli_bad_forces_give_one_line_naming_plugin_and_parameter(command, argv, words, capsys):
+    rc = cli.main([command, "-N", "16", "-R", "1", "--device", "cpu", "-q"] + argv)
+    captured = capsys.readouterr()
+    assert rc == 2 and captured.out == ""
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("spherevm: error: ") and "Traceback" not in captured.err
+    for w in words:
+        assert w in lines[0], lines[0]
+
+
+def test_cli_plugins_lists_force_parameters(capsys):
+    assert cli.main(["plugins"]) == 0
+    out = capsys.readouterr().out
+    assert "parameters: kA=1.0, kP=1.0, A0=1.0, P0=3.8" in out
+
+
+def test_rigidity_sweep_carries_forces_in_its_manifest(tmp_path, capsys):
+    plain = sweeps.RigiditySweep(cells=[16], p0=[3.8], replicas=1)
+    assert "forces" not in plain.parameters()                   # old manifests still match
+    with_b = sweeps.RigiditySweep(cells=[16], p0=[3.8], replicas=1, forces=[("bending", {"B": 0.2})])
+    assert with_b.parameters()["forces"] == [["bending", {"B": 0.2}]]
+    assert sweeps.RigiditySweep.from_parameters(with_b.parameters()) == with_b
+    with pytest.raises(ValueError, match="bending.*B"):
+        sweeps.RigiditySweep(cells=[16], p0=[3.8], replicas=1, forces=[("bending", {"B": -1})])
+    # the chunk adds the force: energies differ from the plain sweep's, same tilings
+    from spherevm.sweeps.execution import run_chunk
+    a = run_chunk(plain.parameters(), 16, 0, 1)
+    b = run_chunk(with_b.parameters(), 16, 0, 1)
+    assert a["tiling_seed"] == b["tiling_seed"]
+    assert a["energy_per_cell"] != b["energy_per_cell"]
+    # and from the command line, into the folder's manifest
+    out = tmp_path / "sweep"
+    args = cli.build_parser().parse_args(["rigidity", "--cells", "16", "--p0", "3.8", "3.9", "--replicas", "1",
+                                          "--device", "cpu", "--workers", "1", "--bending", "0.2", "--no-plots",
+                                          "-q", "--out", str(out)])
+    assert rigidity_cli.sweep_from_args(args).forces == (("bending", (("B", 0.2),)),)
+    assert args.func(args) == 0
+    import json
+    assert json.loads((out / "manifest.json").read_text())["parameters"]["forces"] == [["bending", {"B": 0.2}]]

@@ -308,13 +308,13 @@ def test_cli_plugins_lists_force_parameters(capsys):
 
 
 def test_rigidity_sweep_carries_forces_in_its_manifest(tmp_path, capsys):
-    plain = sweeps.RigiditySweep(cells=[16], p0=[3.8], replicas=1)
+    plain = sweeps.RigiditySweep(cells=[16], p0=[3.8], replicas=1, max_steps=300)
     assert "forces" not in plain.parameters()                   # old manifests still match
-    with_b = sweeps.RigiditySweep(cells=[16], p0=[3.8], replicas=1, forces=[("bending", {"B": 0.2})])
+    with_b = sweeps.RigiditySweep(cells=[16], p0=[3.8], replicas=1, max_steps=300, forces=[("bending", {"B": 0.2})])
     assert with_b.parameters()["forces"] == [["bending", {"B": 0.2}]]
     assert sweeps.RigiditySweep.from_parameters(with_b.parameters()) == with_b
     with pytest.raises(ValueError, match="bending.*B"):
-        sweeps.RigiditySweep(cells=[16], p0=[3.8], replicas=1, forces=[("bending", {"B": -1})])
+        sweeps.RigiditySweep(cells=[16], p0=[3.8], replicas=1, max_steps=300, forces=[("bending", {"B": -1})])
     # the chunk adds the force: energies differ from the plain sweep's, same tilings
     from spherevm.sweeps.execution import run_chunk
     a = run_chunk(plain.parameters(), 16, 0, 1)
@@ -324,7 +324,7 @@ def test_rigidity_sweep_carries_forces_in_its_manifest(tmp_path, capsys):
     # and from the command line, into the folder's manifest
     out = tmp_path / "sweep"
     args = cli.build_parser().parse_args(["rigidity", "--cells", "16", "--p0", "3.8", "3.9", "--replicas", "1",
-                                          "--device", "cpu", "--workers", "1", "--bending", "0.2", "--no-plots",
+                                          "--device", "cpu", "--workers", "1", "--bending", "0.2", "--no-plots", "--max-steps", "300",
                                           "-q", "--out", str(out)])
     assert rigidity_cli.sweep_from_args(args).forces == (("bending", (("B", 0.2),)),)
     assert args.func(args) == 0

@@ -41,7 +41,8 @@ class DynamicsResult:
 
 def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=0, device="auto",
                     relax_steps=10_000, equilibrate_steps=None, b=0.5, points_per_decade=10, out=None,
-                    frames=50, t1=True, progress=None, surface: str = "sphere") -> DynamicsResult:
+                    frames=50, t1=True, progress=None, surface: str = "sphere",
+                    extra_forces=()) -> DynamicsResult:
     """Overdamped Brownian dynamics of random tilings, measured as in the paper (Fig. 3).
 
     1. **relax**: FIRE (+ T1) from a random tiling for at most ``relax_steps`` steps, so the run
@@ -55,7 +56,8 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
 
     ``T`` may hold one temperature per replica: a whole temperature series runs as one ensemble.
     ``out``: GSD trajectory of the production run (``frames`` frames, log-spaced). ``progress``:
-    ``progress(stage, done, total)``. Time unit: 1/(mu kP) with mu = 1; dt in that unit.
+    ``progress(stage, done, total)``. ``extra_forces``: Force instances added to the vertex model
+    (e.g. ``Bending(B)``), in every stage. Time unit: 1/(mu kP) with mu = 1; dt in that unit.
 
     ``surface="plane"``: random periodic Voronoi tilings (:func:`spherevm.init.random_planar_tiling`,
     square box of side sqrt(N), <A> = 1, N >= 8) instead of the sphere's; MSD and Q_s then use the
@@ -76,6 +78,7 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
     tiling = init.random_planar_tiling if surface == "plane" else init.random_tiling
     sim.state = tiling(n_cells, replicas=replicas, seed=seed)
     sim.operations.forces.append(VertexModel.dimensionless(kr=kr, p0=p0))
+    sim.operations.forces.extend(extra_forces)
     if t1:
         sim.operations.updaters.append(T1())
     if relax_steps:

@@ -84,3 +84,50 @@ def surface_device(surface, device):
         raise CLIError("argument --device: the periodic plane runs on the CPU only for now (the CUDA kernels do "
                        "not support it yet); use --device cpu or auto")
     return "cpu"
+
+def force_spec(text):
+    """argparse type of ``--force NAME:k=v,k=v``: ``(NAME, {k: v})``, numbers as float."""
+    name, _, rest = str(text).partition(":")
+    name = name.strip()
+    if not name:
+        raise argparse.ArgumentTypeError(f"expected NAME or NAME:key=value,key=value, got {text!r}")
+    params = {}
+    for item in filter(None, (p.strip() for p in rest.split(","))):
+        key, eq, value = item.partition("=")
+        if not eq or not key.strip():
+            raise argparse.ArgumentTypeError(f"force {name!r}: expected key=value, got {item!r}")
+        try:
+            params[key.strip()] = float(value)
+        except ValueError:
+            params[key.strip()] = value.strip()
+    return name, params
+
+
+def add_force_arguments(group):
+    """``--force NAME:k=v,...`` (repeatable) and ``--bending B``: forces added to the vertex model."""
+    group.add_argument("--force", dest="forces", type=force_spec, action="append", default=[],
+                       metavar="NAME:K=V,...", help="add the registered force NAME (see 'spherevm plugins') "
+                       "with these constructor parameters; repeatable")
+    group.add_argument("--bending", type=real(), default=None, metavar="B",
+                       help="bending between neighbouring cells, B in units of kP <A> (same as --force bending:B=B)")
+
+
+def extra_forces(args) -> list:
+    """The ``(name, params)`` pairs of ``--force`` and ``--bending``, checked by each plugin's own
+    constructor (CLIError naming the plugin and parameter, status 2)."""
+    from .. import plugins
+    specs = list(getattr(args, "forces", None) or [])
+    if getattr(args, "bending", None) is not None:
+        specs.append(("bending", {"B": args.bending}))
+    for name, params in specs:
+        try:
+            plugins.build_force(name, params)
+        except (ValueError, TypeError) as exc:
+            raise CLIError(f"argument --force: {one_line(exc)}") from exc
+    return specs
+
+
+def build_forces(specs) -> list:
+    """Force instances for ``(name, params)`` pairs (after :func:`extra_forces` checked them)."""
+    from .. import plugins
+    return [plugins.build_force(name, params) for name, params in specs]

@@ -7,8 +7,8 @@ import time
 
 import numpy as np
 
-from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_surface, check_out_path, integer, one_line, real,
-                        surface_device)
+from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_surface, build_forces,
+                        check_out_path, extra_forces, integer, one_line, real, surface_device)
 
 
 def add_parser(subparsers):
@@ -26,6 +26,7 @@ def add_parser(subparsers):
     g.add_argument("--p0", type=real(), default=3.775, metavar="P", help="target shape index (default: %(default)s)")
     g.add_argument("--kr", type=real(), default=0.0, metavar="K", help="area stiffness (default: %(default)s)")
     add_surface(g)
+    add_force_arguments(g)
     g = d.add_argument_group("dynamics")
     g.add_argument("--T", "-T", dest="T", type=real(), default=0.01, help="temperature, >= 0 (default: %(default)s)")
     g.add_argument("--dt", type=real(strict=True), default=0.05, help="time step, > 0 (default: %(default)s)")
@@ -67,6 +68,7 @@ def run(args) -> int:
     for path in (args.out, args.csv):
         if path is not None:
             check_out_path(path)
+    specs = extra_forces(args)
     csv_path = args.csv or (os.path.splitext(args.out)[0] + ".csv" if args.out else None)
     err = sys.stderr
     if not args.quiet:
@@ -78,6 +80,7 @@ def run(args) -> int:
                               replicas=args.replicas, seed=args.seed, device=surface_device(args.surface, args.device),
                               relax_steps=args.relax, surface=args.surface,
                               equilibrate_steps=args.equilibrate, b=args.b, out=args.out,
+                              extra_forces=build_forces(specs),
                               progress=_StageProgress(err, enabled=not args.quiet))
     except (ValueError, TypeError) as exc:
         raise CLIError(one_line(exc), USAGE_ERROR) from exc

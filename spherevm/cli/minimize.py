@@ -5,8 +5,8 @@ import sys
 import time
 
 from ..progress import StatusLine
-from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_surface, check_out_path, integer, one_line, real,
-                        surface_device)
+from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_surface, build_forces,
+                        check_out_path, extra_forces, integer, one_line, real, surface_device)
 
 
 def add_parser(subparsers):
@@ -31,6 +31,7 @@ def add_parser(subparsers):
     g.add_argument("--no-t1", dest="t1", action="store_const", const=None,
                    help="no T1 exchanges (edges may then collapse and stall the minimisation)")
     add_surface(g)
+    add_force_arguments(g)
     g = m.add_argument_group("minimiser")
     g.add_argument("--dt", type=real(strict=True), default=0.02, help="FIRE time step, > 0 (default: %(default)s)")
     g.add_argument("--force-tol", type=real(), default=1e-8,
@@ -124,6 +125,7 @@ def run(args) -> int:
         import importlib.util
         if importlib.util.find_spec("gsd") is None:  # the GSD writer needs it: fail before any work
             raise CLIError("argument --out: writing GSD files needs the 'gsd' package (pip install gsd)")
+    specs = extra_forces(args)
     err = sys.stderr
     # set-up: anything the library refuses here is bad input (status 2)
     try:
@@ -132,6 +134,7 @@ def run(args) -> int:
         tiling = svm.init.random_planar_tiling if args.surface == "plane" else svm.init.random_tiling
         sim.state = tiling(args.cells, replicas=args.replicas, seed=args.seed)
         sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=args.kr, p0=args.p0))
+        sim.operations.forces.extend(build_forces(specs))
         if args.t1 is not None:
             sim.operations.updaters.append(svm.plugins.updaters.T1(threshold=args.t1, new_length=3.0 * args.t1))
         sim.operations.integrator = svm.plugins.integrators.FIRE(dt=args.dt)

@@ -20,4 +20,6 @@ def run(args) -> int:
     w1 = max(len(r[1]) for r in rows if not r[1].startswith("broken"))
     for name, kind, source in rows:
         print(f"{name.ljust(w0)}  {kind.ljust(w1)}  {source}".rstrip())
+        if kind == "force":                  # constructor parameters (what --force NAME:k=v takes)
+            print(f"{''.ljust(w0)}  {''.ljust(w1)}  parameters: {plugins.parameters_of(plugins.load(name))}")
     return 0

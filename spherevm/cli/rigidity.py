@@ -8,7 +8,7 @@ import sys
 from ..sweeps import (CPU_BATCH_CELLS, GPU_BATCH_CELLS, RigiditySweep, TextProgress, format_p0star_table,
                       open_sweep_folder, parse_p0_grid, run_sweep, write_tables)
 from ..sweeps import cluster
-from .arguments import add_surface, integer, real, surface_device
+from .arguments import add_force_arguments, add_surface, extra_forces, integer, real, surface_device
 
 DEFAULT_CELLS = (16, 32)
 DEFAULT_P0 = "3.5:4.0:0.025"
@@ -32,6 +32,7 @@ def add_parser(subparsers):
     g.add_argument("--replicas", "-R", type=integer(1), default=DEFAULT_REPLICAS,
                    help="random tilings per (N, p0) (default: %(default)s)")
     g.add_argument("--kr", type=real(), default=0.0, help="area stiffness kA <A>/kP (default: %(default)s)")
+    add_force_arguments(g)
     g.add_argument("--seed", type=integer(0), default=0, help="random seed (default: %(default)s)")
     add_surface(g)
     g.add_argument("--shared-tilings", action="store_true",
@@ -87,7 +88,8 @@ def sweep_from_args(args) -> RigiditySweep:
     return RigiditySweep(cells=args.cells, p0=parse_p0_grid(args.p0), replicas=args.replicas, kr=args.kr,
                          seed=args.seed, shared_tilings=args.shared_tilings, dt=args.dt, force_tol=args.force_tol,
                          energy_tol=args.energy_tol, max_steps=args.max_steps, t1_max_flip_backs=args.max_flip_backs,
-                         surface=getattr(args, "surface", "sphere"), **t1)
+                         surface=getattr(args, "surface", "sphere"), forces=tuple(extra_forces(args)),
+                         **t1)
 
 
 def run(args) -> int:

@@ -77,10 +77,41 @@ def describe() -> list:
     return rows
 
 
+def parameters_of(cls) -> str:
+    """A plugin class's constructor parameters, as ``inspect.signature`` shows them (no ``self``)."""
+    import inspect
+    try:
+        sig = inspect.signature(cls)
+    except (TypeError, ValueError):
+        return ""
+    return ", ".join(str(p) for p in sig.parameters.values() if p.name != "trigger")
+
+
+def build_force(name: str, params=None):
+    """An instance of the force registered as ``name``, built with ``params`` (a dict) by its own
+    constructor. ValueError names the plugin (and the parameter) on bad input."""
+    params = dict(params or {})
+    cls = load(name)
+    if kind_of(cls) != "force":
+        raise ValueError(f"plugin {name!r} is a {kind_of(cls)}, not a force")
+    import inspect
+    try:
+        sig = inspect.signature(cls)
+        unknown = [k for k in params if k not in sig.parameters]
+    except (TypeError, ValueError):
+        unknown = []
+    if unknown:
+        raise ValueError(f"force {name!r} has no parameter {unknown[0]!r}; its parameters: {parameters_of(cls)}")
+    try:
+        return cls(**params)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"force {name!r}: {exc}") from None
+
+
 def available() -> dict:
     """Every registered plugin name with its kind (see :func:`describe`)."""
     return {name: kind for name, kind, _ in describe()}
 
 
 __all__ = ["ENTRY_POINT_GROUP", "Force", "ForceResult", "Integrator", "Operation", "Updater", "Writer",
-           "available", "describe", "forces", "integrators", "kind_of", "load", "updaters", "writers"]
+           "available", "build_force", "describe", "forces", "integrators", "kind_of", "load", "parameters_of", "updaters", "writers"]

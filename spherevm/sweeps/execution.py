@@ -44,6 +44,7 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     it. The vertex model is given per cell: ``kA = kr kP / <A>``, ``kP = 1``, ``A0 = <A>``,
     ``P0 = p0 sqrt(<A>)``, with each replica's own p0.
     """
+    from ..plugins import build_force
     from ..plugins.forces import VertexModel
     from ..plugins.integrators import FIRE
     from ..plugins.updaters import T1
@@ -60,6 +61,7 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     sim.state = state
     sim.operations.forces.append(VertexModel(kA=sweep.kr / area, kP=1.0, A0=area,
                                              P0=p0[cell_rep] * np.sqrt(area)))
+    sim.operations.forces.extend(build_force(name, dict(params)) for name, params in sweep.forces)
     # with a length factor, T1 ignores new_length
     sim.operations.updaters.append(T1(threshold=sweep.t1_threshold, new_length=sweep.t1_new_length,
                                       length_factor=sweep.t1_length_factor, max_flip_backs=sweep.t1_max_flip_backs))

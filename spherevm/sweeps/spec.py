@@ -51,6 +51,7 @@ class RigiditySweep:
     t1_max_flip_backs: int = 100
     t1_length_factor: float = None
     surface: str = "sphere"
+    forces: tuple = ()
 
     def __post_init__(self):
         set_ = object.__setattr__
@@ -105,6 +106,7 @@ class RigiditySweep:
         set_(self, "t1_max_flip_backs", integer("t1_max_flip_backs", self.t1_max_flip_backs, 1))
         if self.t1_length_factor is not None:
             set_(self, "t1_length_factor", positive("t1_length_factor", self.t1_length_factor))
+        set_(self, "forces", _check_forces(self.forces))
 
     @staticmethod
     def reference_t1() -> dict:
@@ -116,6 +118,10 @@ class RigiditySweep:
         """JSON-ready parameters (what the manifest stores and a resumed sweep must match)."""
         out = asdict(self)
         out["cells"], out["p0"] = list(self.cells), list(self.p0)
+        if self.forces:      # extra forces: [[name, {k: v}], ...]; absent otherwise (old manifests match)
+            out["forces"] = [[name, dict(params)] for name, params in self.forces]
+        else:
+            del out["forces"]
         return out
 
     @classmethod
@@ -142,6 +148,22 @@ class RigiditySweep:
 
 #: the surfaces a sweep can run on
 SURFACES = ("sphere", "plane")
+
+
+def _check_forces(forces) -> tuple:
+    """Extra forces as ``((name, ((key, value), ...)), ...)``, each built once by its plugin's own
+    constructor to check it (ValueError naming the plugin and parameter)."""
+    from ..plugins import build_force
+    out = []
+    for item in forces or ():
+        try:
+            name, params = item
+            params = dict(params)
+        except (TypeError, ValueError):
+            raise ValueError(f"forces must be (name, {{parameter: value}}) pairs, got {item!r}") from None
+        build_force(str(name), params)
+        out.append((str(name), tuple(sorted(params.items()))))
+    return tuple(out)
 
 
 def _p0_key(p0: float) -> int:

@@ -19,9 +19,9 @@ LAYERS = [
     ["topology"],
     ["state"],
     ["shapes", "gsdio", "init", "init_plane"],
-    ["plugins"],
+    ["plugins", "testing"],
     ["simulation"],
-    ["analysis", "protocols", "sweeps"],
+    ["analysis", "protocols", "sweeps", "export", "render", "ovito"],
     ["cli", "__main__"],
 ]
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}

@@ -20,11 +20,11 @@ import argparse
 import os
 import sys
 
-from . import dynamics, info, minimize, plugins, rigidity
+from . import dynamics, export, info, minimize, plugins, render, rigidity
 from .arguments import RUNTIME_ERROR, USAGE_ERROR, CLIError, one_line
 
 PROG = "spherevm"
-COMMANDS = (minimize, dynamics, rigidity, info, plugins)
+COMMANDS = (minimize, dynamics, rigidity, info, plugins, export, render)
 COMMAND_NAMES = tuple(c.__name__.rsplit(".", 1)[-1] for c in COMMANDS)
 COMMANDS_METAVAR = "{" + ",".join(COMMAND_NAMES) + "}"
 

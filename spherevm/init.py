@@ -255,11 +255,12 @@ def regular_tiling(name: str, radius=None, device=CPU) -> State:
 from .init_plane import MIN_PLANAR_CELLS, hexagonal_tiling, random_planar_tiling  # noqa: E402,F401  (re-exported)
 
 
-def from_gsd(path, frame: int = -1, device=CPU, validate: bool = False) -> State:
+def from_gsd(path, frame: int = -1, device=CPU, validate: bool = True, orientation: bool = False) -> State:
     """The State of frame ``frame`` (negative counts from the end) of a spherevm GSD file, restored
     exactly: bitwise positions, identical topology (see :func:`spherevm.gsdio.read_state`).
 
-    ``validate=True`` also runs :meth:`State.validate` (off by default: at kA = 0 a valid run may
-    fold a cell, which the orientation test rejects).
+    ``validate`` (default True) checks the stored network and names the file, frame and first bad
+    entry; ``orientation=True`` also requires positive cell areas (off by default: at kA = 0 a
+    valid run may fold a cell, which that test rejects).
     """
-    return gsdio.read_state(path, frame=frame, device=device, validate=validate)
+    return gsdio.read_state(path, frame=frame, device=device, validate=validate, orientation=orientation)

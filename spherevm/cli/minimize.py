@@ -154,9 +154,7 @@ def run(args) -> int:
                                   max_steps=args.max_steps, check_every=args.check_every, progress=progress)
         finally:
             progress.close()
-        if writer is not None:
-            if not writer.trigger(sim.timestep):  # the last frame, unless the trigger just wrote it
-                writer.write(sim, sim.timestep)
+        if writer is not None:   # the writer wrote the last frame itself (GSD(final=True))
             writer.close()
     except Exception as exc:
         raise CLIError(f"minimization failed at step {sim.timestep}: {one_line(exc)}", RUNTIME_ERROR) from exc

@@ -68,6 +68,7 @@ class FIRE(Minimizer):
         self.alpha = xp.full(r, self.alpha_start)
         self.n_positive = xp.zeros(r, dtype=xp.int64)
 
+    checkpoint_fields = ("velocities", "replica_dt", "alpha", "n_positive")
     narrowable = True
     per_replica = Minimizer.per_replica + ("replica_dt", "alpha", "n_positive")
     per_vertex = ("velocities",)

@@ -41,7 +41,7 @@ class DynamicsResult:
 
 def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=0, device="auto",
                     relax_steps=10_000, equilibrate_steps=None, b=0.5, points_per_decade=10, out=None,
-                    frames=50, t1=True, progress=None) -> DynamicsResult:
+                    frames=50, t1=True, progress=None, restart=None) -> DynamicsResult:
     """Overdamped Brownian dynamics of random tilings, measured as in the paper (Fig. 3).
 
     1. **relax**: FIRE (+ T1) from a random tiling for at most ``relax_steps`` steps, so the run
@@ -55,12 +55,21 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
     ``T`` may hold one temperature per replica: a whole temperature series runs as one ensemble.
     ``out``: GSD trajectory of the production run (``frames`` frames, log-spaced). ``progress``:
     ``progress(stage, done, total)``. Time unit: 1/(mu kP) with mu = 1; dt in that unit.
+
+    ``restart``: a spherevm GSD file (a checkpoint, such as an earlier run's ``out``): its last
+    frame gives the State and the timestep (so the Philox noise goes on where that run stopped),
+    relaxation and equilibration are skipped (``n_cells`` and ``replicas`` are ignored), and the
+    production phase runs ``steps`` more steps from there.
     """
     if steps < 1 or int(steps) != steps:
         raise ValueError(f"steps must be a positive integer, got {steps!r}")
     equilibrate_steps = steps // 10 if equilibrate_steps is None else int(equilibrate_steps)
     sim = Simulation(device=device, seed=seed)
-    sim.state = init.random_tiling(n_cells, replicas=replicas, seed=seed)
+    if restart is None:
+        sim.state = init.random_tiling(n_cells, replicas=replicas, seed=seed)
+    else:
+        sim.create_state_from_gsd(restart)
+        relax_steps = equilibrate_steps = 0
     sim.operations.forces.append(VertexModel.dimensionless(kr=kr, p0=p0))
     if t1:
         sim.operations.updaters.append(T1())

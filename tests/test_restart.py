@@ -194,3 +194,42 @@ def test_user_plugin_state_is_restored(tiling, tmp_path):
     again.operations.updaters.append(Counter())
     again.create_state_from_gsd(tmp_path / "c.gsd")
     assert again.operations.updaters[1].count.tolist() == [7, 7]
+
+
+def _cli(*argv, cwd=None):
+    env = dict(os.environ, PYTHONPATH=os.getcwd())
+    return subprocess.run([sys.executable, "-m", "spherevm", *argv], capture_output=True, text=True, env=env,
+                          cwd=cwd)
+
+
+def test_cli_minimize_restart_continues_bitwise(tmp_path):
+    common = ("--cells", "16", "--replicas", "2", "-q")
+    whole = _cli("minimize", *common, "--max-steps", "600", "--out", str(tmp_path / "w.gsd"))
+    first = _cli("minimize", *common, "--max-steps", "300", "--out", str(tmp_path / "a.gsd"))
+    second = _cli("minimize", "-q", "--restart", str(tmp_path / "a.gsd"), "--max-steps", "300",
+                  "--out", str(tmp_path / "b.gsd"))
+    assert whole.returncode == first.returncode == second.returncode == 0, second.stderr
+    assert second.stdout == whole.stdout
+    a, b = svm.init.from_gsd(tmp_path / "w.gsd"), svm.init.from_gsd(tmp_path / "b.gsd")
+    assert a.positions.tobytes() == b.positions.tobytes()
+
+
+def test_cli_dynamics_restart_continues_the_timestep(tmp_path):
+    out = _cli("dynamics", "--cells", "16", "--replicas", "1", "--steps", "40", "--relax", "50", "-q",
+               "--out", str(tmp_path / "d.gsd"))
+    assert out.returncode == 0, out.stderr
+    again = _cli("dynamics", "--restart", str(tmp_path / "d.gsd"), "--steps", "40", "-q",
+                 "--out", str(tmp_path / "e.gsd"))
+    assert again.returncode == 0, again.stderr
+    with svm.gsdio.Reader(tmp_path / "d.gsd") as r, svm.gsdio.Reader(tmp_path / "e.gsd") as s:
+        assert s.step(-1) == r.step(-1) + 40
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (("minimize", "--out", "/proc/x.gsd"), "--out"),
+    (("dynamics", "--csv", "/no/dir/x.csv"), "--csv"),
+    (("minimize", "--restart", "/no/such.gsd"), "--restart"),
+])
+def test_cli_bad_paths_are_usage_errors_naming_the_flag(argv, flag):
+    out = _cli(*argv, "-q")
+    assert out.returncode == 2 and f"argument {flag}" in out.stderr, out.stderr

@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from .arguments import RUNTIME_ERROR, USAGE_ERROR, CLIError, check_out_path, integer, one_line, real
+from .arguments import RUNTIME_ERROR, USAGE_ERROR, CLIError, check_in_path, check_out_path, integer, one_line, real
 
 
 def add_parser(subparsers):
@@ -35,6 +35,9 @@ def add_parser(subparsers):
     g.add_argument("--b", type=real(strict=True), default=0.5, help="self-overlap window, sqrt(<A>) (default: %(default)s)")
     g = d.add_argument_group("output")
     g.add_argument("--out", "-o", default=None, metavar="FILE.gsd", help="GSD trajectory of the production run")
+    g.add_argument("--restart", default=None, metavar="FILE.gsd",
+                   help="continue from the last frame of a spherevm GSD file (its state and timestep); "
+                        "skips relaxation and equilibration, ignores --cells and --replicas")
     g.add_argument("--csv", default=None, metavar="FILE.csv", help="time, MSD and Q_s (default: next to --out, else none)")
     g.add_argument("--device", choices=("cpu", "gpu", "auto"), default="auto", help="where to run (default: %(default)s)")
     g.add_argument("--quiet", "-q", action="store_true", help="no progress on standard error")
@@ -62,9 +65,11 @@ class _StageProgress:
 def run(args) -> int:
     """The handler of ``spherevm dynamics``."""
     from ..protocols import glassy_dynamics
-    for path in (args.out, args.csv):
+    for path, flag in ((args.out, "--out"), (args.csv, "--csv")):
         if path is not None:
-            check_out_path(path)
+            check_out_path(path, flag)
+    if args.restart is not None:
+        check_in_path(args.restart, "--restart")
     csv_path = args.csv or (os.path.splitext(args.out)[0] + ".csv" if args.out else None)
     err = sys.stderr
     if not args.quiet:
@@ -74,7 +79,7 @@ def run(args) -> int:
     try:
         res = glassy_dynamics(args.cells, args.p0, args.kr, args.T, dt=args.dt, steps=args.steps,
                               replicas=args.replicas, seed=args.seed, device=args.device, relax_steps=args.relax,
-                              equilibrate_steps=args.equilibrate, b=args.b, out=args.out,
+                              equilibrate_steps=args.equilibrate, b=args.b, out=args.out, restart=args.restart,
                               progress=_StageProgress(err, enabled=not args.quiet))
     except (ValueError, TypeError) as exc:
         raise CLIError(one_line(exc), USAGE_ERROR) from exc

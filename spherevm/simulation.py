@@ -317,10 +317,13 @@ class Simulation:
         """Run the writers whose trigger fires now (``final``: also those whose ``final`` is set, at
         the end of a run or minimisation), each at most once per timestep."""
         ts = self.timestep
-        for w in self.operations.writers:
-            if (w.trigger(ts) or (final and getattr(w, "final", False))) and getattr(w, "_last_written", None) != ts:
-                w.write(self, ts)
-                w._last_written = ts
+        due = [w for w in self.operations.writers
+               if (w.trigger(ts) or (final and getattr(w, "final", False))) and getattr(w, "_last_written", None) != ts]
+        if due and self.operations.integrator is not None:
+            self.operations.integrator.check(self)   # a step the GPU flagged: no frame of a broken state
+        for w in due:
+            w.write(self, ts)
+            w._last_written = ts
 
     def run(self, steps: int, check_every=None, progress=None):
         """Advance ``steps`` timesteps: updaters, forces, integrator, writers on each.
@@ -435,6 +438,7 @@ class Simulation:
                 if fire.check_due() or (fire.iteration >= limit and fire._checked_at != fire.iteration):
                     fire.check_convergence(self)
                 if fire._checked_at == fire.iteration:
+                    self.check_finite()   # NaN, or an exploding step the GPU kernel flagged
                     running = int((~fire.stopped).sum())
                     if progress is not None:
                         progress(fire.iteration, n_rep - running, n_rep)

@@ -111,13 +111,15 @@ class FrameWriter:
                 arr = f.read_chunk(frame=last, name=key)
                 self._item_keys[key[4:]] = (arr.shape[1:], arr.dtype)
 
-    def append(self, state, timestep, log, cell_values, vertex_values):
+    def append(self, state, timestep, log, cell_values, vertex_values, checkpoint=None):
         """Write one frame of ``state`` at ``timestep``.
 
         log : ``{name: per-replica array}``, written as ``log/<name>``.
         cell_values : ``{quantity: (n_cells,) float64}``, written exactly as ``spherevm/cell_<q>``
             and as the mean over each vertex's cells as ``log/particles/cell_<q>``.
         vertex_values : ``{name: (n_vertices, ...) array}``, written as ``log/particles/<name>``.
+        checkpoint : ``{suffix: NumPy array}`` (``Simulation.checkpoint()``), written as
+            ``spherevm/<suffix>`` in this frame only (a reader never takes them from frame 0).
         """
         import gsd.hoomd
         dev = state.device
@@ -195,6 +197,14 @@ class FrameWriter:
                 self._frame0[name] = arr.copy()
         for q, values in cell_values.items():
             chunks["cell_" + q] = values
+        for name, arr in (checkpoint or {}).items():
+            arr = np.asarray(arr)
+            if arr.dtype == bool:
+                arr = arr.astype(np.uint8)
+            if arr.dtype.kind not in "uif":
+                raise TypeError(f"checkpoint field {name!r} has dtype {arr.dtype}; state_to_save must return "
+                                "numeric or bool arrays (encode text as uint8)")
+            chunks[name] = arr.reshape(1) if arr.ndim == 0 else arr
         for name, arr in chunks.items():
             traj.file.write_chunk(PREFIX + name, np.ascontiguousarray(arr))
         traj.append(frame)
@@ -270,9 +280,7 @@ class Reader:
         step = self._chunk("configuration/step", self.index(frame))
         return 0 if step is None else int(step[0])
 
-    def state(self, frame: int = -1, device=CPU, validate: bool = False) -> State:
-        """The State of a frame; see :func:`read_state`."""
-        device = resolve(device)
+    def _require_spherevm(self):
         path = self.path
         if len(self) == 0:
             raise ValueError(f"{path!r} holds no complete frame (the writer stopped before its first frame "
@@ -282,6 +290,12 @@ class Reader:
                              "was not written by spherevm.plugins.writers.GSD (a plain HOOMD trajectory, say), so "
                              "it holds no cell topology; write the run with spherevm.plugins.writers.GSD, or build "
                              "the State with spherevm.init.from_polygons")
+
+    def state(self, frame: int = -1, device=CPU, validate: bool = True, orientation: bool = False) -> State:
+        """The State of a frame; see :func:`read_state`."""
+        device = resolve(device)
+        path = self.path
+        self._require_spherevm()
         idx = self.index(frame)
 
         def chunk(name):
@@ -311,16 +325,45 @@ class Reader:
                              f"vertex_neighbors {data['vertex_neighbors'].shape}, vertex_cells "
                              f"{data['vertex_cells'].shape}, cell_vertices {cv.shape}, cell_sides "
                              f"{data['cell_sides'].shape}); the file is damaged")
+        where = f"{path!r}, frame {idx} (timestep {self.step(idx)})"
         try:
-            return State(positions=pos, cell_vertices=cv, cell_sides=data["cell_sides"],
-                         vertex_neighbors=data["vertex_neighbors"], vertex_cells=data["vertex_cells"],
-                         vertex_start=data["vertex_start"], cell_start=data["cell_start"], **size,
-                         constraint=constraint, device=device, validate=validate)
-        except ValueError as exc:
-            raise ValueError(f"{path!r}, frame {idx}: the stored state is invalid: {exc}") from exc
+            state = State(positions=pos, cell_vertices=cv, cell_sides=data["cell_sides"],
+                          vertex_neighbors=data["vertex_neighbors"], vertex_cells=data["vertex_cells"],
+                          vertex_start=data["vertex_start"], cell_start=data["cell_start"], **size,
+                          constraint=constraint, device=CPU, validate=False)
+            if validate:
+                bad = (cv < -1) | (cv >= nv)
+                if bad.any():
+                    c = int(np.flatnonzero(bad.any(axis=1))[0])
+                    raise ValueError(f"cell_vertices of cell {c} is {cv[c].tolist()}, outside -1..{nv - 1}")
+                state.validate(orientation=orientation)
+        except (ValueError, IndexError, TypeError) as exc:
+            hint = "" if not validate else " (the file is damaged or was not written by spherevm; validate=False reads it anyway)"
+            raise ValueError(f"{where}: the stored state is invalid: {exc}{hint}") from exc
+        return state if device is CPU else state.to(device)
+
+    def checkpoint(self, frame: int = -1) -> dict:
+        """The saved run state of a frame: ``{"simulation": {field: array}, "op": {key: {field: array}}}``,
+        from the ``spherevm/simulation/*`` and ``spherevm/op/<key>/<field>`` chunks of that frame
+        only (empty dicts where the frame holds none)."""
+        idx = self.index(frame)
+        out = {"simulation": {}, "op": {}}
+        for kind in ("simulation/", "op/"):
+            for name in self.file.find_matching_chunk_names(PREFIX + kind):
+                if not self.file.chunk_exists(frame=idx, name=name):
+                    continue
+                rest = name[len(PREFIX + kind):]
+                value = self.file.read_chunk(frame=idx, name=name)
+                if kind == "simulation/":
+                    out["simulation"][rest] = value
+                else:
+                    key, _, field_name = rest.rpartition("/")
+                    out["op"].setdefault(key, {})[field_name] = value
+        return out
 
     def cell_values(self, frame: int = -1) -> dict:
         """The exact per-cell arrays (``area``, ``perimeter``, ``shape_index``, ``energy``) of a frame."""
+        self._require_spherevm()
         idx = self.index(frame)
         return {q: self.file.read_chunk(frame=idx, name=f"{PREFIX}cell_{q}") for q in CELL_QUANTITIES
                 if self.file.chunk_exists(frame=idx, name=f"{PREFIX}cell_{q}")}
@@ -332,19 +375,22 @@ def n_frames(path) -> int:
         return len(r)
 
 
-def read_state(path, frame: int = -1, device=CPU, validate: bool = False) -> State:
+def read_state(path, frame: int = -1, device=CPU, validate: bool = True, orientation: bool = False) -> State:
     """Restore the State stored in frame ``frame`` (negative counts from the end) of a spherevm GSD file.
 
     Positions come back bitwise (the float64 copy), the topology identical, also across T1s and
-    changes of ``max_sides``. ``validate=True`` also runs :meth:`State.validate` (off by default:
-    a valid run may pass through folded cells that the check rejects).
+    changes of ``max_sides``. ``validate=True`` (default) runs :meth:`State.validate` on it: finite
+    positions on the surface, index ranges, trivalent reciprocal tables consistent with the cell
+    table, replica layout, Euler characteristic; an invalid frame raises ValueError naming the file,
+    frame, timestep and the first bad entry. ``orientation=True`` adds the positive-area test (off
+    by default: a valid run at kA = 0 may pass through folded cells). ``validate=False`` skips it.
 
     Raises FileNotFoundError for a missing file, ValueError for a file that is not GSD, not written
     by spherevm or damaged, and :class:`FrameIndexError` (an IndexError and a ValueError) for a
     frame outside the file.
     """
     with Reader(path) as r:
-        return r.state(frame, device=device, validate=validate)
+        return r.state(frame, device=device, validate=validate, orientation=orientation)
 
 
 def read_cell_values(path, frame: int = -1) -> dict:

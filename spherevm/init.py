@@ -26,6 +26,11 @@ def _check_radius(radius, n_cells):
     r = float(radius)
     if not np.isfinite(r) or r <= 0:
         raise ValueError(f"radius must be positive and finite, got {radius}")
+    unit = r * np.sqrt(4 * np.pi / n_cells)      # sqrt(<A>)
+    if not 1e-50 <= unit <= 1e50:
+        raise ValueError(f"radius {radius:g} gives cells of size sqrt(<A>) = {unit:.3g}: areas (~R^2) and "
+                         "energies (~R^4) would leave the range of float64; choose units in which cells are "
+                         "of order 1 (the default radius sqrt(N/4 pi) gives <A> = 1)")
     return r
 
 
@@ -90,7 +95,25 @@ def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, v
     replicas = integer("replicas", replicas, minimum=1)
     seed = integer("seed", seed)
     R = _check_radius(radius, n)
+    _check_tiling_memory(n, replicas, device)
     return _tilings(n, [(seed, r) for r in range(replicas)], R, vertices, sort, device)
+
+
+# Bytes per cell, measured (tracemalloc and qhull, random_tiling(50000)): the finished State holds
+# about 160 B per cell on the host; building one replica peaks near 2.5 kB per cell; a simulation
+# on the GPU keeps about 400 B per cell there (State, forces, integrator memory, scratch).
+_HOST_STATE_BYTES, _HOST_BUILD_BYTES, _DEVICE_BYTES = 500, 2500, 400
+
+
+def _check_tiling_memory(n_cells, replicas, device):
+    """Refuse before allocating a request that cannot fit (InsufficientMemory, naming both numbers)."""
+    from .device import resolve
+    from .validation import check_memory
+    dev = resolve(device)
+    total = float(n_cells) * replicas
+    check_memory(f"random_tiling({n_cells}, replicas={replicas})",
+                 host_bytes=total * _HOST_STATE_BYTES + float(n_cells) * _HOST_BUILD_BYTES,
+                 device_bytes=total * _DEVICE_BYTES, gpu=dev.is_gpu)
 
 
 def random_tilings(n_cells: int, seeds, radius=None, vertices="centroid", sort: bool = True, device=CPU) -> State:
@@ -255,11 +278,12 @@ def regular_tiling(name: str, radius=None, device=CPU) -> State:
 from .init_plane import MIN_PLANAR_CELLS, hexagonal_tiling, random_planar_tiling, random_planar_tilings  # noqa: E402,F401  (re-exported)
 
 
-def from_gsd(path, frame: int = -1, device=CPU, validate: bool = False) -> State:
+def from_gsd(path, frame: int = -1, device=CPU, validate: bool = True, orientation: bool = False) -> State:
     """The State of frame ``frame`` (negative counts from the end) of a spherevm GSD file, restored
     exactly: bitwise positions, identical topology (see :func:`spherevm.gsdio.read_state`).
 
-    ``validate=True`` also runs :meth:`State.validate` (off by default: at kA = 0 a valid run may
-    fold a cell, which the orientation test rejects).
+    ``validate`` (default True) checks the stored network and names the file, frame and first bad
+    entry; ``orientation=True`` also requires positive cell areas (off by default: at kA = 0 a
+    valid run may fold a cell, which that test rejects).
     """
-    return gsdio.read_state(path, frame=frame, device=device, validate=validate)
+    return gsdio.read_state(path, frame=frame, device=device, validate=validate, orientation=orientation)

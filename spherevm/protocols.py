@@ -42,7 +42,7 @@ class DynamicsResult:
 def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=0, device="auto",
                     relax_steps=10_000, equilibrate_steps=None, b=0.5, points_per_decade=10, out=None,
                     frames=50, t1=True, progress=None, surface: str = "sphere",
-                    extra_forces=()) -> DynamicsResult:
+                    extra_forces=(), restart=None) -> DynamicsResult:
     """Overdamped Brownian dynamics of random tilings, measured as in the paper (Fig. 3).
 
     1. **relax**: FIRE (+ T1) from a random tiling for at most ``relax_steps`` steps, so the run
@@ -63,6 +63,11 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
     square box of side sqrt(N), <A> = 1, N >= 8) instead of the sphere's; MSD and Q_s then use the
     unwrapped centroids with each replica's centre-of-mass drift removed instead of its rotation
     (docs/plane.md). The plane runs on the CPU only for now: ``device="auto"`` picks it there.
+
+    ``restart``: a spherevm GSD file (a checkpoint, such as an earlier run's ``out``): its last
+    frame gives the State and the timestep (so the Philox noise goes on where that run stopped),
+    relaxation and equilibration are skipped (``n_cells`` and ``replicas`` are ignored), and the
+    production phase runs ``steps`` more steps from there.
     """
     if surface not in ("sphere", "plane"):
         raise ValueError(f"surface must be 'sphere' or 'plane', got {surface!r}")
@@ -75,8 +80,12 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
         raise ValueError(f"steps must be a positive integer, got {steps!r}")
     equilibrate_steps = steps // 10 if equilibrate_steps is None else int(equilibrate_steps)
     sim = Simulation(device=device, seed=seed)
-    tiling = init.random_planar_tiling if surface == "plane" else init.random_tiling
-    sim.state = tiling(n_cells, replicas=replicas, seed=seed)
+    if restart is None:
+        tiling = init.random_planar_tiling if surface == "plane" else init.random_tiling
+        sim.state = tiling(n_cells, replicas=replicas, seed=seed)
+    else:
+        sim.create_state_from_gsd(restart)
+        relax_steps = equilibrate_steps = 0
     sim.operations.forces.append(VertexModel.dimensionless(kr=kr, p0=p0))
     sim.operations.forces.extend(extra_forces)
     if t1:

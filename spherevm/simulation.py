@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import init, shapes
+from . import shapes
 from .device import resolve
 from .plugins.base import Force, Integrator, Minimizer, Updater, Writer
 from .validation import integer
@@ -35,6 +35,7 @@ class Operations:
             raise TypeError(f"integrator must be a spherevm.plugins.Integrator, got {type(value).__name__}")
         if value is not None and self._sim._state is not None:
             value.attach(self._sim)             # a refused integrator leaves the old one in place
+            self._sim._restore_pending(value, "integrator")
         if self._integrator is not None:
             self._integrator.detach()
         self._integrator = value
@@ -45,6 +46,16 @@ class Operations:
         if self._integrator is not None:
             yield self._integrator
         yield from self.writers
+
+    def keyed(self):
+        """``(checkpoint key, operation)`` for every operation (see ``Operation.checkpoint_key``)."""
+        for kind in ("updaters", "forces"):
+            for i, op in enumerate(getattr(self, kind)):
+                yield op.checkpoint_key(f"{kind}.{i}"), op
+        if self._integrator is not None:
+            yield self._integrator.checkpoint_key("integrator"), self._integrator
+        for i, op in enumerate(self.writers):
+            yield op.checkpoint_key(f"writers.{i}"), op
 
 
 class _OperationList(MutableSequence):
@@ -59,10 +70,13 @@ class _OperationList(MutableSequence):
             raise TypeError(f"expected a spherevm.plugins.{self._kind.__name__}, got {type(op).__name__}")
         return op
 
-    def _attach(self, ops):
+    def _attach(self, ops, start=0):
         if self._sim._state is not None:
-            for op in ops:
+            kind = next(k for k in ("forces", "updaters", "writers")
+                        if getattr(self._sim.operations, k, None) is self)
+            for i, op in enumerate(ops):
                 op.attach(self._sim)
+                self._sim._restore_pending(op, f"{kind}.{start + i}")
 
     def __getitem__(self, i):
         return self._items[i]
@@ -72,7 +86,9 @@ class _OperationList(MutableSequence):
 
     def __setitem__(self, i, value):
         new = [self._check(op) for op in value] if isinstance(i, slice) else [self._check(value)]
-        self._attach(new)                       # a refused operation never joins the list
+        start = range(len(self._items))[i][0] if isinstance(i, slice) and range(len(self._items))[i] \
+            else (i % max(len(self._items), 1) if not isinstance(i, slice) else len(self._items))
+        self._attach(new, start)                # a refused operation never joins the list
         old = self._items[i] if isinstance(i, slice) else [self._items[i]]
         self._items[i] = new if isinstance(i, slice) else value
         for op in old:
@@ -86,7 +102,8 @@ class _OperationList(MutableSequence):
             op.detach()
 
     def insert(self, i, op):
-        self._attach([self._check(op)])
+        n = len(self._items)
+        self._attach([self._check(op)], min(max(i if i >= 0 else n + i, 0), n))
         self._items.insert(i, op)
 
     def __eq__(self, other):
@@ -137,6 +154,8 @@ class Simulation:
         self.timestep = 0
         self._state = None
         self._cache = None
+        self._pending = {}          # operation state from a checkpoint, by key, until picked up
+        self._updated_at = None     # the timestep at which the updaters last ran
         self.operations = Operations(self)
 
     # ------------------------------------------------------------------ state
@@ -150,15 +169,62 @@ class Simulation:
         from .state import State
         if not isinstance(value, State):
             raise TypeError(f"state must be a spherevm.State, got {type(value).__name__}")
+        self._set_state(value, pending={})
+
+    def _set_state(self, value, pending, updated_at=None):
         self._state = value.copy() if value.device is self.device else value.to(self.device)
         self._cache = None
-        for op in self.operations:
+        self._pending = dict(pending)
+        self._updated_at = updated_at
+        for key, op in list(self.operations.keyed()):
             op.attach(self)
+            self._restore_pending(op, key, keyed=True)
 
-    def create_state_from_gsd(self, path, frame: int = -1):
-        """Set the State from a GSD frame (HOOMD's ``Simulation.create_state_from_gsd``), restored
-        exactly on this Simulation's device; see :func:`spherevm.init.from_gsd`."""
-        self.state = init.from_gsd(path, frame=frame, device=self.device)
+    def _restore_pending(self, op, where, keyed=False):
+        """Hand ``op`` (just attached) its saved state from the checkpoint, if there is one."""
+        key = where if keyed else op.checkpoint_key(where)
+        data = self._pending.pop(key, None)
+        if data is not None:
+            op.restore_state(data)
+
+    def create_state_from_gsd(self, path, frame: int = -1, validate: bool = True):
+        """Set the State, the timestep and the saved state of the operations from a GSD frame
+        (HOOMD's ``Simulation.create_state_from_gsd``), restored exactly on this Simulation's device.
+
+        Every operation attached now or later picks up its saved state (FIRE's velocities, dt,
+        alpha, counters and convergence; Active's directors; T1's counters and flip-back memory)
+        when it attaches, by its checkpoint key (``Operation.checkpoint_key``): running on gives
+        bitwise the uninterrupted run. ``validate``: see :func:`spherevm.gsdio.read_state`.
+        See docs/file-format.md, *Checkpoints*."""
+        from . import gsdio
+        with gsdio.Reader(path) as reader:
+            state = reader.state(frame, device=self.device, validate=validate)
+            step = reader.step(frame)
+            saved = reader.checkpoint(frame)
+        sim = saved.pop("simulation", {})
+        if "seed" in sim and int(sim["seed"][0]) != self.seed:
+            import warnings
+            warnings.warn(f"{path}: the checkpoint was written by a Simulation with seed={int(sim['seed'][0])}, "
+                          f"this one has seed={self.seed}; the random numbers will differ from the original run",
+                          stacklevel=2)
+        updated = int(sim["updated_at"][0]) if "updated_at" in sim else -1
+        self.timestep = step
+        self._set_state(state, pending=saved.get("op", {}), updated_at=None if updated < 0 else updated)
+
+    def checkpoint(self) -> dict:
+        """What a checkpoint frame holds besides the State: ``{chunk suffix: NumPy array}``, with
+        ``op/<key>/<field>`` for every operation's :meth:`~spherevm.plugins.base.Operation.state_to_save`
+        and ``simulation/<field>`` for the Simulation's own (seed, the timestep its updaters last ran)."""
+        out = {"simulation/seed": np.array([self.seed], dtype=np.int64),
+               "simulation/updated_at": np.array([-1 if self._updated_at is None else self._updated_at],
+                                                 dtype=np.int64)}
+        for key, op in self.operations.keyed():
+            for field_name, value in op.state_to_save().items():
+                out[f"op/{key}/{field_name}"] = value
+        for key, data in self._pending.items():   # not picked up yet: keep it for a later restart
+            for field_name, value in data.items():
+                out.setdefault(f"op/{key}/{field_name}", value)
+        return out
 
     def _require_state(self):
         if self._state is None:
@@ -228,7 +294,14 @@ class Simulation:
         return table[name](self)
 
     # ------------------------------------------------------------------ running
+    def _update_once(self):
+        """The updaters of this timestep, unless they ran at it already (a ``minimize`` stops right
+        after they ran; a resumed one, or a restart from its last frame, must not run them twice)."""
+        if self._updated_at != self.timestep:
+            self._update()
+
     def _update(self):
+        self._updated_at = self.timestep
         for u in self.operations.updaters:
             if u.trigger(self.timestep):
                 u.update(self, self.timestep)
@@ -240,13 +313,17 @@ class Simulation:
             integrator.step(self, forces)
         self.timestep += 1
 
-    def _write(self):
-        """Run the writers whose trigger fires now, each at most once per timestep."""
+    def _write(self, final=False):
+        """Run the writers whose trigger fires now (``final``: also those whose ``final`` is set, at
+        the end of a run or minimisation), each at most once per timestep."""
         ts = self.timestep
-        for w in self.operations.writers:
-            if w.trigger(ts) and getattr(w, "_last_written", None) != ts:
-                w.write(self, ts)
-                w._last_written = ts
+        due = [w for w in self.operations.writers
+               if (w.trigger(ts) or (final and getattr(w, "final", False))) and getattr(w, "_last_written", None) != ts]
+        if due and self.operations.integrator is not None:
+            self.operations.integrator.check(self)   # a step the GPU flagged: no frame of a broken state
+        for w in due:
+            w.write(self, ts)
+            w._last_written = ts
 
     def run(self, steps: int, check_every=None, progress=None):
         """Advance ``steps`` timesteps: updaters, forces, integrator, writers on each.
@@ -266,13 +343,14 @@ class Simulation:
         self._write()   # the frame a run starts from (writers skip timesteps they already wrote)
         try:
             for i in range(1, int(steps) + 1):
-                self._update()
+                self._update_once()
                 self._integrate()
                 if i % check_every == 0 or i == steps:
                     self.check_finite()
                     if progress is not None:
                         progress(i, int(steps))
                 self._write()
+            self._write(final=True)   # the state the run ends in, for writers that ask for it
         finally:
             self.flush()
 
@@ -310,9 +388,17 @@ class Simulation:
                 w.flush()
 
     def minimize(self, force_tol=None, energy_tol=None, max_steps: int = 100_000, check_every=None,
-                 progress=None, narrow: bool = True) -> MinimizeResult:
+                 progress=None, narrow: bool = True, resume: bool = False) -> MinimizeResult:
         """Minimise every replica with the Minimizer integrator (FIRE if none is set) until each
-        converges, is halted or ``max_steps`` iterations have passed; the minimiser starts afresh.
+        converges, is halted or ``max_steps`` iterations have passed.
+
+        ``resume=False`` (default): the minimiser starts afresh (FIRE's velocities, dt, alpha,
+        counters, convergence and iteration count reset; halting operations forget their history).
+        ``resume=True``: it goes on from where it stands (after an earlier ``minimize``, a ``run``
+        or a checkpoint restored with ``create_state_from_gsd``), for ``max_steps`` more
+        iterations: ``minimize(1000)`` then ``minimize(1000, resume=True)`` is bitwise
+        ``minimize(2000)`` (when ``check_every`` divides 1000: the first call checks convergence at
+        its last iteration).
 
         ``force_tol``, ``energy_tol`` and ``check_every`` set the minimiser's own (see
         :class:`spherevm.plugins.base.Minimizer`); None keeps them. ``progress`` is an optional
@@ -337,22 +423,26 @@ class Simulation:
             raise TypeError(f"minimize() needs a spherevm.plugins.Minimizer integrator such as FIRE, "
                             f"found {type(fire).__name__}")
         fire.configure(force_tol=force_tol, energy_tol=energy_tol, check_every=check_every)
-        fire.reset()
-        for op in self.operations:
-            op.reset_halted()
+        if not resume:
+            fire.reset()
+            for op in self.operations:
+                op.reset_halted()
+        limit = fire.iteration + max_steps
         narrow = narrow and not self.operations.writers and all(op.narrowable for op in self.operations)
         n_rep, n_cells = self._state.n_replicas, self._state.cells_per_replica
         narrowed = []
         self._write()
         try:
             while True:
-                self._update()
-                if fire.check_due() or fire.iteration >= max_steps:
+                self._update_once()
+                if fire.check_due() or (fire.iteration >= limit and fire._checked_at != fire.iteration):
                     fire.check_convergence(self)
+                if fire._checked_at == fire.iteration:
+                    self.check_finite()   # NaN, or an exploding step the GPU kernel flagged
                     running = int((~fire.stopped).sum())
                     if progress is not None:
                         progress(fire.iteration, n_rep - running, n_rep)
-                    if running == 0 or fire.iteration >= max_steps:
+                    if running == 0 or fire.iteration >= limit:
                         break
                     if narrow and 2 * running <= len(fire.stopped):
                         narrowed.append(self._narrow(np.flatnonzero(~fire.stopped)))
@@ -361,6 +451,7 @@ class Simulation:
         finally:
             while narrowed:
                 self._widen(*narrowed.pop())
+        self._write(final=True)   # the state the minimisation ends in, for writers that ask for it
         self.flush()
         _, energy = self.compute_forces()
         e = self.device.to_numpy(energy)
@@ -368,5 +459,5 @@ class Simulation:
         return MinimizeResult(converged=fire.replica_converged.copy(),
                               reason=np.where(running, "max_steps", fire.reason).astype(str), energy=e,
                               energy_per_cell=e / n_cells, max_force=self.device.to_numpy(self.max_force()),
-                              steps=np.where(running, int(max_steps), fire.steps),
+                              steps=np.where(running, int(limit), fire.steps),
                               mean_shape_index=shapes.mean_shape_index(self._state))

@@ -51,3 +51,45 @@ def non_negative(name, value, per_item: str = "a scalar or one value per replica
     if arr.ndim > 1 or not np.all(np.isfinite(arr)) or np.any(arr < 0):
         raise ValueError(f"{name} must be finite and >= 0 ({per_item}), got {value!r}")
     return arr
+
+
+class InsufficientMemory(MemoryError, ValueError):
+    """A request that would not fit in memory, refused before allocating (a MemoryError and a ValueError)."""
+
+
+def available_host_memory():
+    """Bytes of host memory available now (``MemAvailable`` of /proc/meminfo, else sysconf), or None."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        import os
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _gib(n):
+    return f"{n / 2 ** 30:.3g} GiB"
+
+
+def check_memory(what: str, host_bytes: float, device_bytes: float = 0.0, gpu: bool = False):
+    """Refuse (InsufficientMemory) a request whose estimated host or GPU memory exceeds what is
+    available now, with both numbers in the message."""
+    host = available_host_memory()
+    if host is not None and host_bytes > host:
+        raise InsufficientMemory(f"{what} needs about {_gib(host_bytes)} of host memory, but only {_gib(host)} "
+                                 "is available; ask for fewer cells or replicas")
+    if gpu and device_bytes:
+        try:
+            import cupy
+            free = int(cupy.cuda.runtime.memGetInfo()[0])
+        except Exception:
+            return
+        if device_bytes > free:
+            raise InsufficientMemory(f"{what} needs about {_gib(device_bytes)} of GPU memory, but only {_gib(free)} "
+                                     "is free; ask for fewer cells or replicas")

@@ -50,18 +50,40 @@ def real(strict=False):
     return _argument_type(float, validation.real, strict=strict)
 
 
-def check_out_path(path):
-    """Fail early (before any work) when the file ``path`` cannot be written."""
+def check_out_path(path, flag="--out"):
+    """Fail early (before any work, status 2) when the file ``path`` cannot be written; ``flag``
+    names the argument in the message."""
     if not path:
-        raise CLIError("argument --out: expected a file name, got ''")
+        raise CLIError(f"argument {flag}: expected a file name, got ''")
     full = os.path.abspath(path)
     if os.path.isdir(full):
-        raise CLIError(f"argument --out: {path!r} is a directory; give a file name such as run.gsd")
+        raise CLIError(f"argument {flag}: {path!r} is a directory; give a file name such as "
+                       f"{'run.csv' if flag == '--csv' else 'run.gsd'}")
     folder = os.path.dirname(full)
     if not os.path.isdir(folder):
-        raise CLIError(f"argument --out: folder {folder!r} does not exist; create it first")
+        raise CLIError(f"argument {flag}: folder {folder!r} does not exist; create it first")
     if not os.access(folder, os.W_OK | os.X_OK) or (os.path.exists(full) and not os.access(full, os.W_OK)):
-        raise CLIError(f"argument --out: cannot write {path!r} (permission denied)")
+        raise CLIError(f"argument {flag}: cannot write {path!r} (permission denied)")
+    existed = os.path.exists(full)
+    try:   # os.access says yes for root on read-only or virtual file systems (/proc): try it
+        with open(full, "ab"):
+            pass
+    except OSError as exc:
+        raise CLIError(f"argument {flag}: cannot write {path!r} ({exc.strerror or exc})") from None
+    if not existed:
+        try:
+            os.remove(full)
+        except OSError:
+            pass
+
+
+def check_in_path(path, flag):
+    """Fail early (status 2) when the file ``path`` cannot be read."""
+    if not path or not os.path.isfile(path):
+        what = "is a directory" if path and os.path.isdir(path) else "does not exist"
+        raise CLIError(f"argument {flag}: {path!r} {what}; give an existing spherevm GSD file")
+    if not os.access(path, os.R_OK):
+        raise CLIError(f"argument {flag}: cannot read {path!r} (permission denied)")
 
 
 # ---------------------------------------------------------------------------------------- surface
@@ -84,6 +106,7 @@ def surface_device(surface, device):
         raise CLIError("argument --device: the periodic plane runs on the CPU only for now (the CUDA kernels do "
                        "not support it yet); use --device cpu or auto")
     return "cpu"
+
 
 def force_spec(text):
     """argparse type of ``--force NAME:k=v,k=v``: ``(NAME, {k: v})``, numbers as float."""

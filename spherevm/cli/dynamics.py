@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_surface, build_forces,
-                        check_out_path, extra_forces, integer, one_line, real, surface_device)
+                        check_in_path, check_out_path, extra_forces, integer, one_line, real, surface_device)
 
 
 def add_parser(subparsers):
@@ -38,6 +38,9 @@ def add_parser(subparsers):
     g.add_argument("--b", type=real(strict=True), default=0.5, help="self-overlap window, sqrt(<A>) (default: %(default)s)")
     g = d.add_argument_group("output")
     g.add_argument("--out", "-o", default=None, metavar="FILE.gsd", help="GSD trajectory of the production run")
+    g.add_argument("--restart", default=None, metavar="FILE.gsd",
+                   help="continue from the last frame of a spherevm GSD file (its state and timestep); "
+                        "skips relaxation and equilibration, ignores --cells and --replicas")
     g.add_argument("--csv", default=None, metavar="FILE.csv", help="time, MSD and Q_s (default: next to --out, else none)")
     g.add_argument("--device", choices=("cpu", "gpu", "auto"), default="auto", help="where to run (default: %(default)s)")
     g.add_argument("--quiet", "-q", action="store_true", help="no progress on standard error")
@@ -65,9 +68,11 @@ class _StageProgress:
 def run(args) -> int:
     """The handler of ``spherevm dynamics``."""
     from ..protocols import glassy_dynamics
-    for path in (args.out, args.csv):
+    for path, flag in ((args.out, "--out"), (args.csv, "--csv")):
         if path is not None:
-            check_out_path(path)
+            check_out_path(path, flag)
+    if args.restart is not None:
+        check_in_path(args.restart, "--restart")
     specs = extra_forces(args)
     csv_path = args.csv or (os.path.splitext(args.out)[0] + ".csv" if args.out else None)
     err = sys.stderr
@@ -78,7 +83,7 @@ def run(args) -> int:
     try:
         res = glassy_dynamics(args.cells, args.p0, args.kr, args.T, dt=args.dt, steps=args.steps,
                               replicas=args.replicas, seed=args.seed, device=surface_device(args.surface, args.device),
-                              relax_steps=args.relax, surface=args.surface,
+                              relax_steps=args.relax, surface=args.surface, restart=args.restart,
                               equilibrate_steps=args.equilibrate, b=args.b, out=args.out,
                               extra_forces=build_forces(specs),
                               progress=_StageProgress(err, enabled=not args.quiet))

@@ -6,7 +6,7 @@ import time
 
 from ..progress import StatusLine
 from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_surface, build_forces,
-                        check_out_path, extra_forces, integer, one_line, real, surface_device)
+                        check_in_path, check_out_path, extra_forces, integer, one_line, real, surface_device)
 
 
 def add_parser(subparsers):
@@ -44,6 +44,12 @@ def add_parser(subparsers):
     g = m.add_argument_group("output")
     g.add_argument("--out", "-o", default=None, metavar="FILE.gsd",
                    help="write a GSD trajectory (first frame, every --write-every steps, last frame)")
+    g.add_argument("--restart", default=None, metavar="FILE.gsd",
+                   help="continue from the last frame of a spherevm GSD file: its state, timestep and FIRE state "
+                        "(velocities, dt, alpha, convergence); FIRE goes on (resume) unless --fresh-fire; "
+                        "ignores --cells and --replicas")
+    g.add_argument("--fresh-fire", action="store_true",
+                   help="with --restart: start FIRE afresh from the restored state instead of continuing it")
     g.add_argument("--write-every", type=integer(0), default=1000, metavar="STEPS",
                    help="frame period of --out; 0 writes the first and last frames only (default: %(default)s)")
     g.add_argument("--device", choices=("cpu", "gpu", "auto"), default="auto",
@@ -120,6 +126,8 @@ def run(args) -> int:
     import spherevm as svm
     from ..trigger import On, Periodic
 
+    if args.restart is not None:
+        check_in_path(args.restart, "--restart")
     if args.out is not None:
         check_out_path(args.out)
         import importlib.util
@@ -131,8 +139,12 @@ def run(args) -> int:
     try:
         device = svm.device.resolve(surface_device(args.surface, args.device))
         sim = svm.Simulation(device=device, seed=args.seed)
-        tiling = svm.init.random_planar_tiling if args.surface == "plane" else svm.init.random_tiling
-        sim.state = tiling(args.cells, replicas=args.replicas, seed=args.seed)
+        if args.restart is None:
+            tiling = svm.init.random_planar_tiling if args.surface == "plane" else svm.init.random_tiling
+            sim.state = tiling(args.cells, replicas=args.replicas, seed=args.seed)
+        else:
+            sim.create_state_from_gsd(args.restart)
+            args.cells, args.replicas = sim.state.cells_per_replica, sim.state.n_replicas
         sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=args.kr, p0=args.p0))
         sim.operations.forces.extend(build_forces(specs))
         if args.t1 is not None:
@@ -157,12 +169,11 @@ def run(args) -> int:
     try:
         try:
             result = sim.minimize(force_tol=args.force_tol, energy_tol=args.energy_tol,
-                                  max_steps=args.max_steps, check_every=args.check_every, progress=progress)
+                                  max_steps=args.max_steps, check_every=args.check_every, progress=progress,
+                                  resume=args.restart is not None and not args.fresh_fire)
         finally:
             progress.close()
-        if writer is not None:
-            if not writer.trigger(sim.timestep):  # the last frame, unless the trigger just wrote it
-                writer.write(sim, sim.timestep)
+        if writer is not None:   # the writer wrote the last frame itself (GSD(final=True))
             writer.close()
     except Exception as exc:
         raise CLIError(f"minimization failed at step {sim.timestep}: {one_line(exc)}", RUNTIME_ERROR) from exc

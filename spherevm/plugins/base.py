@@ -59,6 +59,33 @@ class Operation:
     def loggables(self) -> dict:
         return {}
 
+    # Checkpoints (exact restart): an operation whose future depends on data it keeps (velocities,
+    # directors, counters) lists the attributes holding it in ``checkpoint_fields``, or overrides
+    # :meth:`state_to_save` and :meth:`restore_state`. The GSD writer stores what state_to_save
+    # returns in every frame (``spherevm/op/<key>/<field>``, ``key`` from :meth:`checkpoint_key`);
+    # ``Simulation.create_state_from_gsd`` keeps it pending and hands each operation its entry
+    # right after it attaches, so the run goes on bitwise as if never interrupted.
+    checkpoint_fields = ()
+    #: explicit checkpoint key (None: ``<list>.<position>.<ClassName>``, "integrator.<ClassName>")
+    name = None
+
+    def checkpoint_key(self, where: str) -> str:
+        """The stable key of this operation's saved state; ``where`` is "integrator" or
+        "<forces|updaters|writers>.<position>"."""
+        return self.name if self.name is not None else f"{where}.{type(self).__name__}"
+
+    def state_to_save(self) -> dict:
+        """``{field: NumPy array}``: everything that affects this operation's future (host copies;
+        per-vertex and per-cell rows in the State's order). Default: the ``checkpoint_fields``."""
+        return {name: _host(getattr(self, name)) for name in self.checkpoint_fields}
+
+    def restore_state(self, data: dict):
+        """Take back what :meth:`state_to_save` returned (called right after :meth:`attach`, so the
+        attributes exist with the right shapes, on the State's device). Default: each of the
+        ``checkpoint_fields``, checked against the shape of the attribute it replaces."""
+        for name in self.checkpoint_fields:
+            setattr(self, name, _restored(self, name, data))
+
     halt_reason = "halted"
 
     def halted(self):
@@ -101,6 +128,31 @@ class Operation:
             full = saved[name]
             full[_index_like(full, getattr(selection, axis))] = getattr(self, name)
             setattr(self, name, full)
+
+
+def _host(value):
+    """A NumPy copy of a NumPy array, a CuPy array or a scalar."""
+    value = value.get() if hasattr(value, "get") else value
+    return np.array(value, copy=True)
+
+
+def _restored(op, name, data):
+    """Saved field ``name`` of ``op`` as the attribute it replaces: same shape, dtype and device."""
+    if name not in data:
+        raise ValueError(f"{type(op).__name__}: the checkpoint lacks field {name!r}; it was written by another "
+                         f"version of the operation")
+    current = getattr(op, name)
+    value = np.asarray(data[name])
+    if current is None:
+        return value
+    if tuple(value.shape) != tuple(current.shape):
+        raise ValueError(f"{type(op).__name__}: saved {name!r} has shape {value.shape}, but the operation "
+                         f"needs {tuple(current.shape)} for this State; the checkpoint belongs to another State")
+    value = value.astype(current.dtype)
+    if isinstance(current, np.ndarray):
+        return value
+    import cupy
+    return cupy.asarray(value)
 
 
 def _index_like(array, index):
@@ -248,6 +300,33 @@ class Minimizer(Integrator):
 
     per_replica = Integrator.per_replica + ("replica_converged", "stopped", "reason", "steps")
 
+    def state_to_save(self) -> dict:
+        """The convergence state (iteration, last check, per-replica flags, reasons, steps) plus the
+        subclass's ``checkpoint_fields`` (FIRE: velocities, dt, alpha, counters)."""
+        out = super().state_to_save()
+        reason = "\n".join(str(r) for r in self.reason)
+        out.update(iteration=np.array([self.iteration], dtype=np.int64),
+                   checked_at=np.array([-1 if self._checked_at is None else self._checked_at], dtype=np.int64),
+                   replica_converged=self.replica_converged.astype(np.uint8), stopped=self.stopped.astype(np.uint8),
+                   steps=self.steps.copy(), active=self.active.astype(np.uint8),
+                   reason=np.frombuffer(reason.encode("utf-8"), dtype=np.uint8).copy())
+        return out
+
+    def restore_state(self, data: dict):
+        super().restore_state(data)
+        n = self._simulation.state.n_replicas
+        reason = bytes(np.asarray(data["reason"], dtype=np.uint8)).decode("utf-8").split("\n")
+        if len(reason) != n or len(data["stopped"]) != n:
+            raise ValueError(f"{type(self).__name__}: the checkpoint holds {len(reason)} replicas, the State {n}")
+        self.iteration = int(data["iteration"][0])
+        checked = int(data["checked_at"][0])
+        self._checked_at = None if checked < 0 else checked
+        self.replica_converged = np.asarray(data["replica_converged"]).astype(bool)
+        self.stopped = np.asarray(data["stopped"]).astype(bool)
+        self.steps = np.asarray(data["steps"]).astype(np.int64)
+        self.reason = np.array(reason, dtype=object)
+        self.set_active(np.asarray(data["active"]).astype(bool))
+
     @property
     def converged(self) -> bool:
         return bool(self.replica_converged.all())
@@ -303,7 +382,14 @@ class Updater(Operation):
 
 
 class Writer(Operation):
-    """Records the simulation: ``write(simulation, timestep)``; ``close()`` at the end."""
+    """Records the simulation: ``write(simulation, timestep)``; ``close()`` at the end.
+
+    ``final = True`` asks for one more ``write`` at the end of every ``run`` and ``minimize`` (at
+    the timestep they end on, unless the trigger already wrote it), so the last record is the
+    final state; the GSD writer sets it by default.
+    """
+
+    final = False
 
     def write(self, simulation, timestep):
         raise NotImplementedError

@@ -156,6 +156,8 @@ class Active(Brownian):
         self._mode = 1 if directors == "cell" else 2
         self.directors = None
 
+    checkpoint_fields = ("directors",)   # a restart takes them back instead of drawing new ones
+
     def _bases(self, state):
         """Unit normals at the directors' base points: cell centroids or vertices."""
         con = state.constraint

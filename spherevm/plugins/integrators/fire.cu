@@ -51,11 +51,14 @@ extern "C" __global__ void fire_control(
 }
 
 // Per vertex: mix, semi-implicit Euler, P_N re-projection and P_T velocity transport.
+// error: earliest (timestep << 32 | vertex) whose move |h w| was not finite or above
+// max_step * length_unit[r] (sqrt(<A>)); that vertex is left unmoved, check() raises.
 extern "C" __global__ void fire_move(
     double* __restrict__ pos, double* __restrict__ vel, const double* __restrict__ forces,
     const int* __restrict__ vertex_replica, const double* __restrict__ radius, const bool* __restrict__ active,
     const double* __restrict__ keep, const double* __restrict__ scale, const double* __restrict__ step,
-    int n_vertices)
+    int n_vertices, const double* __restrict__ length_unit, double max_step, unsigned long long timestep,
+    unsigned long long* __restrict__ error)
 {
     long i = (long)blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n_vertices) return;
@@ -65,6 +68,11 @@ extern "C" __global__ void fire_move(
     vec3 w = keep[r] * load3(vel, i) + scale[r] * f;
     double h = step[r];
     w = w + h * f;
+    double moved = norm3(h * w) / length_unit[r];
+    if (!(moved <= max_step)) {
+        atomicMin(error, (timestep << 32) | (unsigned long long)i);
+        return;
+    }
     vec3 x = load3(pos, i) + h * w;
     vec3 n = normalize3(x);
     x = radius[r] * n;

@@ -29,14 +29,22 @@ class FIRE(Minimizer):
     ``alpha_start = 0.1``, ``f_alpha = 0.99``. Convergence (``force_tol``, ``energy_tol``,
     ``check_every``) is per replica, see :class:`spherevm.plugins.base.Minimizer`: replicas that
     have stopped do not move, and their dt, alpha and counter stay as they were.
+
+    ``max_step`` (units of sqrt(<A>) of the replica, default 0.5) guards against exploding steps,
+    as in :class:`~spherevm.plugins.integrators.Brownian`: a vertex that would move farther (or to
+    NaN) in one iteration stops the run with FloatingPointError naming the timestep, replica and
+    vertex, before the move (CPU) or at the next ``check`` (GPU: the kernel leaves that vertex in
+    place and sets an error word; every writer checks it before writing), so no corrupt frame is
+    written.
     """
 
     gpu_surfaces = (Sphere,)
     surface_needs = ("normal", "project_normal")
 
     def __init__(self, dt=0.01, dt_max=None, n_min=5, f_inc=1.1, f_dec=0.5, alpha_start=0.1, f_alpha=0.99,
-                 force_tol=1e-10, energy_tol=1e-20, check_every=10):
+                 force_tol=1e-10, energy_tol=1e-20, check_every=10, max_step=0.5):
         super().__init__(force_tol=force_tol, energy_tol=energy_tol, check_every=check_every)
+        self.max_step = positive("max_step", max_step)
         self.dt = positive("dt", dt)
         self.dt_max = positive("dt_max", dt_max if dt_max is not None else 10 * self.dt)
         if self.dt_max < self.dt:
@@ -68,6 +76,7 @@ class FIRE(Minimizer):
         self.alpha = xp.full(r, self.alpha_start)
         self.n_positive = xp.zeros(r, dtype=xp.int64)
 
+    checkpoint_fields = ("velocities", "replica_dt", "alpha", "n_positive")
     narrowable = True
     per_replica = Minimizer.per_replica + ("replica_dt", "alpha", "n_positive")
     per_vertex = ("velocities",)
@@ -126,6 +135,7 @@ class FIRE(Minimizer):
         dt = xp.where(on, self.replica_dt, 0.0)
         per_vertex = xp.take(xp.stack((keep, scale, dt)), rep, axis=1)[..., None]
         v = per_vertex[0] * v + (per_vertex[1] + per_vertex[2]) * forces
+        self._guard(simulation, per_vertex[2] * v, on[rep])
         x = state.constraint.project_normal(state.positions + per_vertex[2] * v,
                                               state.constraint.size(state, rep))
         v = state.constraint.project_tangent(x, v)
@@ -136,6 +146,38 @@ class FIRE(Minimizer):
             state.positions = xp.where(moving, x, state.positions)
             self.velocities = xp.where(moving, v, 0.0)
         simulation.state_changed()
+
+    def _length_unit(self, state):
+        """sqrt(<A>) per replica on the device (once per State)."""
+        return state.cached((self, "length_unit"),
+                            lambda: state.device.asarray(np.sqrt(np.asarray(state.mean_cell_area, dtype=np.float64))))
+
+    def _guard(self, simulation, dx, moving):
+        """Raise before a move in which a moving vertex would go farther than max_step sqrt(<A>)."""
+        state = simulation.state
+        xp = state.device.xp
+        step = xp.sqrt((dx * dx).sum(axis=1)) / self._length_unit(state)[state.vertex_replica]
+        bad = ~(step <= self.max_step) & moving          # catches NaN too
+        if bool(bad.any()):
+            v = int(state.device.to_numpy(xp.flatnonzero(bad))[0])
+            r = int(state.vertex_replica_np()[v])
+            raise FloatingPointError(
+                f"FIRE: exploding step at timestep {simulation.timestep}: replica {r}, vertex {v} would move "
+                f"{float(step[v]):.3g} sqrt(<A>) (max_step={self.max_step}); reduce dt (now {self.dt}, dt_max "
+                f"{self.dt_max}) or check the forces for NaN; the state was not moved")
+
+    def check(self, simulation):
+        """Raise for the earliest exploding step the GPU kernel flagged (one small read-back)."""
+        err = getattr(self, "_error", None)
+        if err is None:
+            return
+        code = int(err.get()[0])
+        if code != np.iinfo(np.uint64).max:
+            step, v = code >> 32, code & 0xFFFFFFFF
+            r = int(simulation.state.vertex_replica_np()[v])
+            raise FloatingPointError(
+                f"FIRE: exploding step at timestep {step}: replica {r}, vertex {v} would move more than "
+                f"max_step={self.max_step} sqrt(<A>) or became NaN; reduce dt (now {self.dt}) or check the forces")
 
     def _move_gpu(self, simulation, forces):
         """Three kernels (fire.cu): per-replica sums, per-replica control, per-vertex move."""
@@ -153,9 +195,12 @@ class FIRE(Minimizer):
                 self.n_positive, keep, scale, step, np.int32(self.n_min), np.float64(self.f_inc),
                 np.float64(self.f_dec), np.float64(self.alpha_start), np.float64(self.f_alpha),
                 np.float64(self.dt_max)))
+        if getattr(self, "_error", None) is None:
+            self._error = cp.full(1, np.iinfo(np.uint64).max, dtype=cp.uint64)
         launch(module.get_function("fire_move"), nv,
                (state.positions, self.velocities, forces, state.vertex_replica, state.radius, active,
-                keep, scale, step, np.int32(nv)))
+                keep, scale, step, np.int32(nv), self._length_unit(state), np.float64(self.max_step),
+                np.uint64(simulation.timestep), self._error))
         simulation.state_changed()
 
     @property
@@ -166,4 +211,5 @@ class FIRE(Minimizer):
     def __repr__(self):
         return (f"FIRE(dt={self.dt}, dt_max={self.dt_max}, n_min={self.n_min}, f_inc={self.f_inc}, "
                 f"f_dec={self.f_dec}, alpha_start={self.alpha_start}, f_alpha={self.f_alpha}, "
-                f"force_tol={self.force_tol}, energy_tol={self.energy_tol}, check_every={self.check_every})")
+                f"force_tol={self.force_tol}, energy_tol={self.energy_tol}, check_every={self.check_every}, "
+                f"max_step={self.max_step})")

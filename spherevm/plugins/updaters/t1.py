@@ -362,6 +362,25 @@ class T1(Updater):
         self._rejoins = np.concatenate([saved["rejoins"][others], self._rejoins[keep]])[order]
         self._gpu = None
 
+    # ------------------------------------------------------------------ checkpoints
+    def state_to_save(self) -> dict:
+        """Counters per replica and the flip-back memory (separated cell pairs, re-join counts)."""
+        self._sync_counters()
+        out = {name: np.array(getattr(self, name), dtype=np.int64) for name in self._COUNTERS}
+        out.update(separated=self._separated.astype(np.int64), rejoins=self._rejoins.astype(np.int64))
+        return out
+
+    def restore_state(self, data: dict):
+        n = self._simulation.state.n_replicas
+        for name in self._COUNTERS:
+            value = np.asarray(data[name], dtype=np.int64).reshape(-1)
+            if len(value) != n:
+                raise ValueError(f"T1: the checkpoint's {name!r} has {len(value)} replicas, the State {n}")
+            setattr(self, name, value.copy())
+        self._separated = np.asarray(data["separated"], dtype=np.int64).reshape(-1).copy()
+        self._rejoins = np.asarray(data["rejoins"], dtype=np.int64).reshape(-1).copy()
+        self._gpu = None          # device counters are rebuilt from these totals
+
     # ------------------------------------------------------------------ reporting
     def halted(self):
         """Per-replica mask of replicas caught flipping back and forth, for Simulation.minimize."""

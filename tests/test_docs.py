@@ -16,12 +16,8 @@ FILES = [ROOT / "README.md"] + sorted((ROOT / "docs").glob("*.md"))
 BLOCK = re.compile(r"(?:(<!--[^\n]*-->)\s*\n)?```python\n(.*?)```", re.S)
 # pages whose examples run for a minute or more (ensembles of 64 x 256 cells, sweeps, long dynamics)
 SLOW = {"analysis.md", "rigidity.md", "dynamics.md", "README.md", "index.md"}
-# pages owned elsewhere whose snippets fail today (reported, not edited here): page -> why
-KNOWN_FAILING = {
-    "plugins.md": "the Force class sketch uses Operation undefined; the GPU sketch uses __file__",
-    "file-format.md": "the first block appends writers to a `sim` it never builds",
-    "rigidity.md": "not checked within the time limit",
-}
+# pages that need an optional package: page -> module (skipped, with the reason, where it is missing)
+NEEDS = {"visualisation.md": "ovito"}
 RUNNER = """
 import sys, traceback
 blocks = eval(sys.stdin.read())
@@ -49,13 +45,13 @@ def pages():
         if not page_blocks(path):
             continue
         marks = [pytest.mark.slow] if path.name in SLOW else []
-        if path.name in KNOWN_FAILING:
-            marks.append(pytest.mark.xfail(reason=KNOWN_FAILING[path.name], strict=False))
         yield pytest.param(path, id=str(path.relative_to(ROOT)), marks=marks)
 
 
 @pytest.mark.parametrize("path", list(pages()))
 def test_page_runs(path, tmp_path):
+    if path.name in NEEDS:
+        pytest.importorskip(NEEDS[path.name])
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), str(ROOT / "tests" / "plugin_example"),
                                                       os.environ.get("PYTHONPATH", "")]), MPLBACKEND="Agg")
     result = subprocess.run([sys.executable, "-c", RUNNER], input=repr(page_blocks(path)), cwd=tmp_path, env=env,

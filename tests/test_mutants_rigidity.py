@@ -226,3 +226,14 @@ def test_summarize_density_grid_and_unusable_sizes():
     assert density["p0"][0] == pytest.approx(3.6 - 0.01) and density["p0"][-1] == pytest.approx(3.9 + 0.01)
     assert np.allclose(density["density"], rigidity.transition_density(x, frac["F"][frac["n_cells"] == 32],
                                                                        0.01, density["p0"]))
+
+
+def test_two_p0_values_are_enough():
+    est = rigidity.p0_star([3.7, 3.8], [0.0, 1.0], sigma=0.01)
+    assert est.mean == pytest.approx(3.75, abs=1e-12) and est.p0_half == pytest.approx(3.75, abs=1e-12)
+    assert rigidity.smoothing_width([3.7, 3.8], [0.0, 1.0]) == pytest.approx(0.05, rel=1e-9)
+
+
+def test_p0_half_when_F_ends_at_one_half():
+    est = rigidity.p0_star([3.6, 3.7, 3.8], [0.0, 0.2, 0.5], sigma=0.05)
+    assert est.p0_half == pytest.approx(3.8, abs=1e-12)

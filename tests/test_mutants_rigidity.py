@@ -237,3 +237,10 @@ def test_two_p0_values_are_enough():
 def test_p0_half_when_F_ends_at_one_half():
     est = rigidity.p0_star([3.6, 3.7, 3.8], [0.0, 0.2, 0.5], sigma=0.05)
     assert est.p0_half == pytest.approx(3.8, abs=1e-12)
+
+
+def test_mean_err_from_two_resamples():
+    n = np.full(len(X), 50)
+    k = np.rint(_logistic(X, 3.8, 0.03) * n)
+    assert np.isfinite(rigidity.p0_star(X, k / n, n, resamples=2).mean_err)
+    assert math.isnan(rigidity.p0_star(X, k / n, n, resamples=1).mean_err)

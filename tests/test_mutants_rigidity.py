@@ -244,3 +244,13 @@ def test_mean_err_from_two_resamples():
     k = np.rint(_logistic(X, 3.8, 0.03) * n)
     assert np.isfinite(rigidity.p0_star(X, k / n, n, resamples=2).mean_err)
     assert math.isnan(rigidity.p0_star(X, k / n, n, resamples=1).mean_err)
+
+
+def test_density_is_normalised_by_the_whole_rise_of_F():
+    # F still rising at the last point: normalised by F_last - F_first, not by an inner difference
+    x = np.array([3.6, 3.7, 3.8])
+    F = np.array([0.0, 0.25, 1.0])
+    grid = np.linspace(3.0, 4.4, 14001)
+    d = rigidity.transition_density(x, F, 0.01, grid)
+    assert d.sum() * (grid[1] - grid[0]) == pytest.approx(1.0, abs=1e-6)
+    assert d[np.searchsorted(grid, 3.75)] == pytest.approx(7.5, rel=1e-6)   # slope 7.5 / mass 1

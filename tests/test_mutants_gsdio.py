@@ -161,3 +161,37 @@ def test_constraint_json_round_trip_and_errors(tmp_path):
 def test_reader_rejects_non_paths():
     with pytest.raises(TypeError, match="path must be a file path"):
         gsdio.Reader(3)
+
+
+class ScaledSphere(Sphere):
+    """A user surface with a public parameter (stored) and a private attribute (not stored)."""
+    name = "scaled_sphere_for_mutants"
+
+    def __init__(self, scale=1.0):
+        super().__init__()
+        self.scale = scale
+        self._calls = 0
+
+
+def test_constraint_parameters_round_trip_private_ones_left_out():
+    raw = gsdio._constraint_json(ScaledSphere(scale=2.5))
+    import json
+    spec = json.loads(bytes(raw).decode())
+    assert spec == {"name": "scaled_sphere_for_mutants", "class": "ScaledSphere", "params": {"scale": 2.5}}
+    back = gsdio._constraint_from_json(raw, "p")
+    assert type(back) is ScaledSphere and back.scale == 2.5
+
+
+def test_box_of_a_small_sphere(tmp_path):
+    # every extent below 1: the box follows the radius, with no floor at 1
+    path = tmp_path / "small.gsd"
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_tiling(32, seed=1, radius=0.3)
+    with GSD(path) as w:
+        w.write(sim, 0)
+    s = sim.state
+    bonds = topology.edges(s.vertex_neighbors)
+    chord = np.linalg.norm(s.positions[bonds[:, 0]] - s.positions[bonds[:, 1]], axis=1)
+    extent = max(0.3, np.abs(s.positions).max(), chord.max())
+    with gsd.hoomd.open(path) as t:
+        assert t[0].configuration.box[0] == np.float32(2.2 * extent * (1 + 1e-6))

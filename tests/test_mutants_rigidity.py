@@ -254,3 +254,26 @@ def test_density_is_normalised_by_the_whole_rise_of_F():
     d = rigidity.transition_density(x, F, 0.01, grid)
     assert d.sum() * (grid[1] - grid[0]) == pytest.approx(1.0, abs=1e-6)
     assert d[np.searchsorted(grid, 3.75)] == pytest.approx(7.5, rel=1e-6)   # slope 7.5 / mass 1
+
+
+def test_std_with_a_kernel_wider_than_the_transition():
+    x = np.array([3.5, 3.7, 3.9, 4.0])
+    F = np.array([0.0, 0.0, 1.0, 1.0])
+    est = rigidity.p0_star(x, F, sigma=0.3)
+    assert est.std == pytest.approx(math.hypot(0.2 / math.sqrt(12), 0.3), rel=1e-12)
+
+
+def test_p0_half_on_a_plateau_at_one_half_and_the_ends_of_F():
+    est = rigidity.p0_star([3.6, 3.7, 3.8], [0.5, 0.5, 1.0], sigma=0.05)
+    assert est.p0_half == pytest.approx(3.7, abs=1e-12)
+    est = rigidity.p0_star([3.6, 3.7, 3.8, 3.9], [0.0, 0.2, 0.6, 1.0], sigma=0.05)
+    assert est.F_first == 0.0 and est.F_last == 1.0
+    est = rigidity.p0_star([3.6, 3.7, 3.8, 3.9], [0.1, 0.2, 0.6, 0.9], sigma=0.05)
+    assert est.F_first == pytest.approx(0.1) and est.F_last == pytest.approx(0.9)
+
+
+def test_summarize_without_any_usable_size():
+    frac, p0star, density = rigidity.summarize([16, 16], [3.7, 3.7], ["zero", "rigid"], resamples=10)
+    assert list(p0star["n_cells"]) == [16] and math.isnan(p0star["p0_star"][0])
+    for col in ("n_cells", "p0", "density"):
+        assert density[col].shape == (0,)

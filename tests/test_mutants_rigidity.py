@@ -277,3 +277,12 @@ def test_summarize_without_any_usable_size():
     assert list(p0star["n_cells"]) == [16] and math.isnan(p0star["p0_star"][0])
     for col in ("n_cells", "p0", "density"):
         assert density[col].shape == (0,)
+
+
+def test_flat_F_gives_nan_density_without_a_warning():
+    import warnings
+    x = np.array([3.6, 3.7, 3.8])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        d = rigidity.transition_density(x, [0.5, 0.5, 0.5], 0.05, x)
+    assert np.all(np.isnan(d))

@@ -172,3 +172,16 @@ def test_normalize_and_tangent_project():
     assert np.allclose(geo.normalize(v), [[0.6, 0.0, 0.8], [0.0, -1.0, 0.0]], atol=1e-16)
     t = geo.tangent_project(EZ, np.array([1.0, 2.0, 3.0]))
     assert np.array_equal(t, [1.0, 2.0, 0.0])
+
+
+def test_clipped_routes_at_coincident_and_antipodal_points():
+    # unit vectors whose float64 |a|^2 rounds above 1: acos and asin must clip, not return NaN
+    rng = np.random.default_rng(0)
+    v = geo.normalize(rng.normal(size=(1000, 3)))
+    v = v[geo._dot(v, v) > 1]
+    assert len(v) > 10
+    assert np.array_equal(geo.geodesic_length(v, v, route="acos"), np.zeros(len(v)))
+    assert np.allclose(geo.geodesic_length(v, -v, route="acos"), np.pi, rtol=0, atol=1e-7)
+    assert np.all(np.isfinite(geo.geodesic_length(v, v, route="asin")))
+    w = geo.normalize(v + 1e-3)
+    assert np.all(geo.geodesic_length(v, w, route="asin") <= np.pi / 2)

@@ -151,6 +151,27 @@ class State:
         """Call after editing the index arrays by hand: cached corner maps are rebuilt."""
         self.topology_version += 1
 
+    def clear_cache(self):
+        """Drop every :meth:`cached` entry (after a change that is not a topology edit, such as a
+        new radius, that derived data may depend on)."""
+        self._cached.clear()
+
+    def resize(self, positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells, vertex_start, cell_start):
+        """Replace the arrays by ones with other numbers of vertices and cells per replica (cells
+        divided or removed, :mod:`spherevm.growth`), replicas back to back. A plain reallocation
+        (no spare capacity); ``topology_version`` bumps and every cached entry is dropped."""
+        xp = self.device.xp
+        self.positions = xp.asarray(positions, dtype=xp.float64)
+        self.cell_vertices = xp.asarray(cell_vertices, dtype=xp.int32)
+        self.cell_sides = xp.asarray(cell_sides, dtype=xp.int32)
+        self.vertex_neighbors = xp.asarray(vertex_neighbors, dtype=xp.int32)
+        self.vertex_cells = xp.asarray(vertex_cells, dtype=xp.int32)
+        self.vertex_start = np.asarray(vertex_start, dtype=np.int64)
+        self.cell_start = np.asarray(cell_start, dtype=np.int64)
+        self._derive_layout()
+        self.clear_cache()
+        self.topology_changed()
+
     # ------------------------------------------------------------------ checks and copies
     def validate(self, tol: float = 1e-9, orientation: bool = True):
         """Raise ValueError naming the first offending cell or vertex if the network is invalid.

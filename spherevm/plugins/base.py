@@ -129,6 +129,28 @@ class Operation:
             full[_index_like(full, getattr(selection, axis))] = getattr(self, name)
             setattr(self, name, full)
 
+    def resized(self, change):
+        """The State gained or lost cells and vertices (:mod:`spherevm.growth`; ``change`` is a
+        :class:`spherevm.growth.Change`). The default makes the ``per_cell`` and ``per_vertex``
+        arrays follow their rows (see :func:`follow_rows`); one with other per-cell or per-vertex
+        data overrides it."""
+        follow_rows(self, change)
+
+
+def follow_rows(op, change):
+    """Rebuild ``op``'s ``per_cell`` arrays through ``change.cell_source`` (a daughter cell takes
+    its mother's row) and its ``per_vertex`` arrays through ``change.vertex_source`` (a created
+    vertex gets a zero row); ``per_replica`` rows stay (replicas are neither added nor removed)."""
+    for name, axis in op._rows():
+        full = getattr(op, name)
+        if axis == "replicas" or full is None:
+            continue
+        source = change.cell_source if axis == "cells" else change.vertex_source
+        out = full[_index_like(full, np.maximum(source, 0))]
+        if axis == "vertices":
+            out[_index_like(full, np.flatnonzero(source < 0))] = 0
+        setattr(op, name, out)
+
 
 def _host(value):
     """A NumPy copy of a NumPy array, a CuPy array or a scalar."""

@@ -83,6 +83,15 @@ class VertexModel(Force):
     def widen(self, selection, saved):
         self.kA, self.kP, self.A0, self.P0, self._dimensionless = saved
 
+    def resized(self, change):
+        """Per-cell parameters follow their cells: a daughter takes its mother's values."""
+        def follow(a):
+            return a[change.cell_source] if a.ndim == 1 else a
+
+        self.kA, self.kP, self.A0, self.P0 = (follow(a) for a in (self.kA, self.kP, self.A0, self.P0))
+        if self._dimensionless is not None:
+            self._dimensionless = tuple(follow(a) for a in self._dimensionless)
+
     def _device_parameters(self, state):
         """Per-cell parameters on the device, cached for the State they were made for."""
         return state.cached((self, "parameters"), lambda: [state.device.asarray(np.ascontiguousarray(p))

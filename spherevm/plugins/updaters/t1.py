@@ -381,6 +381,14 @@ class T1(Updater):
         self._rejoins = np.asarray(data["rejoins"], dtype=np.int64).reshape(-1).copy()
         self._gpu = None          # device counters are rebuilt from these totals
 
+    def resized(self, change):
+        """Cells divided or removed: the flip-back memory follows its cells (pairs with a removed
+        cell are forgotten); the per-replica counters stay."""
+        self._separated, keep = self._pairs_between(self._separated, change.n_cells_before, change.cell_map,
+                                                    len(change.cell_source))
+        self._rejoins = self._rejoins[keep]
+        self._gpu = None
+
     # ------------------------------------------------------------------ reporting
     def halted(self):
         """Per-replica mask of replicas caught flipping back and forth, for Simulation.minimize."""

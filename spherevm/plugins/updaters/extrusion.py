@@ -1,0 +1,88 @@
+"""T2 extrusion: small triangular cells are removed, their three vertices merged into one."""
+from __future__ import annotations
+
+import numpy as np
+
+from ... import growth
+from ..base import Updater
+from .division import _rate, active_cells, cpu_only, follow
+
+
+class Extrusion(Updater):
+    """Remove (T2) the triangular cells a rule selects: their three vertices merge into one at
+    their centroid, joining the three neighbours, which lose a side each.
+
+    Rules (``rule``), built in: ``"area"``, every cell with area below ``area_threshold * <A>`` (its
+    replica's <A>); or a callable ``rule(simulation) -> cell ids`` (global indices).
+
+    Only triangles are extruded (the standard T2): a selected cell with more sides is refused and
+    counted (``"not_triangle"``; T1s must first take its sides), as are a triangle with a
+    three-sided neighbour or neighbours that are not three distinct cells (``"neighbours"``: a
+    two-sided cell would result) and one whose removal would fold a neighbour (``"fold"``).
+    Counters per replica: ``last_extrusions``, ``total_extrusions``, ``refused[reason]``. Only
+    replicas the integrator still moves are touched. Not narrowable; CPU only for now.
+    """
+
+    narrowable = False
+    gpu_surfaces = ()
+    surface_needs = ("normal", "project_normal", "cell_geometry", "total_area_np")
+
+    def __init__(self, rule="area", area_threshold=None, trigger=1):
+        super().__init__(trigger)
+        if not callable(rule) and rule != "area":
+            raise ValueError(f"rule must be 'area' or a callable rule(simulation) -> cell ids, got {rule!r}")
+        if rule == "area":
+            if area_threshold is None:
+                raise ValueError("rule='area' needs area_threshold (cells with A < area_threshold * <A> are removed)")
+            area_threshold = _rate("area_threshold", area_threshold)
+        self.rule, self.area_threshold = rule, area_threshold
+
+    def attach(self, simulation):
+        super().attach(simulation)
+        cpu_only(self, simulation)
+        n = simulation.state.n_replicas
+        self.last_extrusions = np.zeros(n, np.int64)
+        self.total_extrusions = np.zeros(n, np.int64)
+        self.refused = {reason: np.zeros(n, np.int64) for reason in growth.EXTRUSION_REASONS}
+
+    def choose(self, simulation):
+        """Global ids of the cells to remove now (smallest area first for the area rule)."""
+        state = simulation.state
+        if callable(self.rule):
+            cells = np.asarray(self.rule(simulation), dtype=np.int64).reshape(-1)
+            if len(cells) and (cells.min() < 0 or cells.max() >= state.n_cells):
+                raise IndexError(f"rule returned cell ids outside 0..{state.n_cells - 1}")
+            _, first = np.unique(cells, return_index=True)
+            return cells[np.sort(first)]
+        area = state.constraint.cell_areas_np(state)
+        ratio = area / state.mean_cell_area[state.cell_replica_np()]
+        cells = np.flatnonzero(ratio < self.area_threshold)
+        return cells[np.argsort(ratio[cells], kind="stable")]
+
+    def update(self, simulation, timestep):
+        state = simulation.state
+        n = state.n_replicas
+        cells = active_cells(simulation, self.choose(simulation))
+        self.last_extrusions = np.zeros(n, np.int64)
+        if len(cells) == 0:
+            return
+        rep = state.cell_replica_np()[cells]
+        editor = growth.Editor(state)
+        outcome = [editor.extrude(c) for c in cells.tolist()]
+        for reason in growth.EXTRUSION_REASONS:
+            hit = np.array([o == reason for o in outcome], dtype=bool)
+            self.refused[reason] += np.bincount(rep[hit], minlength=n)
+        done = np.array([not isinstance(o, str) for o in outcome])
+        self.last_extrusions = np.bincount(rep[done], minlength=n).astype(np.int64)
+        self.total_extrusions += self.last_extrusions
+        follow(simulation, growth.apply(state, editor))
+
+    @property
+    def loggables(self):
+        return {"extrusion_last": lambda sim: self.last_extrusions.copy(),
+                "extrusion_total": lambda sim: self.total_extrusions.copy(),
+                "extrusion_refused": lambda sim: sum(self.refused.values())}
+
+    def __repr__(self):
+        rule = self.rule if not callable(self.rule) else getattr(self.rule, "__name__", "callable")
+        return f"Extrusion(rule={rule!r}, area_threshold={self.area_threshold})"

@@ -1,0 +1,76 @@
+"""The sphere's radius as a schedule: fixed, growing with N at constant <A>, or a user's function."""
+from __future__ import annotations
+
+import numpy as np
+
+from ...constraints import Sphere
+from ..base import Updater
+from .division import _rate
+
+
+class RadiusSchedule(Updater):
+    """Set each replica's sphere radius every time the trigger fires, rescaling its vertex
+    positions radially (``x -> x R_new / R_old``: shapes are kept, every length scales).
+
+    ``mode``:
+
+    * ``"fixed"``: never change R (dividing cells then lowers <A> = 4 pi R^2 / N);
+    * ``"constant_area"``: ``R = sqrt(N area / 4 pi)`` so that <A> stays ``area`` (default: each
+      replica's <A> when the schedule attaches) as N changes;
+    * a callable ``f(simulation) -> R`` (a scalar or one per replica), of the timestep, of
+      ``simulation.state.cells_per_replica`` or of anything else.
+
+    Put it after the updaters that change N (Division, Extrusion) so the new N is seen in the same
+    step. Sphere only. Narrowable (it keeps one ``area`` per replica).
+    """
+
+    narrowable = True
+    per_replica = ("area",)
+    surface_needs = ("total_area_np",)
+
+    def __init__(self, mode="constant_area", area=None, trigger=1):
+        super().__init__(trigger)
+        if not callable(mode) and mode not in ("fixed", "constant_area"):
+            raise ValueError(f"mode must be 'fixed', 'constant_area' or a callable f(simulation) -> R, got {mode!r}")
+        self.mode = mode
+        self._area = None if area is None else _rate("area", area)
+        if self._area == 0:
+            raise ValueError("area must be > 0")
+        self.area = None
+
+    def attach(self, simulation):
+        super().attach(simulation)
+        if not isinstance(simulation.state.constraint, Sphere):
+            raise ValueError(f"RadiusSchedule needs a Sphere, got {simulation.state.constraint!r}")
+        state = simulation.state
+        self.area = (np.full(state.n_replicas, self._area) if self._area is not None
+                     else np.array(state.mean_cell_area, dtype=np.float64))
+
+    def target(self, simulation):
+        """The radius each replica should have now (NumPy, per replica)."""
+        state = simulation.state
+        if self.mode == "fixed":
+            return state.radius_np()
+        if self.mode == "constant_area":
+            return np.sqrt(state.cells_per_replica * self.area / (4.0 * np.pi))
+        r = np.broadcast_to(np.asarray(self.mode(simulation), dtype=np.float64), (state.n_replicas,)).copy()
+        if not np.all(np.isfinite(r)) or np.any(r <= 0):
+            raise ValueError(f"the radius schedule returned {r.tolist()}; radii must be positive and finite")
+        return r
+
+    def update(self, simulation, timestep):
+        state = simulation.state
+        old, new = state.radius_np(), self.target(simulation)
+        if np.array_equal(old, new):
+            return
+        xp = state.device.xp
+        scale = xp.asarray(new / old)[state.vertex_replica]
+        radius = xp.asarray(new)
+        state.positions = state.constraint.project_normal(state.positions * scale[:, None], radius[state.vertex_replica])
+        state.radius = radius
+        state.clear_cache()          # cached parameters that depend on <A> (dimensionless forces) go stale
+        simulation.state_changed()
+
+    def __repr__(self):
+        mode = self.mode if isinstance(self.mode, str) else "callable"
+        return f"RadiusSchedule(mode={mode!r})"

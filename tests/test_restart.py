@@ -35,6 +35,21 @@ def tiling():
     return svm.init.random_tiling(64, replicas=2, seed=3)
 
 
+# On the GPU the per-replica sums (FIRE's power and norms; Active's cell directors average their
+# vertices) are atomics whose order varies from run to run, so two uninterrupted GPU runs already
+# differ in the last bits (measured on an H200: positions ~1e-13 apart). There a restart must agree
+# with the uninterrupted run as two uninterrupted runs agree: same topology and counts, positions to
+# 1e-9; on the CPU, bitwise.
+def same_run(a, b):
+    fa, fb = final(a), final(b)
+    if a.device.name == "cpu":
+        assert fa == fb
+        return
+    pa, pb = fa.pop("positions"), fb.pop("positions")
+    assert fa == fb
+    assert np.abs(np.frombuffer(pa) - np.frombuffer(pb)).max() < 1e-9
+
+
 def final(sim):
     return {"positions": to_numpy(sim.state.positions).tobytes(),
             "vertex_neighbors": to_numpy(sim.state.vertex_neighbors).tobytes(),
@@ -56,13 +71,14 @@ def test_run_restart_is_bitwise(kind, device, tiling, tmp_path):
     second.create_state_from_gsd(path)
     assert second.timestep == 150
     second.run(150)
-    assert final(second) == final(whole)
+    same_run(second, whole)
     assert sum(final(whole)["t1"]) > 0          # the test goes through T1 flips
     if kind == "fire":
         fa, fb = whole.operations.integrator, second.operations.integrator
         assert fa.iteration == fb.iteration
-        assert to_numpy(fa.velocities).tobytes() == to_numpy(fb.velocities).tobytes()
-        assert to_numpy(fa.replica_dt).tobytes() == to_numpy(fb.replica_dt).tobytes()
+        for name in ("velocities", "replica_dt"):
+            x, y = to_numpy(getattr(fa, name)), to_numpy(getattr(fb, name))
+            assert x.tobytes() == y.tobytes() if device == "cpu" else np.allclose(x, y, rtol=1e-9, atol=1e-12), name
 
 
 def test_operations_attached_after_the_state_pick_up_their_state(tiling, tmp_path):
@@ -138,7 +154,7 @@ def test_minimize_resume_from_a_checkpoint(device, tiling, tmp_path):
     second = minimizer(tiling, device)
     second.create_state_from_gsd(tmp_path / "ck.gsd")
     second.minimize(force_tol=1e-12, max_steps=200, resume=True)
-    assert to_numpy(second.state.positions).tobytes() == to_numpy(whole.state.positions).tobytes()
+    same_run(second, whole)
     assert second.log("t1_total_flips").tolist() == whole.log("t1_total_flips").tolist()
 
 
@@ -197,7 +213,7 @@ def test_user_plugin_state_is_restored(tiling, tmp_path):
 
 
 def _cli(*argv, cwd=None):
-    env = dict(os.environ, PYTHONPATH=os.getcwd())
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([os.getcwd(), os.environ.get("PYTHONPATH", "")]))
     return subprocess.run([sys.executable, "-m", "spherevm", *argv], capture_output=True, text=True, env=env,
                           cwd=cwd)
 

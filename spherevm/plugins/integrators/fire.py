@@ -30,8 +30,9 @@ class FIRE(Minimizer):
     ``check_every``) is per replica, see :class:`spherevm.plugins.base.Minimizer`: replicas that
     have stopped do not move, and their dt, alpha and counter stay as they were.
 
-    ``max_step`` (units of sqrt(<A>) of the replica, default 0.5) guards against exploding steps,
-    as in :class:`~spherevm.plugins.integrators.Brownian`: a vertex that would move farther (or to
+    ``max_step`` (units of sqrt(<A>) of the replica; default 1, a cell size, because FIRE with
+    dt_max = 10 dt takes legitimate steps of half a cell on a raw tiling) guards against exploding
+    steps, as in :class:`~spherevm.plugins.integrators.Brownian`: a vertex that would move farther (or to
     NaN) in one iteration stops the run with FloatingPointError naming the timestep, replica and
     vertex, before the move (CPU) or at the next ``check`` (GPU: the kernel leaves that vertex in
     place and sets an error word; every writer checks it before writing), so no corrupt frame is
@@ -42,7 +43,7 @@ class FIRE(Minimizer):
     surface_needs = ("normal", "project_normal")
 
     def __init__(self, dt=0.01, dt_max=None, n_min=5, f_inc=1.1, f_dec=0.5, alpha_start=0.1, f_alpha=0.99,
-                 force_tol=1e-10, energy_tol=1e-20, check_every=10, max_step=0.5):
+                 force_tol=1e-10, energy_tol=1e-20, check_every=10, max_step=1.0):
         super().__init__(force_tol=force_tol, energy_tol=energy_tol, check_every=check_every)
         self.max_step = positive("max_step", max_step)
         self.dt = positive("dt", dt)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .constraints import PeriodicPlane, Sphere
-from .constraints.plane import _wrap, minimum_image
+from .constraints.plane import _wrap
 
 CENTROID_METHODS = ("area", "vertex")
 
@@ -163,16 +163,9 @@ def planar_cell_centroids(state, method: str = "area"):
     wrapped back into ``[0, Lx) x [0, Ly)``.
     """
     xp = state.device.xp
-    pos = state.positions[:, :2]
-    cv, sides = state.cell_vertices, state.cell_sides
-    col = xp.arange(cv.shape[1])[None, :]
-    valid = col < sides[:, None]
-    first = cv[:, :1]
-    cur = xp.where(valid, cv, first)                                   # padding -> the first vertex
-    nxt = xp.where(valid, xp.take_along_axis(cv, (col + 1) % sides[:, None], axis=1), first)
+    pos, sides = state.positions[:, :2], state.cell_sides
     box = state.box[state.cell_replica]
-    e = minimum_image(pos[nxt] - pos[cur], box[:, None, :])           # (C, W, 2); padding: zero
-    r = xp.cumsum(e, axis=1) - e                                        # vertex j about vertex 0
+    first, valid, e, r = state.constraint.unwrapped_cells(state)
     mean = xp.where(valid[..., None], r, 0.0).sum(axis=1) / sides[:, None].astype(xp.float64)
     centre = mean
     if method == "area":

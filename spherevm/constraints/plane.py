@@ -109,10 +109,12 @@ class PeriodicPlane(Constraint):
     # ------------------------------------------------------------------ cells
     # Corner (v, k) lies in cell vertex_cells[v, k], whose boundary runs counter-clockwise from v to
     # n_k = vertex_neighbors[v, k] (and arrives at v from n_{k+1}): it owns that cell's edge v -> n_k.
-    def cell_geometry(self, state) -> PlaneGeometry:
-        """Areas (shoelace) and perimeters, each polygon unwrapped edge by edge from its first vertex:
-        vertex j sits at ``sum_{i<j} e_i`` with ``e_i`` the minimum-image edges along the cell, so only
-        edges, not whole cells, need to be shorter than half the box."""
+    @staticmethod
+    def unwrapped_cells(state):
+        """Each polygon unwrapped edge by edge from its first vertex: ``(first, valid, e, r)`` with
+        ``first`` (C, 1) the first vertices, ``valid`` (C, W) the real slots of the padded table,
+        ``e`` (C, W, 2) the minimum-image edges along the cell (zero in padding) and ``r`` (C, W, 2)
+        vertex j about vertex 0 (``sum_{i<j} e_i``)."""
         xp = state.device.xp
         pos = state.positions[:, :2]
         cv, sides = state.cell_vertices, state.cell_sides
@@ -122,7 +124,16 @@ class PeriodicPlane(Constraint):
         cur = xp.where(valid, cv, first)                                   # padding -> the first vertex
         nxt = xp.where(valid, xp.take_along_axis(cv, (col + 1) % sides[:, None], axis=1), first)
         e = minimum_image(pos[nxt] - pos[cur], state.box[state.cell_replica][:, None, :])   # (C, W, 2)
-        r = xp.cumsum(e, axis=1) - e                                        # vertex j about vertex 0
+        return first, valid, e, xp.cumsum(e, axis=1) - e
+
+    def cell_geometry(self, state) -> PlaneGeometry:
+        """Areas (shoelace) and perimeters, each polygon unwrapped edge by edge from its first vertex:
+        vertex j sits at ``sum_{i<j} e_i`` with ``e_i`` the minimum-image edges along the cell, so only
+        edges, not whole cells, need to be shorter than half the box."""
+        xp = state.device.xp
+        pos = state.positions[:, :2]
+        sides = state.cell_sides
+        first, valid, e, r = self.unwrapped_cells(state)
         area = 0.5 * (r[..., 0] * e[..., 1] - r[..., 1] * e[..., 0]).sum(axis=1)
         perimeter = xp.sqrt((e * e).sum(axis=-1)).sum(axis=1)
         box_v = state.box[state.vertex_replica][:, None, :]

@@ -270,6 +270,17 @@ class Integrator(Operation):
         pass
 
 
+def raise_flagged_step(error, simulation, message):
+    """Read the GPU kernels' error word (``step << 32 | vertex``, all ones when nothing happened;
+    one small read-back) and raise FloatingPointError with ``message(step, replica, vertex)``."""
+    if error is None:
+        return
+    code = int(error.get()[0])
+    if code != np.iinfo(np.uint64).max:
+        step, v = code >> 32, code & 0xFFFFFFFF
+        raise FloatingPointError(message(step, int(simulation.state.vertex_replica_np()[v]), v))
+
+
 class Minimizer(Integrator):
     """An integrator that lowers the energy and keeps per-replica convergence (FIRE is one).
 

@@ -9,7 +9,7 @@ from ... import random as rng
 from ...constraints import Sphere
 from ...device import launch, load_module
 from ...validation import non_negative, positive
-from ..base import Integrator
+from ..base import Integrator, raise_flagged_step
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
@@ -102,16 +102,9 @@ class Brownian(Integrator):
 
     def check(self, simulation):
         """Raise for the earliest exploding step the GPU kernel flagged (one small read-back)."""
-        err = getattr(self, "_error", None)
-        if err is None:
-            return
-        code = int(err.get()[0])
-        if code != np.iinfo(np.uint64).max:
-            step, v = code >> 32, code & 0xFFFFFFFF
-            r = int(simulation.state.vertex_replica_np()[v])
-            raise FloatingPointError(
-                f"exploding step at timestep {step}: replica {r}, vertex {v} moved more than max_step="
-                f"{self.max_step} sqrt(<A>) or became NaN; reduce dt (now {self.dt}) or check the forces")
+        raise_flagged_step(getattr(self, "_error", None), simulation, lambda step, r, v: (
+            f"exploding step at timestep {step}: replica {r}, vertex {v} moved more than max_step="
+            f"{self.max_step} sqrt(<A>) or became NaN; reduce dt (now {self.dt}) or check the forces"))
 
     def _guard(self, simulation, dr):
         state = simulation.state

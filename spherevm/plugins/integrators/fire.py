@@ -8,7 +8,7 @@ import numpy as np
 from ...constraints import Sphere
 from ...device import launch, load_module
 from ...validation import integer, positive
-from ..base import Minimizer
+from ..base import Minimizer, raise_flagged_step
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
@@ -169,16 +169,9 @@ class FIRE(Minimizer):
 
     def check(self, simulation):
         """Raise for the earliest exploding step the GPU kernel flagged (one small read-back)."""
-        err = getattr(self, "_error", None)
-        if err is None:
-            return
-        code = int(err.get()[0])
-        if code != np.iinfo(np.uint64).max:
-            step, v = code >> 32, code & 0xFFFFFFFF
-            r = int(simulation.state.vertex_replica_np()[v])
-            raise FloatingPointError(
-                f"FIRE: exploding step at timestep {step}: replica {r}, vertex {v} would move more than "
-                f"max_step={self.max_step} sqrt(<A>) or became NaN; reduce dt (now {self.dt}) or check the forces")
+        raise_flagged_step(getattr(self, "_error", None), simulation, lambda step, r, v: (
+            f"FIRE: exploding step at timestep {step}: replica {r}, vertex {v} would move more than "
+            f"max_step={self.max_step} sqrt(<A>) or became NaN; reduce dt (now {self.dt}) or check the forces"))
 
     def _move_gpu(self, simulation, forces):
         """Three kernels (fire.cu): per-replica sums, per-replica control, per-vertex move."""

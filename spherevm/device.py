@@ -39,6 +39,10 @@ class Device:
     def is_gpu(self) -> bool:
         return self.name == "gpu"
 
+    def __reduce__(self):
+        # pickled by name (its array module cannot be): a CPU State travels to worker processes
+        return resolve, (self.name,)
+
     def asarray(self, a, dtype=None):
         """Copy or move ``a`` onto this device."""
         return self.xp.asarray(a, dtype=dtype)

@@ -307,6 +307,24 @@ def test_process_pool_default_on_cpu(tiny_run, tmp_path):
     _same_records(first.records, result.records)
 
 
+def test_tilings_built_ahead_give_the_same_records(tiny_run, tmp_path, monkeypatch):
+    """Worker processes building the coming chunks (as for a GPU sweep) change nothing, and every
+    chunk is taken from them."""
+    _, first, _ = tiny_run
+    built = []
+    original = sweeps.execution.ChunkBuilder.take
+    monkeypatch.setattr(sweeps.execution.ChunkBuilder, "take",
+                        lambda self, c: built.append(c.id) or original(self, c))
+    result = sweeps.run_sweep(sweeps.RigiditySweep(**TINY), tmp_path / "ahead", executor=sweeps.InProcessExecutor(),
+                              device="cpu", batch_cells=32, builders=2)
+    assert sorted(built) == sorted(result.computed) and len(built) == 2
+    _same_records(first.records, result.records)
+    assert sweeps.execution.default_builders("cpu", True) == 0
+    assert sweeps.execution.default_builders("gpu", False) == 0
+    with pytest.raises(ValueError, match="builders"):
+        sweeps.run_sweep(sweeps.RigiditySweep(**TINY), tmp_path / "bad", device="cpu", builders=-1)
+
+
 def test_unconverged_replicas_reported_not_folded_in(tmp_path):
     sweep = sweeps.RigiditySweep(cells=[16], p0=[3.3], replicas=2, max_steps=20)
     result = sweeps.run_sweep(sweep, tmp_path / "s", executor=sweeps.InProcessExecutor(), device="cpu")

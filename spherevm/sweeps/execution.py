@@ -37,12 +37,18 @@ def build_chunk_state(sweep: RigiditySweep, chunk: Chunk):
     return state, p0, [k for k, _ in units], [r for _, r in units], seeds
 
 
-def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu") -> dict:
+def build_chunk(parameters: dict, n_cells: int, start: int, stop: int):
+    """:func:`build_chunk_state` of plain arguments, for worker processes that build ahead."""
+    return build_chunk_state(RigiditySweep.from_parameters(parameters), Chunk(int(n_cells), int(start), int(stop)))
+
+
+def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu", built=None) -> dict:
     """Minimise one chunk; returns its per-replica records (a dict of lists, :data:`RECORD_COLUMNS`).
 
     A plain module-level function of plain arguments, so any executor (process pool, Dask) can run
     it. The vertex model is given per cell: ``kA = kr kP / <A>``, ``kP = 1``, ``A0 = <A>``,
-    ``P0 = p0 sqrt(<A>)``, with each replica's own p0.
+    ``P0 = p0 sqrt(<A>)``, with each replica's own p0. ``built``: what :func:`build_chunk` returns
+    for this chunk, if it was built elsewhere (the same tilings either way).
     """
     from ..plugins import build_force
     from ..plugins.forces import VertexModel
@@ -53,7 +59,7 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     t0 = time.perf_counter()
     sweep = RigiditySweep.from_parameters(parameters)
     chunk = Chunk(int(n_cells), int(start), int(stop))
-    state, p0, p0_index, replica, seeds = build_chunk_state(sweep, chunk)
+    state, p0, p0_index, replica, seeds = build_chunk_state(sweep, chunk) if built is None else built
     mean_area = state.mean_cell_area                     # per replica (1 at the default radius)
     cell_rep = state.cell_replica_np()
     area = mean_area[cell_rep]
@@ -117,6 +123,44 @@ def default_executor(device="auto", workers=None):
     import multiprocessing
     # spawn: no fork of a process that may hold a CUDA context or threads
     return cf.ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn")), dev.name, True
+
+
+class ChunkBuilder:
+    """Builds the tilings of the coming chunks in worker processes while this process minimises.
+
+    For a sweep on one GPU: building a chunk (a convex hull per tiling) takes longer on one host core
+    than minimising it on the GPU, so without this the GPU waits most of the time. The chunks are
+    built in the order they will be taken, at most ``2 workers`` ahead (bounded memory).
+    """
+
+    def __init__(self, parameters: dict, chunks, workers: int):
+        import multiprocessing
+        self.parameters, self.queue, self.depth = parameters, list(chunks), 2 * workers
+        self.pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+        self.futures = {}
+        self._fill()
+
+    def _fill(self):
+        while self.queue and len(self.futures) < self.depth:
+            c = self.queue.pop(0)
+            self.futures[c.id] = self.pool.submit(build_chunk, self.parameters, c.n_cells, c.start, c.stop)
+
+    def take(self, chunk: Chunk):
+        """What :func:`build_chunk` returns for ``chunk`` (waits for it if it is not built yet)."""
+        future = self.futures.pop(chunk.id)
+        self._fill()
+        return future.result()
+
+    def close(self):
+        self.pool.shutdown(wait=False, cancel_futures=True)
+
+
+def default_builders(device_name: str, in_process: bool) -> int:
+    """Builder processes for :func:`run_sweep`: on a GPU, all host cores but one (at most 8)."""
+    if device_name != "gpu" or not in_process:
+        return 0
+    n = (os.cpu_count() or 1) - 1
+    return min(n, 8) if n >= 2 else 0
 
 
 # ---------------------------------------------------------------------------------------- progress
@@ -190,7 +234,7 @@ class SweepResult:
 
 
 def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=None, batch_cells=None,
-              progress=None) -> SweepResult:
+              progress=None, builders=None) -> SweepResult:
     """Run (or resume) a rigidity sweep, writing each chunk to ``<out>/chunks/`` as it finishes.
 
     ``executor``: any :class:`concurrent.futures.Executor` (or a ``distributed.Client``, whose
@@ -199,7 +243,10 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
     (``"cpu"``, ``"gpu"`` or ``"auto"``; with your own executor it is resolved on the worker).
     ``batch_cells``: cells per chunk (default :data:`CPU_BATCH_CELLS` or :data:`GPU_BATCH_CELLS`);
     it changes how the work is cut, never the results. ``progress``: called with a
-    :class:`SweepProgress` after every chunk.
+    :class:`SweepProgress` after every chunk. ``builders``: processes that build the coming
+    chunks' tilings while the GPU minimises (:class:`ChunkBuilder`; default
+    :func:`default_builders`: all host cores but one, at most 8, for an in-process GPU sweep; 0 builds
+    each chunk just before it is minimised). Neither changes the results.
 
     Everything is validated before the folder is created; a folder holding a sweep with other
     parameters raises ValueError. A chunk that fails stops the sweep (RuntimeError naming the
@@ -220,11 +267,13 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         integer("workers", workers, 1)
     if batch_cells is not None:
         integer("batch_cells", batch_cells, 1)
+    if builders is not None:
+        integer("builders", builders, 0)
     if progress is not None and not callable(progress):
         raise TypeError("progress must be callable")
     open_sweep_folder(sweep, out, create=False)          # bad folder or mismatch: errors before anything is made
 
-    owned = False
+    owned, builder = False, None
     if executor is None:
         executor, device_name, owned = default_executor(device, workers)
     else:
@@ -254,13 +303,18 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         # written before the next starts); everything at once otherwise, largest N first
         todo = sorted(chunks, key=lambda c: -c.n_cells * c.size)
         limit = 1 if in_process else len(todo)
+        if builders is None:
+            builders = default_builders(device_name, in_process)
+        if in_process and builders and len(todo) > 1:
+            builder = ChunkBuilder(params, todo, builders)
         pending = {}
         computed = []
         folder = os.path.join(path, CHUNK_DIR)
         while todo or pending:
             while todo and len(pending) < limit:
                 c = todo.pop(0)
-                pending[executor.submit(run_chunk, params, c.n_cells, c.start, c.stop, device_name)] = c
+                built = builder.take(c) if builder is not None else None
+                pending[executor.submit(run_chunk, params, c.n_cells, c.start, c.stop, device_name, built)] = c
             finished, _ = cf.wait(list(pending), return_when=cf.FIRST_COMPLETED)
             for fut in finished:
                 c = pending.pop(fut)
@@ -289,6 +343,8 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
             executor.shutdown(wait=False, cancel_futures=True)
         raise
     finally:
+        if builder is not None:
+            builder.close()
         if owned:
             executor.shutdown(wait=True)
     return SweepResult(sweep=sweep, out=path, records=sorted_records(merge_records(parts)), computed=computed,

@@ -134,6 +134,7 @@ extern "C" __global__ void t1_apply(
     atomicAdd(total_flips + r, 1ull);
     moved[2 * i] = u;              // for Integrator.reset_vertices
     moved[2 * i + 1] = v;
+    if (pass_id < 0) return;       // no flip-back bookkeeping (T1.counting)
     int slot = atomicAdd(log_count, 1);
     int* entry = log + (long)slot * LOG_INTS;
     entry[0] = pass_id; entry[1] = C1; entry[2] = C2; entry[3] = C3; entry[4] = C4; entry[5] = r;

@@ -8,7 +8,7 @@ import numpy as np
 from ... import topology
 from ...constraints import Sphere
 from ...device import launch, load_module
-from ..base import Updater
+from ..base import Minimizer, Updater
 from ...validation import integer, positive
 
 _KERNELS = Path(__file__).with_suffix(".cu")
@@ -44,13 +44,18 @@ class T1(Updater):
     instead of flipping back and forth until max_steps. ``flip_backs`` holds, per replica, the
     largest re-join count of any pair.
 
+    ``count_flip_backs``: keep that bookkeeping (a record of every separated cell pair). None (default):
+    unless the integrator is a dynamics integrator that is not a :class:`~spherevm.plugins.base.Minimizer`
+    (Brownian, Active): there flips back and forth are physics, nothing halts on them, and the
+    record grows with every flip (it cost half the step time of hot 1,024-cell tissues on a GPU).
+
     ``preset="reference"`` reproduces the paper's code: threshold 0.1, new edge twice the old length.
     Defaults: threshold 0.04 and new_length 0.12 (3 x threshold, so a fresh edge is not
     immediately short again). See docs/t1.md.
     """
 
     def __init__(self, threshold=0.04, new_length=0.12, length_factor=None, preset=None, trigger=1,
-                 reset_velocities=True, max_flip_backs=100):
+                 reset_velocities=True, max_flip_backs=100, count_flip_backs=None):
         super().__init__(trigger)
         if preset is not None:
             if preset not in PRESETS:
@@ -73,6 +78,9 @@ class T1(Updater):
                                  f"(else the new edge flips straight back), got {new_length!r}")
         self.max_flip_backs = integer("max_flip_backs", max_flip_backs, minimum=1)
         self.reset_velocities = bool(reset_velocities)
+        if count_flip_backs not in (None, True, False):
+            raise ValueError(f"count_flip_backs must be None (auto), True or False, got {count_flip_backs!r}")
+        self.count_flip_backs = count_flip_backs
         self._reset_counters(0)
 
     def _reset_counters(self, n_replicas):
@@ -162,6 +170,13 @@ class T1(Updater):
     def update(self, simulation, timestep):
         self._update(simulation)
 
+    def counting(self, simulation) -> bool:
+        """Whether this pass records flip-backs (see ``count_flip_backs``)."""
+        if self.count_flip_backs is not None:
+            return self.count_flip_backs
+        integrator = simulation.operations.integrator
+        return integrator is None or isinstance(integrator, Minimizer)
+
     def _update_cpu(self, simulation):
         state = simulation.state
         n_rep = state.n_replicas
@@ -185,7 +200,8 @@ class T1(Updater):
             new = self.length_factor * lengths
         else:
             new = self.new_length * np.sqrt(state.mean_cell_area)[rep]
-        self._count_flip_backs(state, cells, rep)
+        if self.counting(simulation):
+            self._count_flip_backs(state, cells, rep)
         moved = topology.t1_flip(state, u, slot, new)
         self.last_flips = np.bincount(rep, minlength=n_rep)
         self.total_flips += self.last_flips
@@ -252,11 +268,12 @@ class T1(Updater):
         if widen:
             pad = cp.full((state.n_cells, 1), -1, dtype=cp.int32)
             state.cell_vertices = cp.ascontiguousarray(cp.concatenate([state.cell_vertices, pad], axis=1))
-        if buf["log_bound"] + n_cand > len(buf["log"]):   # the log might overflow: replay it first
+        counting = self.counting(simulation)
+        if counting and buf["log_bound"] + n_cand > len(buf["log"]):   # the log might overflow: replay it first
             self._flush_log(state)
             if n_cand > len(buf["log"]):
                 buf["log"] = cp.empty((2 * n_cand, _LOG_INTS), cp.int32)
-        buf["log_bound"] += n_cand
+        buf["log_bound"] += n_cand if counting else 0
         if len(buf["moved"]) < 2 * n_cand:
             buf["moved"] = cp.empty(4 * n_cand, dtype=cp.int32)
         moved = buf["moved"][:2 * n_cand]
@@ -265,7 +282,7 @@ class T1(Updater):
                (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_vertices, state.cell_sides,
                 buf["claim"], buf["cand"], buf["cand_len"], np.int32(n_cand), np.int32(state.max_sides),
                 state.radius, buf["new_length"], np.float64(self.length_factor or 0.0), buf["flips"],
-                buf["total_flips"], moved, buf["log_count"], buf["log"], np.int32(buf["passes"])))
+                buf["total_flips"], moved, buf["log_count"], buf["log"], np.int32(buf["passes"] if counting else -1)))
         launch(module.get_function("t1_release"), n_cand, (buf["claim"], buf["cand"], np.int32(n_cand)))
         if self.reset_velocities and integrator is not None:
             integrator.reset_vertices(moved)

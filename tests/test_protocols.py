@@ -16,6 +16,24 @@ def test_glassy_dynamics_hot_small_sphere_relaxes():
     assert res.msd_per_replica.shape == (len(res.lag), 2) and len(res.tau_alpha_per_replica) == 2
 
 
+def test_an_initial_state_of_several_sizes_runs_as_one_ensemble():
+    """``initial_state`` gives the same run as the built-in tilings; sizes mixed in one State each
+    keep their own curves (cell-weighted averages over replicas of one size)."""
+    from spherevm import State, init
+    kw = dict(T=[0.05, 0.05], dt=0.02, steps=400, relax_steps=100, seed=3, device="cpu")
+    built = glassy_dynamics(16, 3.9, 0.0, replicas=2, **kw)
+    given = glassy_dynamics(None, 3.9, 0.0, initial_state=init.random_tiling(16, replicas=2, seed=3), **kw)
+    assert np.array_equal(built.msd_per_replica, given.msd_per_replica)
+    assert np.array_equal(built.self_overlap_per_replica, given.self_overlap_per_replica)
+    mixed = State.concatenate([init.random_tiling(16, replicas=2, seed=3), init.random_tiling(40, seed=4)])
+    res = glassy_dynamics(None, 3.9, 0.0, initial_state=mixed, **{**kw, "T": [0.05, 0.05, 0.05]})
+    assert res.msd_per_replica.shape == (len(res.lag), 3) and len(res.tau_alpha_per_replica) == 3
+    weights = np.array([16, 16, 40])
+    assert np.allclose(res.msd, (res.msd_per_replica * weights).sum(axis=1) / weights.sum(), rtol=1e-12)
+    with pytest.raises(TypeError, match="initial_state"):
+        glassy_dynamics(None, 3.9, 0.0, initial_state="tiling.gsd", **kw)
+
+
 def test_colder_is_slower():
     hot, cold = (glassy_dynamics(16, 3.9, 0.0, T=T, dt=0.05, steps=1500, replicas=2, relax_steps=300, seed=1,
                                  device="cpu") for T in (0.05, 0.005))

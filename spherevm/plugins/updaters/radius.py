@@ -21,10 +21,13 @@ class RadiusSchedule(Updater):
       ``simulation.state.cells_per_replica`` or of anything else.
 
     Put it after the updaters that change N (Division, Extrusion) so the new N is seen in the same
-    step. Sphere only. Narrowable (it keeps one ``area`` per replica).
+    step. Sphere only, both devices (a pass compares on the host with the radius last set, so a
+    step with no change costs no transfer). Sits minimisations out, as Division does. Narrowable
+    (it keeps one ``area`` per replica).
     """
 
     narrowable = True
+    in_minimize = False
     per_replica = ("area",)
     surface_needs = ("total_area_np",)
 

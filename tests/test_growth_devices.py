@@ -87,6 +87,21 @@ def test_the_radius_host_copy_follows_assignments():
     np.testing.assert_allclose(state.mean_cell_area, 4 * np.pi * np.array([4.0, 9.0]) / 20)
 
 
+def test_constant_area_touches_nothing_until_n_changes():
+    """No rescale by a rounding of R at every step (that would also drop every cache)."""
+    sim, vm, div = _rate_sim(rate=0.0)
+    sched = sim.operations.updaters[-1]
+    sched.update(sim, 0)
+    r, x = sim.state.radius, sim.state.positions
+    for t in range(1, 4):
+        sched.update(sim, t)
+    assert sim.state.radius is r and sim.state.positions is x
+    svm.growth.divide(sim.state, [0], [[0.0, 0.0, 1.0]])
+    sched.update(sim, 4)
+    assert sim.state.radius is not r
+    np.testing.assert_allclose(sim.state.mean_cell_area, 1.0, rtol=1e-14)
+
+
 # ------------------------------------------------------------------ growth sits minimisations out
 def test_minimize_holds_growth_back_and_the_next_run_goes_on():
     sim, vm, div = _rate_sim(rate=0.5, extrusion=True)

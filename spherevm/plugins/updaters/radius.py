@@ -28,7 +28,7 @@ class RadiusSchedule(Updater):
 
     narrowable = True
     in_minimize = False
-    per_replica = ("area",)
+    per_replica = ("area", "counts")
     surface_needs = ("total_area_np",)
 
     def __init__(self, mode="constant_area", area=None, trigger=1):
@@ -48,6 +48,7 @@ class RadiusSchedule(Updater):
         state = simulation.state
         self.area = (np.full(state.n_replicas, self._area) if self._area is not None
                      else np.array(state.mean_cell_area, dtype=np.float64))
+        self.counts = np.full(state.n_replicas, -1, dtype=np.int64)   # N at the last "constant_area" pass
 
     def target(self, simulation):
         """The radius each replica should have now (NumPy, per replica)."""
@@ -63,6 +64,10 @@ class RadiusSchedule(Updater):
 
     def update(self, simulation, timestep):
         state = simulation.state
+        if self.mode == "constant_area":      # R is a function of N: nothing to do (not even a rounding
+            if np.array_equal(self.counts, state.cells_per_replica):     # of R) until N changes
+                return
+            self.counts = state.cells_per_replica.copy()
         old, new = state.radius_np(), self.target(simulation)
         if np.array_equal(old, new):
             return

@@ -94,7 +94,8 @@ def run(mode, args, log):
                          sweep=sweep_zero_fraction(n, p0),
                          zero=float(np.mean(status == "zero")),
                          unconverged=int(np.sum(~np.isin(status, ("zero", "rigid")))),
-                         q=float(np.mean(res.mean_shape_index)), steps=int(res.steps.max()), divisions=int(division.total_divisions.sum()),
+                         q=float(np.mean(res.mean_shape_index)), steps=int(res.steps.max()),
+                         divisions=int(division.total_divisions.sum()),
                          refused=int(division.refusals.sum()), seconds=time.perf_counter() - t0))
         print(_row(rows[-1]), flush=True)
 
@@ -114,7 +115,8 @@ def run(mode, args, log):
             rounds += 1
             idle = idle + 1 if sim.state.n_cells == before else 0
             if idle == 20:
-                raise RuntimeError(f"20 rounds without a division at N = {n}: every choice refused ({division.refused})")
+                raise RuntimeError(f"20 rounds without a division at N = {n}: every choice refused "
+                                   f"({division.refused})")
         log(f"    [{mode}] grown to N = {n} in {rounds} rounds ({time.perf_counter() - t0:.0f} s)")
         quench(n)
         sim.state.validate(orientation=False)
@@ -122,14 +124,14 @@ def run(mode, args, log):
 
 
 HEADER = (f"{'sphere':>13s} {'N':>5s} {'R':>7s} {'<A>':>7s} {'p0=P0/sqrt<A>':>13s} {'P0*(N,<A>)':>10s} "
-          f"{'sweep F':>7s} {'zero-E frac':>11s} {'unconv':>6s} {'<q>':>7s} {'steps':>6s} {'divisions':>9s} {'refused':>7s} "
-          f"{'time/s':>6s}")
+          f"{'sweep F':>7s} {'zero-E frac':>11s} {'unconv':>6s} {'<q>':>7s} {'steps':>6s} {'divisions':>9s} "
+          f"{'refused':>7s} {'time/s':>6s}")
 
 
 def _row(r):
     return (f"{r['mode']:>13s} {r['N']:5d} {r['R']:7.3f} {r['A']:7.4f} {r['p0']:13.3f} {r['P0_star']:10.4f} "
-            f"{r['sweep']:7.3f} {r['zero']:11.3f} {r['unconverged']:6d} {r['q']:7.4f} {r['steps']:6d} {r['divisions']:9d} "
-            f"{r['refused']:7d} {r['seconds']:6.0f}")
+            f"{r['sweep']:7.3f} {r['zero']:11.3f} {r['unconverged']:6d} {r['q']:7.4f} {r['steps']:6d} "
+            f"{r['divisions']:9d} {r['refused']:7d} {r['seconds']:6.0f}")
 
 
 def verdict(rows, mode):
@@ -167,7 +169,7 @@ def plot(rows, path):
         right.plot([r["N"] for r in mine], [r["sweep"] for r in mine], marker + "--", color=color, alpha=0.5,
                    label=f"{mode}: sweep of random tilings")
     left.set_xscale("log")
-    left.legend(fontsize=7, frameon=False)
+    left.legend(fontsize=7, frameon=False, loc="lower right")
     right.set_xscale("log", base=2)
     right.set_xlabel("N")
     right.set_ylabel("zero-energy fraction after FIRE + T1")

@@ -186,8 +186,8 @@ class State:
         those buffers: copy one to keep it across a resize. ``topology_version`` bumps and every
         cached entry is dropped."""
         for name, data, dtype in (("positions", positions, np.float64), ("cell_vertices", cell_vertices, np.int32),
-                                  ("cell_sides", cell_sides, np.int32), ("vertex_neighbors", vertex_neighbors, np.int32),
-                                  ("vertex_cells", vertex_cells, np.int32)):
+                                  ("cell_sides", cell_sides, np.int32), ("vertex_cells", vertex_cells, np.int32),
+                                  ("vertex_neighbors", vertex_neighbors, np.int32)):
             self._refill(name, data, dtype)
         self.vertex_start = np.asarray(vertex_start, dtype=np.int64)
         self.cell_start = np.asarray(cell_start, dtype=np.int64)

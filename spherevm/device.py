@@ -53,6 +53,26 @@ class Device:
             return a.get()
         return np.asarray(a)
 
+    def fit(self, buffer, data, dtype):
+        """``(buffer, view)``: ``data`` (NumPy or on this device) copied into the first rows of
+        ``buffer`` when they fit (same dtype and row shape), else into a new buffer; ``view`` is
+        those rows, a contiguous array of ``data``'s shape. A new buffer has exactly the rows
+        needed the first time (``buffer`` None) and at least twice the old capacity after, so an
+        array whose length changes now and then (a growing tissue) is reallocated O(log n) times.
+        The view aliases the buffer: the next ``fit`` into it overwrites what it shows."""
+        dtype = np.dtype(dtype)
+        data = data if hasattr(data, "shape") else np.asarray(data)
+        shape = tuple(data.shape)
+        if buffer is None or buffer.dtype != dtype or buffer.shape[1:] != shape[1:] or len(buffer) < shape[0]:
+            rows = shape[0] if buffer is None else max(shape[0], 2 * len(buffer))
+            buffer = self.xp.empty((rows,) + shape[1:], dtype=dtype)
+        view = buffer[:shape[0]]
+        if self.is_gpu and isinstance(data, np.ndarray):
+            view.set(np.ascontiguousarray(data, dtype=dtype))      # host to device, no temporary
+        else:
+            view[...] = data
+        return buffer, view
+
     def segment_max(self, values, segments, n_segments):
         """Per-segment maximum of non-negative ``values`` (0 for an empty segment)."""
         out = self.xp.zeros(n_segments)

@@ -408,10 +408,21 @@ class Minimizer(Integrator):
 
 
 class Updater(Operation):
-    """Changes the state between steps (for example the topology): ``update(simulation, timestep)``."""
+    """Changes the state between steps (for example the topology): ``update(simulation, timestep)``.
+
+    ``in_minimize``: whether ``Simulation.minimize`` runs it (T1: yes). The growth updaters
+    (Division, Extrusion, RadiusSchedule) sit minimisations out: a quench finds the inherent state
+    of the tissue as it is (its N and R); a later ``run`` goes on with them, and
+    :meth:`after_minimize` tells them a minimisation passed.
+    """
+
+    in_minimize = True
 
     def update(self, simulation, timestep):
         raise NotImplementedError
+
+    def after_minimize(self, simulation):
+        """A ``Simulation.minimize`` that this updater sat out (``in_minimize`` False) has ended."""
 
 
 class Writer(Operation):

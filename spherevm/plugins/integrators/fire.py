@@ -98,6 +98,8 @@ class FIRE(Minimizer):
         self.velocities[vertices[vertices >= 0]] = 0.0
 
     def _reset_vertices_gpu(self, vertices):
+        import cupy as cp
+        vertices = cp.asarray(vertices, dtype=cp.int32)      # the kernel reads int (T1 passes int32 already)
         launch(load_module(_KERNELS).get_function("fire_reset_vertices"), len(vertices),
                (self.velocities, vertices, np.int32(len(vertices))))
 

@@ -217,7 +217,6 @@ class T1(Updater):
             cap, r = max(1024, state.n_vertices // 4), state.n_replicas
             # per-pass counters in one buffer, zeroed by one memset: [candidates, widen | flips | refused]
             scratch = cp.zeros(2 + 2 * r, dtype=cp.int32)
-            unit = np.sqrt(state.mean_cell_area)
             buf = dict(state=state, n_cells=state.n_cells, capacity=cap,
                        claim=cp.full(state.n_cells, np.iinfo(np.int32).max, dtype=cp.int32), scratch=scratch,
                        counters=scratch[:2], flips=scratch[2:2 + r], refused=scratch[2 + r:],
@@ -226,12 +225,19 @@ class T1(Updater):
                        log=cp.empty((cap, _LOG_INTS), dtype=cp.int32), moved=cp.empty(2 * cap, dtype=cp.int32), passes=0,
                        all_active=cp.ones(r, dtype=bool),
                        total_flips=cp.asarray(self._host_totals("total_flips", r)),
-                       total_refused=cp.asarray(self._host_totals("total_refused", r)),
-                       chord2=cp.asarray(self.chord_threshold2(state)),
-                       new_length=cp.asarray(self.new_length * unit if self.length_factor is None
-                                             else np.full(r, -1.0)))
+                       total_refused=cp.asarray(self._host_totals("total_refused", r)))
             self._gpu = buf
         return buf
+
+    def _device_lengths(self, state):
+        """Squared threshold chords and new edge lengths per replica, on the device: cached with
+        the State, so a new radius (``State.clear_cache``) or a resize renews them."""
+        def build():
+            import cupy as cp
+            unit = np.sqrt(state.mean_cell_area)
+            new = self.new_length * unit if self.length_factor is None else np.full(state.n_replicas, -1.0)
+            return cp.asarray(self.chord_threshold2(state)), cp.asarray(new)
+        return state.cached((self, "lengths"), build)
 
     def _host_totals(self, name, n_replicas):
         """A running total to continue on the device (zeros if it belongs to another State)."""
@@ -243,6 +249,7 @@ class T1(Updater):
         import cupy as cp
         state = simulation.state
         buf = self._gpu_buffers(state)
+        chord2, new_length = self._device_lengths(state)
         module = load_module(_KERNELS)
         integrator = simulation.operations.integrator
         active = integrator.active_on_device() if integrator is not None else buf["all_active"]
@@ -251,7 +258,7 @@ class T1(Updater):
             cp.cuda.runtime.memsetAsync(scratch.data.ptr, 0, scratch.nbytes, cp.cuda.get_current_stream().ptr)
             launch(module.get_function("t1_detect"), state.n_vertices,
                    (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_sides,
-                    state.vertex_replica, state.radius, buf["chord2"], active, np.int32(state.n_vertices),
+                    state.vertex_replica, state.radius, chord2, active, np.int32(state.n_vertices),
                     np.int32(state.max_sides), buf["claim"], buf["refused"], buf["total_refused"], buf["counters"],
                     buf["cand"], buf["cand_len"], np.int32(buf["capacity"])))
             n_cand, widen = (int(x) for x in buf["counters"].get())   # the one read-back
@@ -281,7 +288,7 @@ class T1(Updater):
         launch(module.get_function("t1_apply"), n_cand,
                (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_vertices, state.cell_sides,
                 buf["claim"], buf["cand"], buf["cand_len"], np.int32(n_cand), np.int32(state.max_sides),
-                state.radius, buf["new_length"], np.float64(self.length_factor or 0.0), buf["flips"],
+                state.radius, new_length, np.float64(self.length_factor or 0.0), buf["flips"],
                 buf["total_flips"], moved, buf["log_count"], buf["log"], np.int32(buf["passes"] if counting else -1)))
         launch(module.get_function("t1_release"), n_cand, (buf["claim"], buf["cand"], np.int32(n_cand)))
         if self.reset_velocities and integrator is not None:
@@ -303,7 +310,7 @@ class T1(Updater):
         order = np.argsort(log[:, 0], kind="stable")
         log = log[order]
         for pass_rows in np.split(log, np.flatnonzero(np.diff(log[:, 0])) + 1):  # passes, not flips
-            self._count_flip_backs(state, pass_rows[:, 1:5].astype(np.int64), pass_rows[:, 5])
+            self._count_flip_backs(state, pass_rows[:, 1:5].astype(np.int64), pass_rows[:, 5], buf["n_cells"])
 
     def _sync_counters(self):
         """Bring the GPU counters to the host attributes (for logging and halting)."""
@@ -316,9 +323,10 @@ class T1(Updater):
         self.total_flips = buf["total_flips"].get().astype(np.int64)
         self.total_refused = buf["total_refused"].get().astype(np.int64)
 
-    def _count_flip_backs(self, state, cells, rep):
-        """Count re-joins: a flip making two cells neighbours again that an earlier flip separated."""
-        n = state.n_cells
+    def _count_flip_backs(self, state, cells, rep, n_cells=None):
+        """Count re-joins: a flip making two cells neighbours again that an earlier flip separated.
+        ``n_cells``: the cell count the flips saw (the device log's, if the State was resized since)."""
+        n = state.n_cells if n_cells is None else n_cells
 
         def pair_key(x, y):
             return np.minimum(x, y).astype(np.int64) * n + np.maximum(x, y)
@@ -400,7 +408,9 @@ class T1(Updater):
 
     def resized(self, change):
         """Cells divided or removed: the flip-back memory follows its cells (pairs with a removed
-        cell are forgotten); the per-replica counters stay."""
+        cell are forgotten); the per-replica counters stay. On the GPU the device counters and flip
+        log (in the old numbering) are read first, and the buffers are rebuilt for the new counts."""
+        self._sync_counters()
         self._separated, keep = self._pairs_between(self._separated, change.n_cells_before, change.cell_map,
                                                     len(change.cell_source))
         self._rejoins = self._rejoins[keep]

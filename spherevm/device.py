@@ -57,14 +57,17 @@ class Device:
         """``(buffer, view)``: ``data`` (NumPy or on this device) copied into the first rows of
         ``buffer`` when they fit (same dtype and row shape), else into a new buffer; ``view`` is
         those rows, a contiguous array of ``data``'s shape. A new buffer has exactly the rows
-        needed the first time (``buffer`` None) and at least twice the old capacity after, so an
+        needed the first time (``buffer`` None, or another dtype or row shape) and at least twice the
+        old capacity when only the length grew, so an
         array whose length changes now and then (a growing tissue) is reallocated O(log n) times.
         The view aliases the buffer: the next ``fit`` into it overwrites what it shows."""
         dtype = np.dtype(dtype)
         data = data if hasattr(data, "shape") else np.asarray(data)
         shape = tuple(data.shape)
-        if buffer is None or buffer.dtype != dtype or buffer.shape[1:] != shape[1:] or len(buffer) < shape[0]:
-            rows = shape[0] if buffer is None else max(shape[0], 2 * len(buffer))
+        same_rows = buffer is not None and buffer.dtype == dtype and buffer.shape[1:] == shape[1:]
+        if not same_rows or len(buffer) < shape[0]:
+            # grow geometrically only a buffer of the same row shape (a new width starts afresh)
+            rows = max(shape[0], 2 * len(buffer)) if same_rows else shape[0]
             buffer = self.xp.empty((rows,) + shape[1:], dtype=dtype)
         view = buffer[:shape[0]]
         if self.is_gpu and isinstance(data, np.ndarray):

@@ -8,7 +8,7 @@ import spherevm as svm
 from spherevm.constraints import PeriodicPlane, Sphere
 from spherevm.device import Device
 from spherevm.plugins.forces import VertexModel
-from spherevm.plugins.integrators import FIRE, Brownian
+from spherevm.plugins.integrators import FIRE, Active, Brownian
 from spherevm.plugins.updaters import T1
 
 HEX_PERIMETER = np.sqrt(8 * np.sqrt(3))
@@ -147,7 +147,7 @@ def test_projections_and_lengths():
 
 # ------------------------------------------------------------------ operations
 def _sim(state, p0, kr=0.0, seed=1):
-    sim = svm.Simulation(device="cpu", seed=seed)   # the GPU kernels refuse the plane for now
+    sim = svm.Simulation(device="cpu", seed=seed)   # the GPU's agreement: tests/test_plane_gpu.py
     sim.state = state
     sim.operations.forces.append(VertexModel.dimensionless(kr=kr, p0=p0))
     return sim
@@ -187,6 +187,26 @@ def test_brownian_with_hot_t1_keeps_a_valid_torus():
     assert np.all(s.positions[:, 2] == 0)
 
 
+@pytest.mark.parametrize("directors", ["cell", "vertex"])
+def test_active_directors_stay_in_the_plane_and_diffuse_by_angle(directors):
+    """Directors start as unit vectors in the plane, stay there, and turn about z by Gaussian angles
+    of variance 2 Dr dt per step: <cos(dtheta)> = exp(-Dr t) after time t."""
+    state = svm.init.random_planar_tiling(400, seed=4)
+    sim = _sim(state, 3.9, kr=1.0, seed=8)
+    dr, dt, steps = 1.0, 0.01, 50
+    sim.operations.integrator = Active(dt=dt, v0=0.05, Dr=dr, directors=directors)
+    sim.run(1)
+    d0 = sim.operations.integrator.directors.copy()
+    sim.run(steps)
+    d = sim.operations.integrator.directors
+    assert np.all(d[:, 2] == 0) and np.all(d0[:, 2] == 0)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, rtol=1e-14)
+    cos = (d * d0).sum(axis=1)
+    expected = np.exp(-dr * dt * steps)
+    assert abs(cos.mean() - expected) < 4 * cos.std() / np.sqrt(len(cos))
+    assert np.all(sim.state.positions[:, 2] == 0)
+
+
 def test_t1_flip_across_the_boundary_rotates_about_the_midpoint():
     s = svm.init.hexagonal_tiling(3, 4)
     con = s.constraint
@@ -205,12 +225,17 @@ def test_t1_flip_across_the_boundary_rotates_about_the_midpoint():
     assert abs(np.dot(b - a, before - pu)) < 1e-12
 
 
-def test_gpu_paths_refuse_the_plane():
-    fake = SimpleNamespace(device=Device("gpu", np), constraint=PeriodicPlane())
+def test_gpu_paths_serve_the_plane_and_refuse_other_surfaces():
+    """The CUDA paths are compiled per surface (geometry/surface.cuh): the plane binds them, a
+    surface without kernels is refused naming the ones that have them."""
+    from spherevm.constraints.torus import Torus
+    plane = SimpleNamespace(device=Device("gpu", np), constraint=PeriodicPlane())
+    torus = SimpleNamespace(device=Device("gpu", np), constraint=Torus(3.0, 1.0))
     for op, name in ((VertexModel(), "compute"), (FIRE(), "move"), (Brownian(dt=0.01, T=0.1), "step"),
                      (T1(), "update")):
-        with pytest.raises(ValueError, match="PeriodicPlane"):
-            op.implementation(name, fake)
+        assert op.implementation(name, plane).__name__ == f"_{name}_gpu"
+        with pytest.raises(ValueError, match="Sphere, PeriodicPlane surfaces only.*Torus"):
+            op.implementation(name, torus)
 
 
 # ------------------------------------------------------------------ GSD

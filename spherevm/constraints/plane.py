@@ -152,6 +152,10 @@ class PeriodicPlane(Constraint):
         """Vertex centroid of each cell (unwrapped, then wrapped into the box), ``(n_cells, 3)``."""
         return self.cell_geometry(state).center
 
+    def cell_normals(self, state):
+        """``(0, 0, 1)`` for every cell."""
+        return self.normal(state.device.xp.zeros((state.n_cells, 3)))
+
     def shape_gradient(self, state, geometry: PlaneGeometry, d_area, d_perimeter):
         """Gradient (V, 3), z = 0, of ``sum_c d_area[c] A_c + d_perimeter[c] P_c``.
 

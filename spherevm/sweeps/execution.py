@@ -210,12 +210,6 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
     from ..device import DEVICE_NAMES, Device
     if not isinstance(device, Device) and (not isinstance(device, str) or device.lower() not in DEVICE_NAMES):
         raise ValueError(f"device must be one of {DEVICE_NAMES}, got {device!r}")
-    if sweep.surface == "plane":       # the CUDA kernels refuse the periodic plane for now
-        if not isinstance(device, Device) and device.lower() == "auto":
-            device = "cpu"
-        elif getattr(device, "is_gpu", False) or (isinstance(device, str) and device.lower() == "gpu"):
-            raise ValueError("a sweep on the periodic plane runs on the CPU only for now (the CUDA kernels do not "
-                             "support it yet); use device='cpu'")
     if workers is not None:
         integer("workers", workers, 1)
     if batch_cells is not None:

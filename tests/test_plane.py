@@ -82,6 +82,28 @@ def test_every_tiling_is_a_torus_covering_the_box(n, seed):
     assert np.all(s.constraint.cell_areas_np(s) > 0)
 
 
+def test_large_tilings_triangulate_a_margin_and_give_the_same_tessellation(monkeypatch):
+    """From MARGIN_MIN_CELLS on only the images near the box are triangulated: the same cells and
+    vertices as the full 3 x 3 images (numbered in another order); a margin too thin for some empty
+    circle falls back to the full images, bit for bit."""
+    from spherevm import init_plane
+    full = svm.init.random_planar_tiling(400, seed=9, box=(16.0, 25.0))
+    monkeypatch.setattr(init_plane, "MARGIN_MIN_CELLS", 100)
+    near = svm.init.random_planar_tiling(400, seed=9, box=(16.0, 25.0))
+    near.validate()
+
+    def canonical(s):
+        return s.positions[np.lexsort(s.positions[:, :2].T)]
+    np.testing.assert_allclose(canonical(near), canonical(full), atol=1e-12)
+    np.testing.assert_allclose(np.sort(near.constraint.cell_areas_np(near)), np.sort(full.constraint.cell_areas_np(full)),
+                               atol=1e-12)
+    assert not np.array_equal(near.positions, full.positions)     # the margin path did run
+    monkeypatch.setattr(init_plane, "MARGIN_CELL_SIDES", 0.3)      # no empty circle fits: the full images
+    again = svm.init.random_planar_tiling(400, seed=9, box=(16.0, 25.0))
+    np.testing.assert_array_equal(again.positions, full.positions)
+    np.testing.assert_array_equal(again.cell_vertices, full.cell_vertices)
+
+
 def test_replicas_are_reproducible_and_may_differ_in_box():
     a = svm.init.random_planar_tiling(20, replicas=3, seed=4)
     b = svm.init.random_planar_tiling(20, replicas=1, seed=4)

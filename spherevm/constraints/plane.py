@@ -110,40 +110,68 @@ class PeriodicPlane(Constraint):
     # Corner (v, k) lies in cell vertex_cells[v, k], whose boundary runs counter-clockwise from v to
     # n_k = vertex_neighbors[v, k] (and arrives at v from n_{k+1}): it owns that cell's edge v -> n_k.
     @staticmethod
-    def unwrapped_cells(state):
+    def _tables(state):
+        """Per State and topology: each vertex's box ``(V, 1, 2)`` (just ``(2,)`` when all replicas
+        share one: cheaper to broadcast, the same numbers); for slot j of cell c the corner
+        ``3 v + k`` owning the edge from vertex j to vertex j + 1 (``3 V``, a zero edge, in padding),
+        slot-major ``(W, C)``; the real slots ``(C, W)``; the cells' first vertices ``(C, 1)``."""
+        def build():
+            xp = state.device.xp
+            cv, sides, vc = state.cell_vertices, state.cell_sides, state.vertex_cells
+            valid = xp.arange(cv.shape[1])[None, :] < sides[:, None]
+            v = xp.where(valid, cv, 0)
+            k = xp.argmax(vc[v] == xp.arange(state.n_cells)[:, None, None], axis=2)
+            slot = xp.ascontiguousarray(xp.where(valid, 3 * v + k, 3 * state.n_vertices).T)
+            one = bool((state.box == state.box[:1]).all())
+            box = state.box[0] if one else state.box[state.vertex_replica][:, None, :]
+            return box, slot, valid, cv[:, :1]
+        return state.cached(("plane", "tables"), build, topology=True)
+
+    def corner_edges(self, state):
+        """The minimum image of ``x[vertex_neighbors[v, k]] - x[v]`` per corner, ``(V, 3, 2)``."""
+        pos = state.positions[:, :2]
+        return minimum_image(pos[state.vertex_neighbors] - pos[:, None, :], self._tables(state)[0])
+
+    def _slot_edges(self, state, edge):
+        """The cells' edges and unwrapped vertices, slot-major ``(W, C, 2)``: ``e[j, c]`` the edge from
+        vertex j to j + 1 of cell c (zero in padding), read from the corner edges ``edge``, and
+        ``r[j, c] = sum_{i<j} e[i, c]``, formed as the running sum minus ``e[j]`` (one vectorised
+        step per slot: contiguous rows, and the slot order the CUDA kernel sums in)."""
+        xp = state.device.xp
+        e = xp.concatenate([edge.reshape(-1, 2), xp.zeros((1, 2))])[self._tables(state)[1]]
+        running = e.copy()
+        for j in range(1, len(e)):
+            xp.add(running[j - 1], e[j], out=running[j])
+        return e, running - e
+
+    def unwrapped_cells(self, state, edge=None):
         """Each polygon unwrapped edge by edge from its first vertex: ``(first, valid, e, r)`` with
         ``first`` (C, 1) the first vertices, ``valid`` (C, W) the real slots of the padded table,
-        ``e`` (C, W, 2) the minimum-image edges along the cell (zero in padding) and ``r`` (C, W, 2)
-        vertex j about vertex 0 (``sum_{i<j} e_i``)."""
-        xp = state.device.xp
-        pos = state.positions[:, :2]
-        cv, sides = state.cell_vertices, state.cell_sides
-        col = xp.arange(cv.shape[1])[None, :]
-        valid = col < sides[:, None]
-        first = cv[:, :1]
-        cur = xp.where(valid, cv, first)                                   # padding -> the first vertex
-        nxt = xp.where(valid, xp.take_along_axis(cv, (col + 1) % sides[:, None], axis=1), first)
-        e = minimum_image(pos[nxt] - pos[cur], state.box[state.cell_replica][:, None, :])   # (C, W, 2)
-        return first, valid, e, xp.cumsum(e, axis=1) - e
+        ``e`` (C, W, 2) the minimum-image edges along the cell (zero in padding; from the corner
+        edges ``edge``, computed if not given) and ``r`` (C, W, 2) vertex j about vertex 0
+        (``sum_{i<j} e_i``). ``e`` and ``r`` are views of slot-major arrays."""
+        _, _, valid, first = self._tables(state)
+        e, r = self._slot_edges(state, self.corner_edges(state) if edge is None else edge)
+        return first, valid, e.transpose(1, 0, 2), r.transpose(1, 0, 2)
 
     def cell_geometry(self, state) -> PlaneGeometry:
         """Areas (shoelace) and perimeters, each polygon unwrapped edge by edge from its first vertex:
         vertex j sits at ``sum_{i<j} e_i`` with ``e_i`` the minimum-image edges along the cell, so only
-        edges, not whole cells, need to be shorter than half the box."""
+        edges, not whole cells, need to be shorter than half the box. Every edge's minimum image is
+        taken once, per corner, and read by the cells' slots; sums run in slot order (as in
+        geometry/plane.cuh)."""
         xp = state.device.xp
-        pos = state.positions[:, :2]
-        sides = state.cell_sides
-        first, valid, e, r = self.unwrapped_cells(state)
-        area = 0.5 * (r[..., 0] * e[..., 1] - r[..., 1] * e[..., 0]).sum(axis=1)
-        perimeter = xp.sqrt((e * e).sum(axis=-1)).sum(axis=1)
-        box_v = state.box[state.vertex_replica][:, None, :]
-        edge = minimum_image(pos[state.vertex_neighbors] - pos[:, None, :], box_v)   # (V, 3, 2) per corner
+        edge = self.corner_edges(state)                                     # (V, 3, 2)
+        e, r = self._slot_edges(state, edge)                                # (W, C, 2)
+        area = 0.5 * (r[..., 0] * e[..., 1] - r[..., 1] * e[..., 0]).sum(axis=0)
         length = xp.sqrt((edge * edge).sum(axis=-1))
+        perimeter = xp.concatenate([length.reshape(-1), xp.zeros(1)])[self._tables(state)[1]].sum(axis=0)
 
         def center():
-            mean = xp.where(valid[..., None], r, 0.0).sum(axis=1) / sides[:, None].astype(xp.float64)
+            _, _, valid, first = self._tables(state)
+            mean = xp.where(valid.T[..., None], r, 0.0).sum(axis=0) / state.cell_sides[:, None].astype(xp.float64)
             out = xp.zeros((state.n_cells, 3))
-            out[:, :2] = _wrap(xp, pos[first[:, 0]] + mean, state.box[state.cell_replica])
+            out[:, :2] = _wrap(xp, state.positions[first[:, 0], :2] + mean, state.box[state.cell_replica])
             return out
 
         return PlaneGeometry(area=area, perimeter=perimeter, edge=edge, length=length, center=center)
@@ -166,8 +194,9 @@ class PeriodicPlane(Constraint):
         """
         xp = state.device.xp
         vc = state.vertex_cells
+        before = state.cached(("plane", "cells before"), lambda: vc[:, [2, 0, 1]], topology=True)
         a, p = d_area[vc], d_perimeter[vc]                                  # (V, 3)
-        a_before, p_before = xp.roll(a, 1, axis=1), xp.roll(p, 1, axis=1)
+        a_before, p_before = d_area[before], d_perimeter[before]
         e = geometry.edge
         alpha = 0.5 * (a - a_before)
         beta = (p + p_before) / xp.maximum(geometry.length, 1e-300)

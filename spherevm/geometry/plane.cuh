@@ -42,8 +42,9 @@ __device__ __forceinline__ vec3 plane_unwrap(vec3 b, vec3 a, box2 box) {
 // Area (shoelace) and perimeter of the cell row[0 .. n-1] (counter-clockwise), the polygon unwrapped
 // edge by edge from its first vertex (PeriodicPlane.cell_geometry): with e_j the minimum-image edge
 // from vertex j to vertex j + 1, vertex j sits at r_j = sum_{i<j} e_i, formed as NumPy's
-// cumsum(e) - e forms it; A = 1/2 sum_j r_j x e_j and P = sum_j |e_j|. The sums run in slot order
-// (NumPy sums the padded row pairwise from 8 slots on: the two agree to rounding).
+// running sum minus e_j as NumPy forms it; A = 1/2 sum_j r_j x e_j and P = sum_j |e_j|, summed in
+// slot order as NumPy sums them. Compiled without contraction (the host harness, -ffp-contract=off)
+// this is NumPy bit for bit; nvcc fuses multiply-adds, so the GPU agrees to rounding.
 __device__ __forceinline__ void plane_cell_measures(const double* pos, const int* row, int n, box2 box,
                                                     double* area, double* perimeter) {
     vec3 first = load3(pos, row[0]);

@@ -195,7 +195,8 @@ def test_planar_gsd_written_on_gpu_restores_on_cpu(tmp_path):
     back = svm.init.from_gsd(tmp_path / "g.gsd", device="cpu")
     assert np.array_equal(back.positions, sim.state.positions.get())
     assert np.array_equal(back.box_np(), sim.state.box_np())
-    assert np.array_equal(back.cell_vertices, _table(sim.state)[:, :back.cell_vertices.shape[1]])
+    assert sim.log("t1_total_flips").sum() > 0
+    assert np.array_equal(_table(back), _table(sim.state))      # the GPU may keep a spare column
 
 
 # ------------------------------------------------------------------------------------ sweeps and CLI

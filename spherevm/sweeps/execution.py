@@ -317,8 +317,8 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         while todo or pending:
             while todo and len(pending) < limit:
                 c = todo.pop(0)
-                built = None if prefetch is None else prefetch.get(c)
-                pending[executor.submit(run_chunk, params, c.n_cells, c.start, c.stop, device_name, built)] = c
+                built = () if prefetch is None else (prefetch.get(c),)
+                pending[executor.submit(run_chunk, params, c.n_cells, c.start, c.stop, device_name, *built)] = c
             finished, _ = cf.wait(list(pending), return_when=cf.FIRST_COMPLETED)
             for fut in finished:
                 c = pending.pop(fut)

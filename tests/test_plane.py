@@ -153,6 +153,20 @@ def test_energy_is_invariant_under_translation_and_choice_of_image():
     np.testing.assert_allclose(_energy(_moved(s, p), vm), e0, rtol=1e-11)
 
 
+def test_a_new_box_is_seen_by_the_cached_tables():
+    s = svm.init.random_planar_tiling(30, seed=2)
+    vm = VertexModel.dimensionless(kr=1.0, p0=3.8)
+    vm.compute(s)                                                   # fills the cache
+    scaled = s.copy()
+    scaled.positions = s.positions * 2.0
+    scaled.box = s.box * 2.0
+    np.testing.assert_allclose(scaled.constraint.cell_areas_np(scaled), 4.0 * s.constraint.cell_areas_np(s),
+                               rtol=1e-13)
+    s.positions = s.positions * 2.0
+    s.box = s.box * 2.0                                             # the same State, a new box array
+    np.testing.assert_allclose(s.constraint.cell_areas_np(s), scaled.constraint.cell_areas_np(scaled), rtol=1e-15)
+
+
 def test_projections_and_lengths():
     con = PeriodicPlane()
     box = np.array([[2.0, 3.0]])

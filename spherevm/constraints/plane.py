@@ -116,7 +116,8 @@ class PeriodicPlane(Constraint):
         ``cells`` and ``cells_before`` (the cell before slot k, ``vertex_cells[v, k - 1]``) slot-major
         ``(3, V)``; ``slot`` ``(W, C)``: for slot j of cell c the corner ``k V + v`` (slot-major) owning
         the edge from vertex j to vertex j + 1, ``3 V`` (a zero edge) in padding; ``valid`` ``(C, W)``
-        the real slots; ``first`` ``(C, 1)`` the cells' first vertices."""
+        the real slots; ``first`` ``(C, 1)`` the cells' first vertices. Rebuilt when ``state.box`` is
+        replaced (after editing it in place, call ``state.clear_cache()``)."""
         def build():
             xp = state.device.xp
             cv, sides, vc, nv = state.cell_vertices, state.cell_sides, state.vertex_cells, state.n_vertices
@@ -129,8 +130,12 @@ class PeriodicPlane(Constraint):
             return dict(box=xp.ascontiguousarray(box), neighbors=xp.ascontiguousarray(state.vertex_neighbors.T),
                         cells=cells, cells_before=cells[[2, 0, 1]],
                         slot=xp.ascontiguousarray(xp.where(valid, k * nv + v, 3 * nv).T), valid=valid,
-                        first=cv[:, :1])
-        return state.cached(("plane", "tables"), build, topology=True)
+                        first=cv[:, :1], source=state.box)
+        tables = state.cached(("plane", "tables"), build, topology=True)
+        if tables["source"] is not state.box:
+            state.clear_cache()
+            tables = state.cached(("plane", "tables"), build, topology=True)
+        return tables
 
     def corner_edges(self, state):
         """The minimum image of ``x[vertex_neighbors[v, k]] - x[v]`` per corner, ``(2, 3, V)``."""

@@ -155,18 +155,22 @@ _MODULES = {}
 BLOCK = 256
 
 
-def load_module(cu_file):
-    """Compile (once per process) the CUDA source ``cu_file`` and return its cupy.RawModule.
+def load_module(cu_file, defines=()):
+    """Compile (once per process and set of ``defines``) the CUDA source ``cu_file`` and return its
+    cupy.RawModule.
 
     ``cu_file`` is a path to a ``.cu`` file beside the plugin that owns it; it may include the
-    package's headers (``geometry/sphere.cuh``, ``device_common.cuh``). Kernels use the NumPy
-    path's formulas; fused multiply-adds and rsqrt make them agree with it to rounding, not bitwise.
+    package's headers (``geometry/surface.cuh``, ``device_common.cuh``). ``defines``: macro names
+    passed as ``-D`` (``SVM_SURFACE_PLANE`` compiles the kernels for the periodic plane). Kernels use
+    the NumPy path's formulas; fused multiply-adds and rsqrt make them agree with it to rounding, not
+    bitwise.
     """
     import cupy
-    key = str(cu_file)
+    key = (str(cu_file), tuple(defines))
     if key not in _MODULES:
         code = __import__("pathlib").Path(cu_file).read_text()
-        _MODULES[key] = cupy.RawModule(code=code, options=("-std=c++17", f"-I{_PACKAGE_DIR}"))
+        options = ("-std=c++17", f"-I{_PACKAGE_DIR}") + tuple(f"-D{name}" for name in defines)
+        _MODULES[key] = cupy.RawModule(code=code, options=options)
     return _MODULES[key]
 
 

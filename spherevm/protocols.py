@@ -63,7 +63,7 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
     ``surface="plane"``: random periodic Voronoi tilings (:func:`spherevm.init.random_planar_tiling`,
     square box of side sqrt(N), <A> = 1, N >= 8) instead of the sphere's; MSD and Q_s then use the
     unwrapped centroids with each replica's centre-of-mass drift removed instead of its rotation
-    (docs/plane.md). The plane runs on the CPU only for now: ``device="auto"`` picks it there.
+    (docs/plane.md).
 
     ``restart``: a spherevm GSD file (a checkpoint, such as an earlier run's ``out``): its last
     frame gives the State and the timestep (so the Philox noise goes on where that run stopped),
@@ -77,11 +77,6 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
     """
     if surface not in ("sphere", "plane"):
         raise ValueError(f"surface must be 'sphere' or 'plane', got {surface!r}")
-    if surface == "plane":
-        if device not in ("auto", "cpu") and getattr(device, "name", device) != "cpu":
-            raise ValueError("surface='plane' runs on the CPU only for now (the CUDA kernels do not support the "
-                             f"periodic plane yet), got device={device!r}")
-        device = "cpu"
     if steps < 1 or int(steps) != steps:
         raise ValueError(f"steps must be a positive integer, got {steps!r}")
     equilibrate_steps = steps // 10 if equilibrate_steps is None else int(equilibrate_steps)

@@ -307,24 +307,6 @@ def test_process_pool_default_on_cpu(tiny_run, tmp_path):
     _same_records(first.records, result.records)
 
 
-def test_tilings_built_ahead_give_the_same_records(tiny_run, tmp_path, monkeypatch):
-    """Worker processes building the coming chunks (as for a GPU sweep) change nothing, and every
-    chunk is taken from them."""
-    _, first, _ = tiny_run
-    built = []
-    original = sweeps.execution.ChunkBuilder.take
-    monkeypatch.setattr(sweeps.execution.ChunkBuilder, "take",
-                        lambda self, c: built.append(c.id) or original(self, c))
-    result = sweeps.run_sweep(sweeps.RigiditySweep(**TINY), tmp_path / "ahead", executor=sweeps.InProcessExecutor(),
-                              device="cpu", batch_cells=32, builders=2)
-    assert sorted(built) == sorted(result.computed) and len(built) == 2
-    _same_records(first.records, result.records)
-    assert sweeps.execution.default_builders("cpu", True) == 0
-    assert sweeps.execution.default_builders("gpu", False) == 0
-    with pytest.raises(ValueError, match="builders"):
-        sweeps.run_sweep(sweeps.RigiditySweep(**TINY), tmp_path / "bad", device="cpu", builders=-1)
-
-
 def test_unconverged_replicas_reported_not_folded_in(tmp_path):
     sweep = sweeps.RigiditySweep(cells=[16], p0=[3.3], replicas=2, max_steps=20)
     result = sweeps.run_sweep(sweep, tmp_path / "s", executor=sweeps.InProcessExecutor(), device="cpu")
@@ -382,6 +364,26 @@ def test_p0_star_increases_with_n(tmp_path):
     assert all(p0star["bracketed"])
     # close to (not equal to) the regular-pentagon perimeter
     assert np.all(np.abs(p0star["p0_star"] - p0star["pentagon_perimeter"]) < 0.1)
+
+
+@pytest.mark.parametrize("surface", ["sphere", "plane"])
+def test_prefetched_tilings_are_the_chunk_states(surface):
+    """TilingPrefetch (GPU sweeps build tilings in a process pool, cut into parts per worker) gives
+    each chunk exactly the State that build_chunk_state builds alone, in the order asked."""
+    from spherevm.sweeps.execution import TilingPrefetch
+    sweep = sweeps.RigiditySweep(cells=[16, 24], p0=[3.7, 3.9], replicas=5, seed=4, surface=surface)
+    chunks = sweeps.plan_chunks(sweep, batch_cells=100)
+    assert len(chunks) > 2
+    prefetch = TilingPrefetch(sweep, chunks, workers=2, ahead=1)
+    try:
+        for c in chunks:
+            got = prefetch.get(c)._arrays_np()
+            ref = sweeps.build_chunk_state(sweep, c)[0]._arrays_np()
+            assert got.keys() == ref.keys()
+            for key in ref:
+                assert np.array_equal(got[key], ref[key]), (c.id, key)
+    finally:
+        prefetch.close()
 
 
 @pytest.mark.gpu

@@ -95,17 +95,7 @@ def add_surface(group, what="tilings"):
     periodic plane (square box of side sqrt(N)); <A> = 1 on both."""
     group.add_argument("--surface", choices=SURFACES, default="sphere",
                        help=f"{what} on the sphere (radius sqrt(N/4 pi)) or the periodic plane (square box of side "
-                            "sqrt(N), N >= 8; CPU only for now) (default: %(default)s)")
-
-
-def surface_device(surface, device):
-    """The device for ``surface``: the plane runs on the CPU only for now (``auto`` picks it)."""
-    if surface != "plane":
-        return device
-    if device == "gpu":
-        raise CLIError("argument --device: the periodic plane runs on the CPU only for now (the CUDA kernels do "
-                       "not support it yet); use --device cpu or auto")
-    return "cpu"
+                            "sqrt(N), N >= 8) (default: %(default)s)")
 
 
 def force_spec(text):

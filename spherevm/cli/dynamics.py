@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_surface, build_forces,
-                        check_in_path, check_out_path, extra_forces, integer, one_line, real, surface_device)
+                        check_in_path, check_out_path, extra_forces, integer, one_line, real)
 
 
 def add_parser(subparsers):
@@ -82,7 +82,7 @@ def run(args) -> int:
     t0 = time.perf_counter()
     try:
         res = glassy_dynamics(args.cells, args.p0, args.kr, args.T, dt=args.dt, steps=args.steps,
-                              replicas=args.replicas, seed=args.seed, device=surface_device(args.surface, args.device),
+                              replicas=args.replicas, seed=args.seed, device=args.device,
                               relax_steps=args.relax, surface=args.surface, restart=args.restart,
                               equilibrate_steps=args.equilibrate, b=args.b, out=args.out,
                               extra_forces=build_forces(specs),

@@ -6,7 +6,7 @@ import time
 
 from ..progress import StatusLine
 from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_surface, build_forces,
-                        check_in_path, check_out_path, extra_forces, integer, one_line, real, surface_device)
+                        check_in_path, check_out_path, extra_forces, integer, one_line, real)
 
 
 def add_parser(subparsers):
@@ -137,7 +137,7 @@ def run(args) -> int:
     err = sys.stderr
     # set-up: anything the library refuses here is bad input (status 2)
     try:
-        device = svm.device.resolve(surface_device(args.surface, args.device))
+        device = svm.device.resolve(args.device)
         sim = svm.Simulation(device=device, seed=args.seed)
         if args.restart is None:
             tiling = svm.init.random_planar_tiling if args.surface == "plane" else svm.init.random_tiling

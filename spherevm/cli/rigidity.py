@@ -8,7 +8,7 @@ import sys
 from ..sweeps import (CPU_BATCH_CELLS, GPU_BATCH_CELLS, RigiditySweep, TextProgress, format_p0star_table,
                       open_sweep_folder, parse_p0_grid, run_sweep, write_tables)
 from ..sweeps import cluster
-from .arguments import add_force_arguments, add_surface, extra_forces, integer, real, surface_device
+from .arguments import add_force_arguments, add_surface, extra_forces, integer, real
 
 DEFAULT_CELLS = (16, 32)
 DEFAULT_P0 = "3.5:4.0:0.025"
@@ -110,7 +110,7 @@ def run(args) -> int:
             err.flush()
         bar = TextProgress(err) if not args.quiet else None
         try:
-            device = "gpu" if args.gpus else surface_device(sweep.surface, args.device)
+            device = "gpu" if args.gpus else args.device
             result = run_sweep(sweep, args.out, executor=client, device=device,
                                workers=args.workers,
                                batch_cells=args.batch_cells, progress=bar)

@@ -75,6 +75,11 @@ class Constraint:
         raise NotImplementedError(f"{type(self).__name__} does not yet provide area and perimeter gradients "
                                   "(only Sphere does); vertex-model forces need them")
 
+    def cell_normals(self, state):
+        """The unit surface normal at each cell's centre, ``(n_cells, 3)`` (active cell directors
+        live in the tangent plane there)."""
+        raise NotImplementedError(f"{type(self).__name__} does not yet provide cell normals")
+
     def edge_lengths(self, state, u, v):
         raise NotImplementedError(f"{type(self).__name__} does not yet provide geodesic lengths (only Sphere does)")
 

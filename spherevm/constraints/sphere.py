@@ -190,6 +190,10 @@ class Sphere(Constraint):
         summed = xp.stack([xp.bincount(cells, weights=c, minlength=state.n_cells) for c in corner_unit])
         return (summed / xp.sqrt(_dot(summed, summed))).T
 
+    def cell_normals(self, state):
+        """The cell centres: unit vectors, so their own normals."""
+        return self.cell_centers(state)
+
     @staticmethod
     def _edge_factors(part):
         """Per corner, on the unit sphere, the factors that turn ``b x d`` and ``b - d`` into the

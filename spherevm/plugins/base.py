@@ -5,8 +5,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..constraints import PeriodicPlane, Sphere
+from ..device import load_module
 from ..trigger import Always, as_trigger
 from ..validation import integer, non_negative
+
+#: The surfaces with CUDA kernels and the macros that compile geometry/surface.cuh for each: one
+#: kernel source per operation serves them all (``gpu_surfaces`` of the built-in operations).
+SURFACE_DEFINES = {Sphere: (), PeriodicPlane: ("SVM_SURFACE_PLANE",)}
+KERNEL_SURFACES = tuple(SURFACE_DEFINES)
+
+
+def surface_kernels(cu_file, state):
+    """``(module, size)``: the kernels of ``cu_file`` compiled for ``state``'s surface and the State's
+    per-replica size array they take (``radius`` on the sphere, ``box`` on the plane)."""
+    defines = next(d for cls, d in SURFACE_DEFINES.items() if isinstance(state.constraint, cls))
+    return load_module(cu_file, defines), getattr(state, state.constraint.size_name)
 
 
 class Operation:

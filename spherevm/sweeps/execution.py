@@ -25,30 +25,79 @@ CPU_BATCH_CELLS = 512
 GPU_BATCH_CELLS = 1 << 18
 
 
+#: a GPU sweep with at least this many cells to compute builds its tilings in a process pool, ahead
+#: of the GPU (one tiling per replica on the host is otherwise the bottleneck: 0.02-0.06 s each at
+#: N = 1024, against ~1 ms of GPU time per replica)
+PREFETCH_MIN_CELLS = 100_000
+
+
 # ---------------------------------------------------------------------------------------- one chunk
-def build_chunk_state(sweep: RigiditySweep, chunk: Chunk):
-    """The batched State of a chunk and its per-replica (p0, p0_index, replica, tiling_seed)."""
-    from ..init import random_planar_tilings, random_tilings
+def chunk_seeds(sweep: RigiditySweep, chunk: Chunk):
+    """The chunk's units ``(p0 index, replica)`` and their tiling seeds."""
     units = [sweep.unit(u) for u in range(chunk.start, chunk.stop)]
-    seeds = [tiling_seed(sweep.seed, chunk.n_cells, sweep.p0[k], r, sweep.shared_tilings) for k, r in units]
-    tilings = random_planar_tilings if sweep.surface == "plane" else random_tilings
-    state = tilings(chunk.n_cells, seeds)   # shared tilings: a repeated seed gives the same tiling
+    return units, [tiling_seed(sweep.seed, chunk.n_cells, sweep.p0[k], r, sweep.shared_tilings) for k, r in units]
+
+
+def build_tilings(surface: str, n_cells: int, seeds):
+    """The random tilings of ``seeds`` on ``surface`` as one State."""
+    from ..init import random_planar_tilings, random_tilings
+    return (random_planar_tilings if surface == "plane" else random_tilings)(n_cells, seeds)
+
+
+def _tiling_arrays(surface: str, n_cells: int, seeds):
+    """:func:`build_tilings` as plain arrays and the constraint (what a process pool can send back)."""
+    state = build_tilings(surface, n_cells, seeds)
+    return state._arrays_np(), state.constraint
+
+
+def build_chunk_state(sweep: RigiditySweep, chunk: Chunk, state=None):
+    """The batched State of a chunk (``state`` if it was built elsewhere, as :class:`TilingPrefetch`
+    does) and its per-replica (p0, p0_index, replica, tiling_seed)."""
+    units, seeds = chunk_seeds(sweep, chunk)
+    if state is None:   # shared tilings: a repeated seed gives the same tiling
+        state = build_tilings(sweep.surface, chunk.n_cells, seeds)
     p0 = np.array([sweep.p0[k] for k, _ in units])
     return state, p0, [k for k, _ in units], [r for _, r in units], seeds
 
 
-def build_chunk(parameters: dict, n_cells: int, start: int, stop: int):
-    """:func:`build_chunk_state` of plain arguments, for worker processes that build ahead."""
-    return build_chunk_state(RigiditySweep.from_parameters(parameters), Chunk(int(n_cells), int(start), int(stop)))
+class TilingPrefetch:
+    """Builds the tilings of the next ``ahead`` chunks in a process pool while the GPU minimises the
+    current one: each chunk's seeds are cut into one part per worker and the parts concatenated in
+    order, which is the State that :func:`build_chunk_state` builds alone (tested)."""
+
+    def __init__(self, sweep: RigiditySweep, chunks, workers: int, ahead: int = 2):
+        import multiprocessing
+        self.sweep, self.chunks, self.workers, self.ahead = sweep, list(chunks), workers, ahead
+        self.pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+        self.futures = {}
+        self._submit_until(0)
+
+    def _submit_until(self, index):
+        for c in self.chunks[index:index + self.ahead + 1]:
+            if c.id not in self.futures:
+                seeds = chunk_seeds(self.sweep, c)[1]
+                parts = np.array_split(np.array(seeds, dtype=np.int64), min(self.workers, len(seeds)))
+                self.futures[c.id] = [self.pool.submit(_tiling_arrays, self.sweep.surface, c.n_cells, part.tolist())
+                                      for part in parts if len(part)]
+
+    def get(self, chunk):
+        """The chunk's State (waits for its parts), and the next chunks submitted."""
+        from ..state import State
+        self._submit_until(self.chunks.index(chunk))
+        parts = [State(**arrays, constraint=constraint, validate=False)       # validated by the worker
+                 for arrays, constraint in (f.result() for f in self.futures.pop(chunk.id))]
+        return parts[0] if len(parts) == 1 else State.concatenate(parts)
+
+    def close(self):
+        self.pool.shutdown(wait=False, cancel_futures=True)
 
 
-def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu", built=None) -> dict:
+def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu", state=None) -> dict:
     """Minimise one chunk; returns its per-replica records (a dict of lists, :data:`RECORD_COLUMNS`).
 
     A plain module-level function of plain arguments, so any executor (process pool, Dask) can run
-    it. The vertex model is given per cell: ``kA = kr kP / <A>``, ``kP = 1``, ``A0 = <A>``,
-    ``P0 = p0 sqrt(<A>)``, with each replica's own p0. ``built``: what :func:`build_chunk` returns
-    for this chunk, if it was built elsewhere (the same tilings either way).
+    it (``state``: the chunk's tilings when built elsewhere). The vertex model is given per cell:
+    ``kA = kr kP / <A>``, ``kP = 1``, ``A0 = <A>``, ``P0 = p0 sqrt(<A>)``, with each replica's own p0.
     """
     from ..plugins import build_force
     from ..plugins.forces import VertexModel
@@ -59,7 +108,7 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     t0 = time.perf_counter()
     sweep = RigiditySweep.from_parameters(parameters)
     chunk = Chunk(int(n_cells), int(start), int(stop))
-    state, p0, p0_index, replica, seeds = build_chunk_state(sweep, chunk) if built is None else built
+    state, p0, p0_index, replica, seeds = build_chunk_state(sweep, chunk, state)
     mean_area = state.mean_cell_area                     # per replica (1 at the default radius)
     cell_rep = state.cell_replica_np()
     area = mean_area[cell_rep]
@@ -123,44 +172,6 @@ def default_executor(device="auto", workers=None):
     import multiprocessing
     # spawn: no fork of a process that may hold a CUDA context or threads
     return cf.ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn")), dev.name, True
-
-
-class ChunkBuilder:
-    """Builds the tilings of the coming chunks in worker processes while this process minimises.
-
-    For a sweep on one GPU: building a chunk (a convex hull per tiling) takes longer on one host core
-    than minimising it on the GPU, so without this the GPU waits most of the time. The chunks are
-    built in the order they will be taken, at most ``2 workers`` ahead (bounded memory).
-    """
-
-    def __init__(self, parameters: dict, chunks, workers: int):
-        import multiprocessing
-        self.parameters, self.queue, self.depth = parameters, list(chunks), 2 * workers
-        self.pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
-        self.futures = {}
-        self._fill()
-
-    def _fill(self):
-        while self.queue and len(self.futures) < self.depth:
-            c = self.queue.pop(0)
-            self.futures[c.id] = self.pool.submit(build_chunk, self.parameters, c.n_cells, c.start, c.stop)
-
-    def take(self, chunk: Chunk):
-        """What :func:`build_chunk` returns for ``chunk`` (waits for it if it is not built yet)."""
-        future = self.futures.pop(chunk.id)
-        self._fill()
-        return future.result()
-
-    def close(self):
-        self.pool.shutdown(wait=False, cancel_futures=True)
-
-
-def default_builders(device_name: str, in_process: bool) -> int:
-    """Builder processes for :func:`run_sweep`: on a GPU, all host cores but one (at most 8)."""
-    if device_name != "gpu" or not in_process:
-        return 0
-    n = (os.cpu_count() or 1) - 1
-    return min(n, 8) if n >= 2 else 0
 
 
 # ---------------------------------------------------------------------------------------- progress
@@ -234,19 +245,19 @@ class SweepResult:
 
 
 def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=None, batch_cells=None,
-              progress=None, builders=None) -> SweepResult:
+              progress=None) -> SweepResult:
     """Run (or resume) a rigidity sweep, writing each chunk to ``<out>/chunks/`` as it finishes.
 
     ``executor``: any :class:`concurrent.futures.Executor` (or a ``distributed.Client``, whose
     ``get_executor()`` is used); None picks :func:`default_executor` (in-process on a GPU, a
     process pool of ``workers`` processes on the CPU). ``device``: where each chunk is minimised
     (``"cpu"``, ``"gpu"`` or ``"auto"``; with your own executor it is resolved on the worker).
+    On a GPU with the default executor, a sweep of at least :data:`PREFETCH_MIN_CELLS` cells builds
+    its tilings in a process pool of ``workers`` processes (default: the CPU count less one) ahead of
+    the GPU (:class:`TilingPrefetch`); the results are the same.
     ``batch_cells``: cells per chunk (default :data:`CPU_BATCH_CELLS` or :data:`GPU_BATCH_CELLS`);
     it changes how the work is cut, never the results. ``progress``: called with a
-    :class:`SweepProgress` after every chunk. ``builders``: processes that build the coming
-    chunks' tilings while the GPU minimises (:class:`ChunkBuilder`; default
-    :func:`default_builders`: all host cores but one, at most 8, for an in-process GPU sweep; 0 builds
-    each chunk just before it is minimised). Neither changes the results.
+    :class:`SweepProgress` after every chunk.
 
     Everything is validated before the folder is created; a folder holding a sweep with other
     parameters raises ValueError. A chunk that fails stops the sweep (RuntimeError naming the
@@ -257,23 +268,15 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
     from ..device import DEVICE_NAMES, Device
     if not isinstance(device, Device) and (not isinstance(device, str) or device.lower() not in DEVICE_NAMES):
         raise ValueError(f"device must be one of {DEVICE_NAMES}, got {device!r}")
-    if sweep.surface == "plane":       # the CUDA kernels refuse the periodic plane for now
-        if not isinstance(device, Device) and device.lower() == "auto":
-            device = "cpu"
-        elif getattr(device, "is_gpu", False) or (isinstance(device, str) and device.lower() == "gpu"):
-            raise ValueError("a sweep on the periodic plane runs on the CPU only for now (the CUDA kernels do not "
-                             "support it yet); use device='cpu'")
     if workers is not None:
         integer("workers", workers, 1)
     if batch_cells is not None:
         integer("batch_cells", batch_cells, 1)
-    if builders is not None:
-        integer("builders", builders, 0)
     if progress is not None and not callable(progress):
         raise TypeError("progress must be callable")
     open_sweep_folder(sweep, out, create=False)          # bad folder or mismatch: errors before anything is made
 
-    owned, builder = False, None
+    owned = False
     if executor is None:
         executor, device_name, owned = default_executor(device, workers)
     else:
@@ -284,6 +287,7 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         device_name = device.name if isinstance(device, Device) else device.lower()
     if batch_cells is None:
         batch_cells = GPU_BATCH_CELLS if device_name == "gpu" else CPU_BATCH_CELLS
+    prefetch = None
     try:
         path = open_sweep_folder(sweep, out, create=True)
         done, parts, bad = scan_chunks(sweep, path, clean=True)
@@ -303,17 +307,17 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         # written before the next starts); everything at once otherwise, largest N first
         todo = sorted(chunks, key=lambda c: -c.n_cells * c.size)
         limit = 1 if in_process else len(todo)
-        if builders is None:
-            builders = default_builders(device_name, in_process)
-        if in_process and builders and len(todo) > 1:
-            builder = ChunkBuilder(params, todo, builders)
+        cpus = os.cpu_count() or 1
+        if (in_process and device_name == "gpu" and cpus > 2 and len(todo) > 1
+                and sum(c.n_cells * c.size for c in todo) >= PREFETCH_MIN_CELLS):
+            prefetch = TilingPrefetch(sweep, todo, cpus - 1 if workers is None else workers)
         pending = {}
         computed = []
         folder = os.path.join(path, CHUNK_DIR)
         while todo or pending:
             while todo and len(pending) < limit:
                 c = todo.pop(0)
-                built = () if builder is None else (builder.take(c),)
+                built = () if prefetch is None else (prefetch.get(c),)
                 pending[executor.submit(run_chunk, params, c.n_cells, c.start, c.stop, device_name, *built)] = c
             finished, _ = cf.wait(list(pending), return_when=cf.FIRST_COMPLETED)
             for fut in finished:
@@ -343,8 +347,8 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
             executor.shutdown(wait=False, cancel_futures=True)
         raise
     finally:
-        if builder is not None:
-            builder.close()
+        if prefetch is not None:
+            prefetch.close()
         if owned:
             executor.shutdown(wait=True)
     return SweepResult(sweep=sweep, out=path, records=sorted_records(merge_records(parts)), computed=computed,

@@ -5,9 +5,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ...constraints import Sphere
-from ...device import launch, load_module
-from ..base import Force, ForceResult
+from ...device import launch
+from ..base import KERNEL_SURFACES, Force, ForceResult, surface_kernels
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
@@ -97,7 +96,7 @@ class VertexModel(Force):
         return state.cached((self, "parameters"), lambda: [state.device.asarray(np.ascontiguousarray(p))
                                                             for p in self.parameters(state)])
 
-    gpu_surfaces = (Sphere,)
+    gpu_surfaces = KERNEL_SURFACES
     surface_needs = ("cell_geometry", "shape_gradient", "total_area_np")
 
     def attach(self, simulation):
@@ -125,17 +124,19 @@ class VertexModel(Force):
         return f"VertexModel(kA={self.kA}, kP={self.kP}, A0={self.A0}, P0={self.P0})"
 
     def _compute_gpu(self, state) -> ForceResult:
-        """Two fused kernels (vertex_model.cu): cell geometry and energy, then vertex forces."""
+        """Two fused kernels (vertex_model.cu, compiled for the State's surface): cell geometry and
+        energy, then vertex forces."""
         import cupy as cp
         kA, kP, A0, P0 = self._device_parameters(state)
-        module = load_module(_KERNELS)
+        module, size = surface_kernels(_KERNELS, state)
         nc, nv = state.n_cells, state.n_vertices
         coef, cell_energy = cp.empty((nc, 2)), cp.empty(nc)
         energy = cp.zeros(state.n_replicas)
         launch(module.get_function("vm_cell_geometry"), nc,
-               (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, state.radius,
+               (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, size,
                 np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, cell_energy, energy))
         forces = cp.empty_like(state.positions)
         launch(module.get_function("vm_vertex_forces"), nv,
-               (state.positions, state.vertex_neighbors, state.vertex_cells, np.int32(nv), coef, forces))
+               (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, size,
+                np.int32(nv), coef, forces))
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)

@@ -6,10 +6,9 @@ from pathlib import Path
 import numpy as np
 
 from ... import random as rng
-from ...constraints import Sphere
-from ...device import launch, load_module
+from ...device import launch
 from ...validation import non_negative, positive
-from ..base import Integrator, raise_flagged_step
+from ..base import KERNEL_SURFACES, Integrator, raise_flagged_step, surface_kernels
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
@@ -33,7 +32,7 @@ class Brownian(Integrator):
         self.mu = float(non_negative("mu", mu))
         self.max_step = positive("max_step", max_step)
 
-    gpu_surfaces = (Sphere,)
+    gpu_surfaces = KERNEL_SURFACES
     surface_needs = ("normal", "project_normal", "total_area_np")
 
     def attach(self, simulation):
@@ -69,17 +68,18 @@ class Brownian(Integrator):
         pass
 
     def _step_gpu(self, simulation, forces):
-        """One kernel per step (brownian.cu), plus one per cell for cell directors."""
+        """One kernel per step (brownian.cu, compiled for the State's surface), plus one per cell for
+        cell directors."""
         import cupy as cp
         state = simulation.state
         if getattr(self, "_error", None) is None:
             self._error = cp.full(1, np.iinfo(np.uint64).max, dtype=cp.uint64)
-        module = load_module(_KERNELS)
+        module, size = surface_kernels(_KERNELS, state)
         unit, amp = self._per_replica(state)
         directors = self.directors if self._mode else cp.zeros((1, 3))
         rot_amp = float(np.sqrt(2.0 * self.Dr * self.dt)) if self._mode else 0.0
         launch(module.get_function("brownian_move"), state.n_vertices,
-               (state.positions, forces, state.vertex_replica, state.vertex_cells, state.radius, amp, unit,
+               (state.positions, forces, state.vertex_replica, state.vertex_cells, size, amp, unit,
                 directors, np.int32(self._mode), np.float64(self.mu), np.float64(self.dt),
                 np.float64(getattr(self, "v0", 0.0)), np.float64(rot_amp), np.float64(self.max_step),
                 np.uint32(simulation.seed), np.uint64(simulation.timestep), np.int32(state.n_vertices),
@@ -169,10 +169,10 @@ class Active(Brownian):
     checkpoint_fields = ("directors",)   # a restart takes them back instead of drawing new ones
 
     def _bases(self, state):
-        """Unit normals at the directors' base points: cell centroids or vertices."""
+        """Unit normals at the directors' base points: cell centres or vertices."""
         con = state.constraint
         if self.mode == "cell":
-            return con.cell_centers(state)
+            return con.cell_normals(state)
         return con.normal(state.positions)
 
     def attach(self, simulation):

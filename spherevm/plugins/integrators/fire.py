@@ -5,10 +5,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...constraints import Sphere
-from ...device import launch, load_module
+from ...device import launch
 from ...validation import integer, positive
-from ..base import Minimizer, raise_flagged_step
+from ..base import KERNEL_SURFACES, Minimizer, raise_flagged_step, surface_kernels
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
@@ -39,7 +38,7 @@ class FIRE(Minimizer):
     written.
     """
 
-    gpu_surfaces = (Sphere,)
+    gpu_surfaces = KERNEL_SURFACES
     surface_needs = ("normal", "project_normal")
 
     def __init__(self, dt=0.01, dt_max=None, n_min=5, f_inc=1.1, f_dec=0.5, alpha_start=0.1, f_alpha=0.99,
@@ -100,7 +99,8 @@ class FIRE(Minimizer):
     def _reset_vertices_gpu(self, vertices):
         import cupy as cp
         vertices = cp.asarray(vertices, dtype=cp.int32)      # the kernel reads int (T1 passes int32 already)
-        launch(load_module(_KERNELS).get_function("fire_reset_vertices"), len(vertices),
+        module = surface_kernels(_KERNELS, self._simulation.state)[0]
+        launch(module.get_function("fire_reset_vertices"), len(vertices),
                (self.velocities, vertices, np.int32(len(vertices))))
 
     def move(self, simulation, forces):
@@ -176,10 +176,11 @@ class FIRE(Minimizer):
             f"max_step={self.max_step} sqrt(<A>) or became NaN; reduce dt (now {self.dt}) or check the forces"))
 
     def _move_gpu(self, simulation, forces):
-        """Three kernels (fire.cu): per-replica sums, per-replica control, per-vertex move."""
+        """Three kernels (fire.cu, compiled for the State's surface): per-replica sums, per-replica
+        control, per-vertex move."""
         import cupy as cp
         state = simulation.state
-        module = load_module(_KERNELS)
+        module, size = surface_kernels(_KERNELS, state)
         nv, nr = state.n_vertices, state.n_replicas
         active = self.active_on_device()
         sums = cp.zeros((3, nr))
@@ -194,7 +195,7 @@ class FIRE(Minimizer):
         if getattr(self, "_error", None) is None:
             self._error = cp.full(1, np.iinfo(np.uint64).max, dtype=cp.uint64)
         launch(module.get_function("fire_move"), nv,
-               (state.positions, self.velocities, forces, state.vertex_replica, state.radius, active,
+               (state.positions, self.velocities, forces, state.vertex_replica, size, active,
                 keep, scale, step, np.int32(nv), self._length_unit(state), np.float64(self.max_step),
                 np.uint64(simulation.timestep), self._error))
         simulation.state_changed()

@@ -6,9 +6,8 @@ from pathlib import Path
 import numpy as np
 
 from ... import topology
-from ...constraints import Sphere
-from ...device import launch, load_module
-from ..base import Minimizer, Updater
+from ...device import launch
+from ..base import KERNEL_SURFACES, Minimizer, Updater, surface_kernels
 from ...validation import integer, positive
 
 _KERNELS = Path(__file__).with_suffix(".cu")
@@ -95,7 +94,7 @@ class T1(Updater):
         self._separated = np.zeros(0, dtype=np.int64)  # cell pairs separated by a flip (sorted keys)
         self._rejoins = np.zeros(0, dtype=np.int64)    # how often each was joined again
 
-    gpu_surfaces = (Sphere,)
+    gpu_surfaces = KERNEL_SURFACES
     surface_needs = ("normal", "project_normal", "edge_lengths", "chord_length", "total_area_np")
 
     def attach(self, simulation):
@@ -250,7 +249,7 @@ class T1(Updater):
         state = simulation.state
         buf = self._gpu_buffers(state)
         chord2, new_length = self._device_lengths(state)
-        module = load_module(_KERNELS)
+        module, size = surface_kernels(_KERNELS, state)
         integrator = simulation.operations.integrator
         active = integrator.active_on_device() if integrator is not None else buf["all_active"]
         while True:
@@ -258,7 +257,7 @@ class T1(Updater):
             cp.cuda.runtime.memsetAsync(scratch.data.ptr, 0, scratch.nbytes, cp.cuda.get_current_stream().ptr)
             launch(module.get_function("t1_detect"), state.n_vertices,
                    (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_sides,
-                    state.vertex_replica, state.radius, chord2, active, np.int32(state.n_vertices),
+                    state.vertex_replica, size, chord2, active, np.int32(state.n_vertices),
                     np.int32(state.max_sides), buf["claim"], buf["refused"], buf["total_refused"], buf["counters"],
                     buf["cand"], buf["cand_len"], np.int32(buf["capacity"])))
             n_cand, widen = (int(x) for x in buf["counters"].get())   # the one read-back
@@ -288,7 +287,7 @@ class T1(Updater):
         launch(module.get_function("t1_apply"), n_cand,
                (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_vertices, state.cell_sides,
                 buf["claim"], buf["cand"], buf["cand_len"], np.int32(n_cand), np.int32(state.max_sides),
-                state.radius, new_length, np.float64(self.length_factor or 0.0), buf["flips"],
+                size, new_length, np.float64(self.length_factor or 0.0), buf["flips"],
                 buf["total_flips"], moved, buf["log_count"], buf["log"], np.int32(buf["passes"] if counting else -1)))
         launch(module.get_function("t1_release"), n_cand, (buf["claim"], buf["cand"], np.int32(n_cand)))
         if self.reset_velocities and integrator is not None:

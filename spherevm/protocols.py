@@ -103,7 +103,7 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
     sim.operations.writers.append(recorder)
     if out is not None:
         shots = (start + analysis.log_spaced_times(steps, max(1, frames // 4))).tolist()
-        sim.operations.writers.append(GSD(out, trigger=shots))
+        sim.operations.writers.append(GSD(shots, out))
     sim.run(steps, check_every=100, progress=None if progress is None else lambda i, n: progress("production", i, n))
     traj = analysis.Trajectory.from_recording(recorder, dt=dt)
     traj.times = traj.times - traj.times[0]

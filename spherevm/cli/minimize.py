@@ -153,7 +153,7 @@ def run(args) -> int:
         writer = None
         if args.out is not None:
             trigger = Periodic(args.write_every) if args.write_every > 0 else On(0)
-            writer = svm.plugins.writers.GSD(args.out, trigger=trigger)
+            writer = svm.plugins.writers.GSD(trigger, args.out)
             sim.operations.writers.append(writer)
     except (ValueError, TypeError, RuntimeError, OSError) as exc:
         raise CLIError(one_line(exc), USAGE_ERROR) from exc

@@ -101,4 +101,7 @@ def run(args) -> int:
     if not args.quiet:
         err.write(f"spherevm: done in {time.perf_counter() - t0:.1f} s"
                   f"{'' if csv_path is None else f'; wrote {csv_path}'}{'' if args.out is None else f' and {args.out}'}\n")
+        if args.out is not None:
+            err.write(f"spherevm: {args.out}'s first frame is step {res.production_start}, the start of production "
+                      "(after relaxation and equilibration); lags count from it\n")
     return 0

@@ -12,7 +12,7 @@ class Logger:
 
     >>> logger = Logger(["energy_per_cell", "mean_shape_index"])
     >>> logger.add(t1)                                   # every loggable of an operation (or a Simulation)
-    >>> logger["mean_area"] = lambda sim: 4 * 3.14159 * sim.state.radius**2 / sim.state.cells_per_replica
+    >>> logger["mean_area"] = lambda sim: sim.state.mean_cell_area    # a custom quantity
 
     A custom quantity is a callable ``f(simulation)`` returning a scalar or one value per replica.
     Names are checked against the Simulation when a writer first uses the logger (:meth:`check`),

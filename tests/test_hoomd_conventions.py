@@ -138,6 +138,12 @@ def test_logger_chooses_what_the_gsd_logs(tmp_path):
         np.testing.assert_array_equal(last.log["t1_total_flips"], sim.log("t1_total_flips"))
 
 
+def test_gsd_log_takes_a_logger_as_hoomd_3(tmp_path):
+    logger = Logger(["energy"])
+    assert GSD(1, tmp_path / "a.gsd", log=logger).logger is logger
+    assert GSD(1, tmp_path / "a.gsd", log=["energy", "max_force"]).log == ("energy", "max_force")
+
+
 def test_logger_drives_a_table(tmp_path):
     sim = _sim()
     logger = Logger("mean_shape_index")

@@ -44,8 +44,8 @@ class GSD(Writer):
         (HOOMD's default is ``"ab"``; docs/hoomd.md says why this one overwrites.)
     logger : a :class:`spherevm.logging.Logger` choosing what is logged, written as ``log/<name>``
         with one value per replica (scalars as one value).
-    log : the short form, a sequence of loggable names (see ``Simulation.loggables``); give
-        ``logger`` or ``log``, not both. The default (neither) logs energy, energy per cell, mean
+    log : the short form, a sequence of loggable names (see ``Simulation.loggables``), or a
+        Logger (HOOMD-blue 3's spelling); give ``logger`` or ``log``, not both. The default (neither) logs energy, energy per cell, mean
         shape index and largest force, skipping the force-dependent ones without a force.
     cell_quantities : which per-cell values to record, from ``("area", "perimeter", "shape_index",
         "energy")``: exact arrays under ``spherevm/cell_<q>`` and the mean over each vertex's three
@@ -74,6 +74,8 @@ class GSD(Writer):
             raise ValueError(f"mode must be one of 'wb' (overwrite), 'ab' (append) or 'xb' (create), got {mode!r}")
         self.filename = os.fspath(filename)
         self.mode = mode
+        if isinstance(log, Logger) and logger is None:     # HOOMD-blue 3 spelled it log=Logger
+            logger, log = log, None
         if logger is not None and log is not None:
             raise ValueError("give GSD either logger= (a spherevm.logging.Logger) or log= (names), not both")
         if logger is not None and not isinstance(logger, Logger):

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..progress import StatusLine
+from ..progress import bar as progress_bar
 from ..validation import integer
 from .spec import Chunk, RigiditySweep, plan_chunks, tiling_seed
 from .store import (CHUNK_DIR, RECORD_COLUMNS, merge_records, open_sweep_folder, scan_chunks, sorted_records,
@@ -143,32 +143,30 @@ class SweepProgress:
 
 
 class TextProgress:
-    """A plain-text progress bar on a stream (standard error): redrawn in place on a terminal,
-    otherwise one line per finished chunk at most every 5 seconds (and the last)."""
+    """The sweep's progress bar (tqdm) on a stream (standard error by default): the share of the
+    work done (cells, since a minimisation's cost grows with N), chunks and minimisations done,
+    those found on disk, elapsed time and ETA. Drawn on a terminal only; silent in a log or a pipe."""
 
-    def __init__(self, stream=None, width=28, label="rigidity"):
-        self.status = StatusLine(stream)
-        self.tty = self.status.tty
-        self.width, self.label = width, label
-        self.last = -math.inf
+    def __init__(self, stream=None, label="rigidity"):
+        self.stream, self.label = stream, label
+        self.bar = None
 
     def __call__(self, p: SweepProgress):
-        now = time.monotonic()
-        final = p.chunks_done == p.chunks_total
-        if not self.tty and not final and p.chunks_done and now - self.last < 5.0:
-            return
-        self.last = now
-        frac = p.cells_done / p.cells_total if p.cells_total else 1.0
-        fill = int(round(self.width * frac))
-        eta = "" if not math.isfinite(p.eta) or final else f"  eta {p.eta:5.0f} s"
+        if self.bar is None:
+            self.bar = progress_bar(p.cells_total, self.label, " cells", self.stream, initial=p.cells_done,
+                                    smoothing=0,
+                                    bar_format="{desc}: {percentage:5.1f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
         reused = f" ({p.units_reused} on disk)" if p.units_reused else ""
-        line = (f"{self.label}: [{'#' * fill}{'.' * (self.width - fill)}] {100 * frac:5.1f}%  "
-                f"chunks {p.chunks_done}/{p.chunks_total}  minimisations {p.units_done}/{p.units_total}{reused}  "
-                f"{p.elapsed:6.1f} s{eta}")
-        self.status.show(line)
+        self.bar.set_postfix_str(f"chunks {p.chunks_done}/{p.chunks_total}  "
+                                 f"minimisations {p.units_done}/{p.units_total}{reused}", refresh=False)
+        self.bar.update(p.cells_done - self.bar.n)
+        if p.chunks_done == p.chunks_total:
+            self.bar.refresh()
 
     def close(self):
-        self.status.close()
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
 
 
 # ---------------------------------------------------------------------------------------- the sweep

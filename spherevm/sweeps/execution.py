@@ -13,6 +13,7 @@ import numpy as np
 from ..progress import bar as progress_bar
 from ..validation import integer
 from .spec import Chunk, RigiditySweep, plan_chunks, tiling_seed
+from .states import chunk_state_gsd, save_chunk_state, state_path
 from .store import (CHUNK_DIR, RECORD_COLUMNS, merge_records, open_sweep_folder, scan_chunks, sorted_records,
                     write_columns)
 from .tables import summarize_records
@@ -37,8 +38,10 @@ def build_chunk_state(sweep: RigiditySweep, chunk: Chunk):
     return state, p0, [k for k, _ in units], [r for _, r in units], seeds
 
 
-def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu") -> dict:
-    """Minimise one chunk; returns its per-replica records (a dict of lists, :data:`RECORD_COLUMNS`).
+def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu", save_states=False) -> dict:
+    """Minimise one chunk; returns its per-replica records (a dict of lists, :data:`RECORD_COLUMNS`),
+    with ``save_states`` also its minimised State as the bytes of a GSD file (key ``"state_gsd"``,
+    :func:`spherevm.sweeps.states.chunk_state_gsd`).
 
     A plain module-level function of plain arguments, so any executor (process pool, Dask) can run
     it. The vertex model is given per cell: ``kA = kr kP / <A>``, ``kP = 1``, ``A0 = <A>``,
@@ -71,7 +74,8 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     flips = np.asarray(sim.log("t1_total_flips"))          # the loggable syncs the GPU counters
     elapsed = time.perf_counter() - t0
     n = chunk.size
-    return {"n_cells": [chunk.n_cells] * n, "p0": p0.tolist(), "p0_index": list(p0_index), "replica": list(replica),
+    extra = {"state_gsd": chunk_state_gsd(sim, p0, p0_index, replica)} if save_states else {}
+    return {**extra, "n_cells": [chunk.n_cells] * n, "p0": p0.tolist(), "p0_index": list(p0_index), "replica": list(replica),
             "tiling_seed": list(seeds), "energy_per_cell": [float(e) for e in res.energy_per_cell],
             "max_force": [float(f) for f in res.max_force],
             "mean_shape_index": [float(q) for q in res.mean_shape_index],
@@ -187,8 +191,23 @@ class SweepResult:
         return summarize_records(self.records, zero_tol=zero_tol, **{"surface": self.sweep.surface, **kwargs})
 
 
+def _drop_chunks_without_states(sweep, path, done, parts):
+    """Mark the units of finished chunks that have no state file as missing (and remove those
+    chunk files, which the new chunks replace); return the records kept."""
+    kept = []
+    for rec in parts:
+        cid = rec["chunk"][0]
+        if os.path.isfile(state_path(path, cid)):
+            kept.append(rec)
+            continue
+        n = rec["n_cells"][0]
+        done[n][np.asarray(rec["p0_index"]) * sweep.replicas + np.asarray(rec["replica"])] = False
+        os.remove(os.path.join(path, CHUNK_DIR, cid + ".csv"))
+    return kept
+
+
 def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=None, batch_cells=None,
-              progress=None) -> SweepResult:
+              progress=None, save_states=False) -> SweepResult:
     """Run (or resume) a rigidity sweep, writing each chunk to ``<out>/chunks/`` as it finishes.
 
     ``executor``: any :class:`concurrent.futures.Executor` (or a ``distributed.Client``, whose
@@ -197,7 +216,10 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
     (``"cpu"``, ``"gpu"`` or ``"auto"``; with your own executor it is resolved on the worker).
     ``batch_cells``: cells per chunk (default :data:`CPU_BATCH_CELLS` or :data:`GPU_BATCH_CELLS`);
     it changes how the work is cut, never the results. ``progress``: called with a
-    :class:`SweepProgress` after every chunk.
+    :class:`SweepProgress` after every chunk. ``save_states``: also keep each chunk's minimised
+    State (the inherent states) in ``<out>/states/<chunk id>.gsd``, opened with
+    :func:`spherevm.sweeps.load_state`; a chunk finished earlier without its state file is
+    computed again (on the CPU with bitwise the same records).
 
     Everything is validated before the folder is created; a folder holding a sweep with other
     parameters raises ValueError. A chunk that fails stops the sweep (RuntimeError naming the
@@ -236,6 +258,8 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
     try:
         path = open_sweep_folder(sweep, out, create=True)
         done, parts, bad = scan_chunks(sweep, path, clean=True)
+        if save_states:
+            parts = _drop_chunks_without_states(sweep, path, done, parts)
         chunks = plan_chunks(sweep, batch_cells, done)
         reused_units = int(sum(d.sum() for d in done.values()))
         reused_cells = int(sum(n * d.sum() for n, d in done.items()))
@@ -258,7 +282,8 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         while todo or pending:
             while todo and len(pending) < limit:
                 c = todo.pop(0)
-                pending[executor.submit(run_chunk, params, c.n_cells, c.start, c.stop, device_name)] = c
+                pending[executor.submit(run_chunk, params, c.n_cells, c.start, c.stop, device_name,
+                                        bool(save_states))] = c
             finished, _ = cf.wait(list(pending), return_when=cf.FIRST_COMPLETED)
             for fut in finished:
                 c = pending.pop(fut)
@@ -270,6 +295,8 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
                                        f"{type(exc).__name__}: {exc}; finished chunks are kept in {folder}, "
                                        "rerun to resume") from exc
                 rec = fut.result()
+                if save_states:                 # the state first: a chunk file then implies its state
+                    save_chunk_state(path, c.id, rec.pop("state_gsd"))
                 write_columns(os.path.join(folder, c.id + ".csv"), rec, RECORD_COLUMNS)
                 parts.append(rec)
                 computed.append(c.id)

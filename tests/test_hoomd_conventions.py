@@ -7,18 +7,14 @@ import numpy as np
 import pytest
 
 import spherevm as svm
+from conftest import fire_simulation
 from spherevm.logging import Logger
 from spherevm.plugins.writers import GSD, Table
 from spherevm.trigger import And, Or, Periodic, Trigger
 
 
 def _sim(replicas=2):
-    sim = svm.Simulation(device="cpu", seed=1)
-    sim.state = svm.init.random_tiling(16, replicas=replicas, seed=1)
-    sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=3.8))
-    sim.operations.updaters.append(svm.plugins.updaters.T1())
-    sim.operations.integrator = svm.plugins.integrators.FIRE()
-    return sim
+    return fire_simulation(replicas=replicas, seed=1)
 
 
 def _steps(path):

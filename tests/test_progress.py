@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-import spherevm as svm
+from conftest import fire_simulation
 from spherevm import cli
 from spherevm.progress import MinimizeBar, RunBar, StageBars
 from spherevm.sweeps import SweepProgress, TextProgress
@@ -17,13 +17,8 @@ class Terminal(io.StringIO):
         return True
 
 
-def _sim(replicas=3):
-    sim = svm.Simulation(device="cpu", seed=4)
-    sim.state = svm.init.random_tiling(16, replicas=replicas, seed=4)
-    sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=3.8))
-    sim.operations.updaters.append(svm.plugins.updaters.T1())
-    sim.operations.integrator = svm.plugins.integrators.FIRE()
-    return sim
+def _sim(replicas=2):
+    return fire_simulation(replicas=replicas, seed=4)
 
 
 def _last(text):

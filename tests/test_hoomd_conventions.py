@@ -55,10 +55,12 @@ def test_gsd_old_order_still_works_and_warns(args, kwargs, tmp_path, monkeypatch
 def test_gsd_argument_mistakes_are_named(tmp_path):
     with pytest.raises(TypeError, match="trigger both by position and by keyword"):
         GSD(5, tmp_path / "a.gsd", trigger=10)
-    with pytest.raises(TypeError, match="target both"):
+    with pytest.raises(TypeError, match="filename both"):
         GSD(5, tmp_path / "a.gsd", filename=tmp_path / "b.gsd")
-    with pytest.raises(TypeError, match="at most 2 positional"):
+    with pytest.raises(TypeError, match=r"at most 2 positional arguments \(trigger, filename\)"):
         GSD(5, tmp_path / "a.gsd", "wb")
+    with pytest.raises(TypeError, match="path both"):
+        Table(5, tmp_path / "a.csv", path=tmp_path / "b.csv")
     with pytest.raises(ValueError, match="filename must be a non-empty path"):
         GSD(5)
 

@@ -64,7 +64,7 @@ class GSD(Writer):
 
     def __init__(self, *args, trigger=None, filename=None, mode="wb", logger=None, log=None,
                  cell_quantities=gsdio.CELL_QUANTITIES, checkpoint=True, final=True):
-        trigger, filename = trigger_first("GSD", args, trigger, filename, default_trigger=1000)
+        trigger, filename = trigger_first("GSD", args, trigger, filename, 1000, "filename")
         super().__init__(trigger)
         self.checkpoint = bool(checkpoint)
         self.final = bool(final)

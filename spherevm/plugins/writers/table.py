@@ -23,7 +23,7 @@ class Table(Writer):
     """
 
     def __init__(self, *args, trigger=None, path=None, quantities=None, logger=None):
-        trigger, path = trigger_first("Table", args, trigger, path, default_trigger=1000)
+        trigger, path = trigger_first("Table", args, trigger, path, 1000, "path")
         super().__init__(trigger)
         if logger is not None and quantities is not None:
             raise ValueError("give Table either logger= (a spherevm.logging.Logger) or quantities= (names), not both")

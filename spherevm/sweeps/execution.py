@@ -271,6 +271,7 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         if progress is not None:
             progress(state)
         params = sweep.parameters()
+        states = {"save_states": True} if save_states else {}     # the call stays the same without them
         in_process = isinstance(executor, InProcessExecutor)
         # bounded submission for the in-process executor (it runs at submit time, so each chunk is
         # written before the next starts); everything at once otherwise, largest N first
@@ -283,7 +284,7 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
             while todo and len(pending) < limit:
                 c = todo.pop(0)
                 pending[executor.submit(run_chunk, params, c.n_cells, c.start, c.stop, device_name,
-                                        bool(save_states))] = c
+                                        **states)] = c
             finished, _ = cf.wait(list(pending), return_when=cf.FIRST_COMPLETED)
             for fut in finished:
                 c = pending.pop(fut)

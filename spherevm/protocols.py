@@ -21,6 +21,8 @@ class DynamicsResult:
     """MSD and self-overlap of a run (lags in time units), averaged over replicas and per replica.
 
     ``tau_alpha`` is read off the replica-averaged Q_s; ``tau_alpha_per_replica`` off each replica's.
+    ``production_start`` is the timestep production began at (after relaxation and equilibration):
+    the GSD's first frame and the origin of every lag (a lag of t is timestep production_start + t/dt).
     """
     lag: np.ndarray
     msd: np.ndarray
@@ -30,6 +32,7 @@ class DynamicsResult:
     tau_alpha: float
     tau_alpha_per_replica: np.ndarray
     simulation: Simulation
+    production_start: int = 0
 
     def write_csv(self, path):
         """Columns: time, msd, self_overlap (lengths in units of sqrt(<A>))."""
@@ -56,7 +59,10 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
        tau_alpha where Q_s reaches 1/e (NaN if it does not within the run).
 
     ``T`` may hold one temperature per replica: a whole temperature series runs as one ensemble.
-    ``out``: GSD trajectory of the production run (``frames`` frames, log-spaced). ``progress``:
+    ``out``: GSD trajectory of the production run (``frames`` frames, log-spaced); its first frame
+    is at the end of relaxation and equilibration, not at step 0 (``configuration/step`` counts
+    every step of the run, so the Philox noise never repeats and a restart goes on bitwise): the
+    result's ``production_start`` is that step. ``progress``:
     ``progress(stage, done, total)``. ``extra_forces``: Force instances added to the vertex model
     (e.g. ``Bending(B)``), in every stage. Time unit: 1/(mu kP) with mu = 1; dt in that unit.
 
@@ -110,7 +116,7 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
     sim.operations.writers.append(recorder)
     if out is not None:
         shots = (start + analysis.log_spaced_times(steps, max(1, frames // 4))).tolist()
-        sim.operations.writers.append(GSD(out, trigger=shots))
+        sim.operations.writers.append(GSD(shots, out))
     sim.run(steps, check_every=100, progress=None if progress is None else lambda i, n: progress("production", i, n))
     traj = analysis.Trajectory.from_recording(recorder, dt=dt)
     traj.times = traj.times - traj.times[0]
@@ -122,4 +128,4 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
         tau_r = np.atleast_1d(np.asarray(q.tau_alpha(per_replica=True), dtype=float))
     return DynamicsResult(lag=m.lag, msd=m.value, self_overlap=q.value, msd_per_replica=m.per_replica,
                           self_overlap_per_replica=q.per_replica, tau_alpha=tau, tau_alpha_per_replica=tau_r,
-                          simulation=sim)
+                          simulation=sim, production_start=start)

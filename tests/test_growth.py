@@ -375,7 +375,7 @@ def test_gsd_round_trip_with_changing_counts(tmp_path):
     path = tmp_path / "grow.gsd"
     sim, vm, div = _grow_sim(rule="rate", rate=0.2, axis="random", replicas=1, dt=1.0)
     sim.operations.updaters.append(Extrusion(area_threshold=0.3))
-    sim.operations.writers.append(GSD(path, trigger=1))
+    sim.operations.writers.append(GSD(1, path))
     snapshots = []
     for _ in range(8):
         sim.run(1)

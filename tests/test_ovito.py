@@ -14,7 +14,7 @@ def test_pipeline_cell_mesh(tmp_path):
     sim.state = svm.init.random_tiling(24, replicas=2, seed=5)
     sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=3.8))
     sim.operations.integrator = svm.plugins.integrators.FIRE(dt=0.02)
-    sim.operations.writers.append(svm.plugins.writers.GSD(str(path), trigger=20))
+    sim.operations.writers.append(svm.plugins.writers.GSD(20, str(path)))
     sim.run(40)
     sim.operations.writers[0].close()
     pipeline = so.pipeline(path)

@@ -280,7 +280,7 @@ def test_gsd_round_trip_of_a_planar_state(tmp_path):
     s = svm.init.random_planar_tiling(25, replicas=2, seed=1, box=(4.0, 6.25))
     sim = _sim(s, 3.8, kr=1.0)
     path = tmp_path / "plane.gsd"
-    sim.operations.writers.append(svm.plugins.writers.GSD(path, trigger=1))
+    sim.operations.writers.append(svm.plugins.writers.GSD(1, path))
     sim.operations.integrator = Brownian(dt=0.01, T=0.1)
     sim.run(3)
     back = svm.init.from_gsd(path, validate=True)

@@ -54,6 +54,33 @@ def test_dynamics_cli_writes_csv_and_gsd(tmp_path, capsys):
         assert len(traj) > 3
 
 
+def test_dynamics_gsd_starts_at_production(tmp_path, capsys):
+    """The GSD's first frame is at the end of relaxation + equilibration (issue 14.7): the result and
+    the command say which step that is, and the lags count from it."""
+    import gsd.hoomd
+    from spherevm.analysis import Trajectory, msd
+    out = tmp_path / "p.gsd"
+    res = glassy_dynamics(16, 3.9, 0.0, T=0.02, dt=0.05, steps=200, replicas=2, relax_steps=150, seed=2,
+                          device="cpu", out=str(out), equilibrate_steps=30)
+    with gsd.hoomd.open(out) as traj:
+        steps = [int(f.configuration.step) for f in traj]
+    relaxed = res.production_start - 30
+    assert 0 < relaxed <= 150                         # FIRE stopped somewhere in its 150 steps
+    assert steps[0] == res.production_start and steps[-1] == res.production_start + 200
+    from_file = Trajectory.from_gsd(out)
+    lag, m = msd(from_file)
+    assert lag[0] == 0 and lag[-1] == 200              # lags from the first frame, in steps
+    i = int(np.flatnonzero(res.lag == 200 * 0.05)[0])
+    assert m[-1] == pytest.approx(res.msd[i], rel=1e-12)   # the same frames as the recording
+    code = cli.main(["dynamics", "--cells", "16", "--replicas", "1", "--steps", "50", "--relax", "40",
+                     "--T", "0.02", "--out", str(tmp_path / "c.gsd")])
+    assert code == 0
+    err = capsys.readouterr().err
+    with gsd.hoomd.open(tmp_path / "c.gsd") as traj:
+        first = int(traj[0].configuration.step)
+    assert first > 0 and f"c.gsd's first frame is step {first}, the start of production" in err
+
+
 @pytest.mark.parametrize("argv", [["--T", "-1"], ["--dt", "0"], ["--steps", "0"], ["--cells", "3"]])
 def test_dynamics_cli_bad_input(argv, capsys):
     assert cli.main(["dynamics", *argv]) == 2

@@ -10,9 +10,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..progress import StatusLine
+from ..progress import bar as progress_bar
 from ..validation import integer
 from .spec import Chunk, RigiditySweep, plan_chunks, tiling_seed
+from .states import chunk_state_gsd, save_chunk_state, state_path
 from .store import (CHUNK_DIR, RECORD_COLUMNS, merge_records, open_sweep_folder, scan_chunks, sorted_records,
                     write_columns)
 from .tables import summarize_records
@@ -92,8 +93,11 @@ class TilingPrefetch:
         self.pool.shutdown(wait=False, cancel_futures=True)
 
 
-def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu", state=None) -> dict:
-    """Minimise one chunk; returns its per-replica records (a dict of lists, :data:`RECORD_COLUMNS`).
+def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu", state=None,
+              save_states=False) -> dict:
+    """Minimise one chunk; returns its per-replica records (a dict of lists, :data:`RECORD_COLUMNS`),
+    with ``save_states`` also its minimised State as the bytes of a GSD file (key ``"state_gsd"``,
+    :func:`spherevm.sweeps.states.chunk_state_gsd`).
 
     A plain module-level function of plain arguments, so any executor (process pool, Dask) can run
     it (``state``: the chunk's tilings when built elsewhere). The vertex model is given per cell:
@@ -126,7 +130,8 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     flips = np.asarray(sim.log("t1_total_flips"))          # the loggable syncs the GPU counters
     elapsed = time.perf_counter() - t0
     n = chunk.size
-    return {"n_cells": [chunk.n_cells] * n, "p0": p0.tolist(), "p0_index": list(p0_index), "replica": list(replica),
+    extra = {"state_gsd": chunk_state_gsd(sim, p0, p0_index, replica)} if save_states else {}
+    return {**extra, "n_cells": [chunk.n_cells] * n, "p0": p0.tolist(), "p0_index": list(p0_index), "replica": list(replica),
             "tiling_seed": list(seeds), "energy_per_cell": [float(e) for e in res.energy_per_cell],
             "max_force": [float(f) for f in res.max_force],
             "mean_shape_index": [float(q) for q in res.mean_shape_index],
@@ -198,32 +203,30 @@ class SweepProgress:
 
 
 class TextProgress:
-    """A plain-text progress bar on a stream (standard error): redrawn in place on a terminal,
-    otherwise one line per finished chunk at most every 5 seconds (and the last)."""
+    """The sweep's progress bar (tqdm) on a stream (standard error by default): the share of the
+    work done (cells, since a minimisation's cost grows with N), chunks and minimisations done,
+    those found on disk, elapsed time and ETA. Drawn on a terminal only; silent in a log or a pipe."""
 
-    def __init__(self, stream=None, width=28, label="rigidity"):
-        self.status = StatusLine(stream)
-        self.tty = self.status.tty
-        self.width, self.label = width, label
-        self.last = -math.inf
+    def __init__(self, stream=None, label="rigidity"):
+        self.stream, self.label = stream, label
+        self.bar = None
 
     def __call__(self, p: SweepProgress):
-        now = time.monotonic()
-        final = p.chunks_done == p.chunks_total
-        if not self.tty and not final and p.chunks_done and now - self.last < 5.0:
-            return
-        self.last = now
-        frac = p.cells_done / p.cells_total if p.cells_total else 1.0
-        fill = int(round(self.width * frac))
-        eta = "" if not math.isfinite(p.eta) or final else f"  eta {p.eta:5.0f} s"
+        if self.bar is None:
+            self.bar = progress_bar(p.cells_total, self.label, " cells", self.stream, initial=p.cells_done,
+                                    smoothing=0,
+                                    bar_format="{desc}: {percentage:5.1f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
         reused = f" ({p.units_reused} on disk)" if p.units_reused else ""
-        line = (f"{self.label}: [{'#' * fill}{'.' * (self.width - fill)}] {100 * frac:5.1f}%  "
-                f"chunks {p.chunks_done}/{p.chunks_total}  minimisations {p.units_done}/{p.units_total}{reused}  "
-                f"{p.elapsed:6.1f} s{eta}")
-        self.status.show(line)
+        self.bar.set_postfix_str(f"chunks {p.chunks_done}/{p.chunks_total}  "
+                                 f"minimisations {p.units_done}/{p.units_total}{reused}", refresh=False)
+        self.bar.update(p.cells_done - self.bar.n)
+        if p.chunks_done == p.chunks_total:
+            self.bar.refresh()
 
     def close(self):
-        self.status.close()
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
 
 
 # ---------------------------------------------------------------------------------------- the sweep
@@ -244,8 +247,23 @@ class SweepResult:
         return summarize_records(self.records, zero_tol=zero_tol, **{"surface": self.sweep.surface, **kwargs})
 
 
+def _drop_chunks_without_states(sweep, path, done, parts):
+    """Mark the units of finished chunks that have no state file as missing (and remove those
+    chunk files, which the new chunks replace); return the records kept."""
+    kept = []
+    for rec in parts:
+        cid = rec["chunk"][0]
+        if os.path.isfile(state_path(path, cid)):
+            kept.append(rec)
+            continue
+        n = rec["n_cells"][0]
+        done[n][np.asarray(rec["p0_index"]) * sweep.replicas + np.asarray(rec["replica"])] = False
+        os.remove(os.path.join(path, CHUNK_DIR, cid + ".csv"))
+    return kept
+
+
 def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=None, batch_cells=None,
-              progress=None) -> SweepResult:
+              progress=None, save_states=False) -> SweepResult:
     """Run (or resume) a rigidity sweep, writing each chunk to ``<out>/chunks/`` as it finishes.
 
     ``executor``: any :class:`concurrent.futures.Executor` (or a ``distributed.Client``, whose
@@ -257,7 +275,10 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
     the GPU (:class:`TilingPrefetch`); the results are the same.
     ``batch_cells``: cells per chunk (default :data:`CPU_BATCH_CELLS` or :data:`GPU_BATCH_CELLS`);
     it changes how the work is cut, never the results. ``progress``: called with a
-    :class:`SweepProgress` after every chunk.
+    :class:`SweepProgress` after every chunk. ``save_states``: also keep each chunk's minimised
+    State (the inherent states) in ``<out>/states/<chunk id>.gsd``, opened with
+    :func:`spherevm.sweeps.load_state`; a chunk finished earlier without its state file is
+    computed again (on the CPU with bitwise the same records).
 
     Everything is validated before the folder is created; a folder holding a sweep with other
     parameters raises ValueError. A chunk that fails stops the sweep (RuntimeError naming the
@@ -291,6 +312,8 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
     try:
         path = open_sweep_folder(sweep, out, create=True)
         done, parts, bad = scan_chunks(sweep, path, clean=True)
+        if save_states:
+            parts = _drop_chunks_without_states(sweep, path, done, parts)
         chunks = plan_chunks(sweep, batch_cells, done)
         reused_units = int(sum(d.sum() for d in done.values()))
         reused_cells = int(sum(n * d.sum() for n, d in done.items()))
@@ -302,6 +325,7 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         if progress is not None:
             progress(state)
         params = sweep.parameters()
+        states = {"save_states": True} if save_states else {}     # the call stays the same without them
         in_process = isinstance(executor, InProcessExecutor)
         # bounded submission for the in-process executor (it runs at submit time, so each chunk is
         # written before the next starts); everything at once otherwise, largest N first
@@ -318,7 +342,8 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
             while todo and len(pending) < limit:
                 c = todo.pop(0)
                 built = () if prefetch is None else (prefetch.get(c),)
-                pending[executor.submit(run_chunk, params, c.n_cells, c.start, c.stop, device_name, *built)] = c
+                pending[executor.submit(run_chunk, params, c.n_cells, c.start, c.stop, device_name, *built,
+                                        **states)] = c
             finished, _ = cf.wait(list(pending), return_when=cf.FIRST_COMPLETED)
             for fut in finished:
                 c = pending.pop(fut)
@@ -330,6 +355,8 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
                                        f"{type(exc).__name__}: {exc}; finished chunks are kept in {folder}, "
                                        "rerun to resume") from exc
                 rec = fut.result()
+                if save_states:                 # the state first: a chunk file then implies its state
+                    save_chunk_state(path, c.id, rec.pop("state_gsd"))
                 write_columns(os.path.join(folder, c.id + ".csv"), rec, RECORD_COLUMNS)
                 parts.append(rec)
                 computed.append(c.id)

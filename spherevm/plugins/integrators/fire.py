@@ -24,10 +24,12 @@ class FIRE(Minimizer):
     3. semi-implicit Euler: ``v <- v + dt F``, ``x <- P_N(x + dt v)``, then ``v <- P_T(x, v)``
        carries the velocity into the new tangent plane.
 
-    Defaults are Bitzek's: ``dt_max = 10 dt``, ``n_min = 5``, ``f_inc = 1.1``, ``f_dec = 0.5``,
-    ``alpha_start = 0.1``, ``f_alpha = 0.99``. Convergence (``force_tol``, ``energy_tol``,
-    ``check_every``) is per replica, see :class:`spherevm.plugins.base.Minimizer`: replicas that
-    have stopped do not move, and their dt, alpha and counter stay as they were.
+    ``dt = 0.02`` is the step the docs, the CLI and the sweeps use (measured fastest on the
+    rigidity protocol, docs/rigidity.md). The other defaults are Bitzek's: ``dt_max = 10 dt``,
+    ``n_min = 5``, ``f_inc = 1.1``, ``f_dec = 0.5``, ``alpha_start = 0.1``, ``f_alpha = 0.99``.
+    Convergence (``force_tol``, ``energy_tol``, ``check_every``) is per replica, see
+    :class:`spherevm.plugins.base.Minimizer`: replicas that have stopped do not move, and their dt,
+    alpha and counter stay as they were.
 
     ``max_step`` (units of sqrt(<A>) of the replica; default 1, a cell size, because FIRE with
     dt_max = 10 dt takes legitimate steps of half a cell on a raw tiling) guards against exploding
@@ -41,7 +43,7 @@ class FIRE(Minimizer):
     gpu_surfaces = KERNEL_SURFACES
     surface_needs = ("normal", "project_normal")
 
-    def __init__(self, dt=0.01, dt_max=None, n_min=5, f_inc=1.1, f_dec=0.5, alpha_start=0.1, f_alpha=0.99,
+    def __init__(self, dt=0.02, dt_max=None, n_min=5, f_inc=1.1, f_dec=0.5, alpha_start=0.1, f_alpha=0.99,
                  force_tol=1e-10, energy_tol=1e-20, check_every=10, max_step=1.0):
         super().__init__(force_tol=force_tol, energy_tol=energy_tol, check_every=check_every)
         self.max_step = positive("max_step", max_step)

@@ -155,9 +155,23 @@ _MODULES = {}
 BLOCK = 256
 
 
+class CompiledModule:
+    """A compiled cupy.RawModule whose kernels are looked up once: CuPy's ``get_function`` costs a
+    few microseconds a call, which small tissues pay at every launch."""
+
+    def __init__(self, module):
+        self.module, self._functions = module, {}
+
+    def get_function(self, name):
+        function = self._functions.get(name)
+        if function is None:
+            function = self._functions[name] = self.module.get_function(name)
+        return function
+
+
 def load_module(cu_file, defines=()):
-    """Compile (once per process and set of ``defines``) the CUDA source ``cu_file`` and return its
-    cupy.RawModule.
+    """Compile (once per process and set of ``defines``) the CUDA source ``cu_file`` and return it
+    as a :class:`CompiledModule`.
 
     ``cu_file`` is a path to a ``.cu`` file beside the plugin that owns it; it may include the
     package's headers (``geometry/surface.cuh``, ``device_common.cuh``). ``defines``: macro names
@@ -170,7 +184,7 @@ def load_module(cu_file, defines=()):
     if key not in _MODULES:
         code = __import__("pathlib").Path(cu_file).read_text()
         options = ("-std=c++17", f"-I{_PACKAGE_DIR}") + tuple(f"-D{name}" for name in defines)
-        _MODULES[key] = cupy.RawModule(code=code, options=options)
+        _MODULES[key] = CompiledModule(cupy.RawModule(code=code, options=options))
     return _MODULES[key]
 
 

@@ -91,6 +91,37 @@ class VertexModel(Force):
         if self._dimensionless is not None:
             self._dimensionless = tuple(follow(a) for a in self._dimensionless)
 
+    # Checkpoints: per-cell parameter arrays are state (they follow their cells through divisions
+    # and extrusions, so a grown tissue's arrays exist nowhere but here); scalars are the script's.
+    def _arrays(self):
+        """``{name: array}`` of every parameter, the dimensionless ones included."""
+        out = dict(kA=self.kA, kP=self.kP, A0=self.A0, P0=self.P0)
+        if self._dimensionless is not None:
+            out.update(zip(("kr", "p0", "a0"), self._dimensionless))
+        return out
+
+    def state_to_save(self) -> dict:
+        """The per-cell (1-D) parameters, in the State's cell order; scalar ones are not saved."""
+        return {name: np.array(a, copy=True) for name, a in self._arrays().items() if a.ndim == 1}
+
+    def restore_state(self, data: dict):
+        """Per-cell parameters come back from the checkpoint, replacing what the model was built with
+        (whose length fits the tissue before it grew); a parameter the script gives as a scalar stays
+        the script's."""
+        n = self._simulation.state.n_cells
+        arrays = self._arrays()
+        for name, saved in data.items():
+            if name not in arrays or arrays[name].ndim == 0:
+                continue
+            saved = np.asarray(saved, dtype=np.float64)
+            if saved.shape != (n,):
+                raise ValueError(f"VertexModel: saved per-cell {name!r} has shape {saved.shape}, but the State has "
+                                 f"{n} cells; the checkpoint belongs to another State")
+            arrays[name] = saved.copy()
+        self.kA, self.kP, self.A0, self.P0 = (arrays[k] for k in ("kA", "kP", "A0", "P0"))
+        if self._dimensionless is not None:
+            self._dimensionless = tuple(arrays[k] for k in ("kr", "p0", "a0"))
+
     def _device_parameters(self, state):
         """Per-cell parameters on the device, cached for the State they were made for."""
         return state.cached((self, "parameters"), lambda: [state.device.asarray(np.ascontiguousarray(p))

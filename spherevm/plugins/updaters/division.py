@@ -117,6 +117,7 @@ class Division(Updater):
     surface_needs = ("normal", "project_normal", "cell_geometry", "total_area_np")
     per_cell = ("lineage",)
     per_replica = ("last_divisions", "total_divisions", "refusals")
+    checkpoint_fields = ("lineage",) + per_replica
 
     def __init__(self, rule="rate", rate=None, area_threshold=None, axis="hertwig", max_cells=None, dt=None,
                  trigger=1):
@@ -153,6 +154,14 @@ class Division(Updater):
     def refused(self):
         """Refusals per reason (``growth.DIVISION_REASONS``), each per replica."""
         return {reason: self.refusals[:, k] for k, reason in enumerate(growth.DIVISION_REASONS)}
+
+    def state_to_save(self) -> dict:
+        """Lineage, counters, refusals and the rate rule's clock (the timestep of the last pass)."""
+        return dict(super().state_to_save(), clock=np.array([self._last], dtype=np.int64))
+
+    def restore_state(self, data: dict):
+        super().restore_state(data)
+        self._last = int(np.asarray(data["clock"]).reshape(-1)[0])
 
     def after_minimize(self, simulation):
         """The minimisation's iterations are not time for the rate rule."""

@@ -29,6 +29,7 @@ class Extrusion(Updater):
     gpu_surfaces = None
     surface_needs = ("normal", "project_normal", "cell_geometry", "total_area_np")
     per_replica = ("last_extrusions", "total_extrusions", "refusals")
+    checkpoint_fields = per_replica
 
     def __init__(self, rule="area", area_threshold=None, trigger=1):
         super().__init__(trigger)

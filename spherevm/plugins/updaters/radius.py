@@ -50,6 +50,22 @@ class RadiusSchedule(Updater):
                      else np.array(state.mean_cell_area, dtype=np.float64))
         self.counts = np.full(state.n_replicas, -1, dtype=np.int64)   # N at the last "constant_area" pass
 
+    def state_to_save(self) -> dict:
+        """The target <A> per replica and the cell counts of the last "constant_area" pass."""
+        return {"area": self.area.copy(), "counts": self.counts.copy()}
+
+    def restore_state(self, data: dict):
+        """``counts`` always; ``area`` unless the script gives one (the default, each replica's <A> at
+        the first attach, is state: after growth the <A> of the restored sphere is only rounded)."""
+        n = self._simulation.state.n_replicas
+        for name in ("area", "counts"):
+            if np.asarray(data[name]).shape != (n,):
+                raise ValueError(f"RadiusSchedule: saved {name!r} has shape {np.shape(data[name])}, but the State "
+                                 f"has {n} replicas")
+        self.counts = np.asarray(data["counts"], dtype=np.int64).copy()
+        if self._area is None:
+            self.area = np.asarray(data["area"], dtype=np.float64).copy()
+
     def target(self, simulation):
         """The radius each replica should have now (NumPy, per replica)."""
         state = simulation.state

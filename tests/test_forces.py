@@ -103,14 +103,14 @@ def test_bad_parameters(kw):
 
 def test_threaded_blocks_give_the_same_forces(monkeypatch):
     # CPU only: large NumPy states are split into per-core vertex blocks: the result must not change
-    import spherevm.constraints.sphere as sphere
+    import spherevm.constraints.corners as corners
     s = svm.init.random_tiling(500, replicas=2, seed=21)
     model = VertexModel.dimensionless(kr=0.7, p0=3.7)
     one = model.compute(s)
-    monkeypatch.setattr(sphere, "PARALLEL_MIN_VERTICES", 10)
-    monkeypatch.setattr(sphere.os, "cpu_count", lambda: 3)
+    monkeypatch.setattr(corners, "PARALLEL_MIN_VERTICES", 10)
+    monkeypatch.setattr(corners.os, "cpu_count", lambda: 3)
     s.topology_changed()
     many = model.compute(s)
-    assert len(sphere._vertex_blocks(s)) == 3
+    assert len(corners.blocks(s, s.n_vertices)) == 3
     assert np.allclose(many.forces, one.forces, rtol=0, atol=1e-13 * np.abs(one.forces).max())
     assert np.allclose(many.energy, one.energy, rtol=1e-14)

@@ -1,12 +1,12 @@
 """The sphere centred at the origin: geodesic perimeters and spherical-polygon areas."""
 from __future__ import annotations
 
-import os
 import numpy as np
 
 from ..device import array_module
 from ..geometry import sphere as geo
 from .base import Constraint
+from .corners import corner_index, in_parallel
 
 
 class CellGeometry:
@@ -36,36 +36,6 @@ def _cross(a, b):
 def _dot(a, b):
     # one fused pass (einsum), 1.7x to 2.6x faster than three products and two sums
     return array_module(a, b).einsum("ij,ij->j", a, b)
-
-
-_POOL = None
-PARALLEL_MIN_VERTICES = 16384   # below this, one thread; blocks hold at least half as many vertices
-BLOCK_VERTICES = 16384          # per block: its per-corner vectors (3 x 3 x 16384 doubles, 1.2 MB) stay in cache
-
-
-def _vertex_blocks(state):
-    """Contiguous vertex ranges for large NumPy states: at least one per CPU core (NumPy releases
-    the GIL inside its loops, so blocks run on all cores at once) and small enough that a block's
-    temporaries stay in cache (measured, 65,536 cells on 2 cores: 28-30 ms in blocks of 16,384
-    vertices, 32-35 ms in blocks of 32,768 or 65,536)."""
-    nv = state.n_vertices
-    workers = os.cpu_count() or 1
-    if state.device.is_gpu or nv < PARALLEL_MIN_VERTICES:
-        return [(0, nv)]
-    count = max(min(workers, nv // (PARALLEL_MIN_VERTICES // 2)), -(-nv // BLOCK_VERTICES))
-    edges = np.linspace(0, nv, count + 1).astype(int)
-    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
-
-
-def _in_parallel(fn, items):
-    """``[fn(item) for item in items]``, on a thread pool when there are several items."""
-    global _POOL
-    if len(items) == 1:
-        return [fn(items[0])]
-    if _POOL is None:
-        from concurrent.futures import ThreadPoolExecutor
-        _POOL = ThreadPoolExecutor(max_workers=os.cpu_count(), thread_name_prefix="spherevm")
-    return [f.result() for f in [_POOL.submit(fn, item) for item in items]]
 
 
 class Sphere(Constraint):
@@ -111,29 +81,7 @@ class Sphere(Constraint):
         return 4.0 * np.pi * np.asarray(radius, dtype=np.float64) ** 2
 
     # -------------------------------------------------------------- per-corner metric
-    # Corner (v, k) lies in cell vertex_cells[v, k], where the boundary runs counter-clockwise from
-    # v to n_k = vertex_neighbors[v, k]; the edge (v, n_k) borders cells k and k-1. Corner arrays
-    # are slot-major, shape (3 components, 3 slots, vertices of the block): a vertex quantity
-    # broadcasts over the slot axis and the sum over a vertex's corners adds three contiguous rows.
-
-    def _corner_index(self, state):
-        """Per vertex block, the slot-major corner tables: next vertex, the corner's cell, the cell
-        before it (k - 1) and the cell's first vertex (its fan apex). Cached per State and topology
-        version (T1 flips bump it)."""
-        return state.cached((self, "corner_index"), lambda: self._build_corner_index(state), topology=True)
-
-    @staticmethod
-    def _build_corner_index(state):
-        xp = state.device.xp
-        vn, vc = state.vertex_neighbors.astype(np.intp), state.vertex_cells.astype(np.intp)
-        first = state.cell_vertices[:, 0].astype(np.intp)
-        result = []
-        for lo, hi in _vertex_blocks(state):
-            cells = xp.ascontiguousarray(vc[lo:hi].T).reshape(-1)
-            before = xp.ascontiguousarray(xp.roll(vc[lo:hi], 1, axis=1).T).reshape(-1)
-            result.append(dict(lo=lo, hi=hi, next=xp.ascontiguousarray(vn[lo:hi].T).reshape(-1),
-                               cells=cells, apex=first[cells], both=xp.concatenate((cells, before))))
-        return result
+    # Corner tables and vertex blocks: spherevm.constraints.corners.
 
     def cell_geometry(self, state) -> CellGeometry:
         """Areas and perimeters, and the per-corner terms the gradients reuse.
@@ -145,7 +93,7 @@ class Sphere(Constraint):
         xp = state.device.xp
         n = state.n_cells
         u, rv = self._unit_components(state)
-        index = self._corner_index(state)
+        index = corner_index(state)
 
         def corners(block):
             ub = u[:, None, block["lo"]:block["hi"]]                    # (3, 1, nb): b, for every slot
@@ -164,7 +112,7 @@ class Sphere(Constraint):
                     xp.bincount(cells, weights=xp.arctan2(num, den), minlength=n))
             return dict(m=m.reshape(3, -1), x=x, q=q, two_sin=sm * sp), sums
 
-        parts = _in_parallel(corners, index)
+        parts = in_parallel(corners, index)
         R = state.radius[state.cell_replica]
         perimeter = (2.0 * R) * sum(p[1][0] for p in parts)
         area = (2.0 * R * R) * sum(p[1][1] for p in parts)
@@ -237,7 +185,7 @@ class Sphere(Constraint):
             s -= _dot(s, u) * u                                      # onto the tangent plane
             out[lo:hi] = (s / g["rv"][lo:hi]).T
 
-        _in_parallel(block, list(zip(g["index"], g["parts"])))
+        in_parallel(block, list(zip(g["index"], g["parts"])))
         return out
 
     def corner_gradients(self, state, geometry: CellGeometry):

@@ -46,8 +46,9 @@ def in_parallel(fn, items):
 def corner_index(state):
     """Per vertex block (:func:`blocks`), the slot-major corner tables: ``lo``, ``hi``; ``next``,
     the next vertex; ``cells``, the corner's cell; ``both``, the corner's cell then the cell before
-    it (slot k - 1); ``apex``, the cell's first vertex (its fan apex). Cached per State and
-    topology version (T1 flips bump it)."""
+    it (slot k - 1); ``apex``, the cell's first vertex (its fan apex); ``components``, the corner's
+    cell plus ``n_cells`` times each Cartesian component (one ``bincount`` sums (3, corners)
+    vectors per cell). Cached per State and topology version (T1 flips bump it)."""
     return state.cached((corner_index,), lambda: _build(state), topology=True)
 
 
@@ -55,10 +56,12 @@ def _build(state):
     xp = state.device.xp
     vn, vc = state.vertex_neighbors.astype(np.intp), state.vertex_cells.astype(np.intp)
     first = state.cell_vertices[:, 0].astype(np.intp)
+    offsets = state.n_cells * xp.arange(3)[:, None]
     result = []
     for lo, hi in blocks(state, state.n_vertices):
         cells = xp.ascontiguousarray(vc[lo:hi].T).reshape(-1)
         before = xp.ascontiguousarray(xp.roll(vc[lo:hi], 1, axis=1).T).reshape(-1)
         result.append(dict(lo=lo, hi=hi, next=xp.ascontiguousarray(vn[lo:hi].T).reshape(-1),
-                           cells=cells, apex=first[cells], both=xp.concatenate((cells, before))))
+                           cells=cells, apex=first[cells], both=xp.concatenate((cells, before)),
+                           components=(cells[None] + offsets).reshape(-1)))
     return result

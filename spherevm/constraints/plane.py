@@ -31,6 +31,14 @@ class PlaneGeometry:
         self._center = center
 
     @property
+    def area_vector(self):
+        """``(0, 0, A_c)`` per cell, ``(n_cells, 3)``: the vector area of a polygon in the plane."""
+        xp = array_module(self.area)
+        out = xp.zeros((len(self.area), 3))
+        out[:, 2] = self.area
+        return out
+
+    @property
     def center(self):
         if callable(self._center):
             self._center = self._center()
@@ -126,10 +134,11 @@ class PeriodicPlane(Constraint):
         e = minimum_image(pos[nxt] - pos[cur], state.box[state.cell_replica][:, None, :])   # (C, W, 2)
         return first, valid, e, xp.cumsum(e, axis=1) - e
 
-    def cell_geometry(self, state) -> PlaneGeometry:
+    def cell_geometry(self, state, area_vectors: bool = False, metric: bool = True) -> PlaneGeometry:
         """Areas (shoelace) and perimeters, each polygon unwrapped edge by edge from its first vertex:
         vertex j sits at ``sum_{i<j} e_i`` with ``e_i`` the minimum-image edges along the cell, so only
-        edges, not whole cells, need to be shorter than half the box."""
+        edges, not whole cells, need to be shorter than half the box. Area vectors (``(0, 0, A_c)``)
+        come with the areas: the two flags of :meth:`Sphere.cell_geometry` change nothing here."""
         xp = state.device.xp
         pos = state.positions[:, :2]
         sides = state.cell_sides
@@ -152,8 +161,11 @@ class PeriodicPlane(Constraint):
         """Vertex centroid of each cell (unwrapped, then wrapped into the box), ``(n_cells, 3)``."""
         return self.cell_geometry(state).center
 
-    def shape_gradient(self, state, geometry: PlaneGeometry, d_area, d_perimeter):
-        """Gradient (V, 3), z = 0, of ``sum_c d_area[c] A_c + d_perimeter[c] P_c``.
+    def shape_gradient(self, state, geometry: PlaneGeometry, d_area, d_perimeter, d_area_vector=None):
+        """Gradient (V, 3), z = 0, of ``sum_c d_area[c] A_c + d_perimeter[c] P_c + d_area_vector[c] . a_c``.
+
+        The area vector is ``(0, 0, A_c)``: its term adds the z component of ``d_area_vector`` to
+        ``d_area`` (either of ``d_area``, ``d_perimeter`` may be None when the energy lacks it).
 
         At vertex v, with edges ``e_k`` to its neighbours and cells ``C_k`` between ``e_k`` and
         ``e_{k+1}``: ``dA(C_k)/dx_v = rot(e_k - e_{k+1}) / 2`` with ``rot(x, y) = (y, -x)`` (the
@@ -162,6 +174,10 @@ class PeriodicPlane(Constraint):
         """
         xp = state.device.xp
         vc = state.vertex_cells
+        zero = xp.zeros(state.n_cells)
+        d_area = zero if d_area is None else d_area
+        d_area = d_area if d_area_vector is None else d_area + d_area_vector[:, 2]
+        d_perimeter = zero if d_perimeter is None else d_perimeter
         a, p = d_area[vc], d_perimeter[vc]                                  # (V, 3)
         a_before, p_before = xp.roll(a, 1, axis=1), xp.roll(p, 1, axis=1)
         e = geometry.edge

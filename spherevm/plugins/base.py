@@ -204,6 +204,13 @@ class Force(Operation):
     def compute(self, state) -> ForceResult:
         raise NotImplementedError
 
+    def combined(self, other, state):
+        """A :class:`ForceResult` of this force and ``other`` together (forces, energies and cell
+        energies summed), where this force computes the pair in fewer passes than the two apart;
+        None (the default) otherwise. :func:`compute_all` asks each pair of attached forces, both
+        ways round."""
+        return None
+
     def energy(self, state):
         """Energy per replica, as a NumPy array."""
         return state.device.to_numpy(self.compute(state).energy)
@@ -211,6 +218,24 @@ class Force(Operation):
     def forces(self, state):
         """Forces ``(n_vertices, 3)``, as a NumPy array."""
         return state.device.to_numpy(self.compute(state).forces)
+
+
+def compute_all(forces, state):
+    """The :class:`ForceResult` of each of ``forces`` on ``state``, in order, except that a pair one
+    of which computes both together (:meth:`Force.combined`) gives one result for the two."""
+    left, results = list(forces), []
+    while left:
+        force = left.pop(0)
+        for i, other in enumerate(left):
+            result = force.combined(other, state)
+            result = other.combined(force, state) if result is None else result
+            if result is not None:
+                del left[i]
+                break
+        else:
+            result = force.compute(state)
+        results.append(result)
+    return results
 
 
 class Integrator(Operation):

@@ -19,3 +19,23 @@ def median_time(fn, device=None, repeat=11, warmup=2):
             device.synchronize()
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
+
+
+def median_times(fns, device=None, repeat=11, warmup=2):
+    """Median wall times (seconds) of several callables, timed in turn within each round (round
+    robin), so that a change of machine load over the run affects them alike: for ratios on a
+    shared machine."""
+    for fn in fns:
+        for _ in range(warmup):
+            fn()
+    if device is not None:
+        device.synchronize()
+    times = [[] for _ in fns]
+    for _ in range(repeat):
+        for fn, t in zip(fns, times):
+            t0 = time.perf_counter()
+            fn()
+            if device is not None:
+                device.synchronize()
+            t.append(time.perf_counter() - t0)
+    return [statistics.median(t) for t in times]

@@ -114,3 +114,21 @@ def test_threaded_blocks_give_the_same_forces(monkeypatch):
     assert len(corners.blocks(s, s.n_vertices)) == 3
     assert np.allclose(many.forces, one.forces, rtol=0, atol=1e-13 * np.abs(one.forces).max())
     assert np.allclose(many.energy, one.energy, rtol=1e-14)
+
+
+def test_allocator_thresholds_are_fixed_unless_asked_not_to():
+    # spherevm.device.tune_allocator: on glibc the NumPy path keeps freed memory for reuse
+    import ctypes
+    import os
+    import subprocess
+    import sys
+    try:
+        ctypes.CDLL("libc.so.6").mallopt
+    except (OSError, AttributeError):
+        pytest.skip("not glibc")
+    assert svm.device.ALLOCATOR_TUNED
+    code = "import spherevm; print(spherevm.device.ALLOCATOR_TUNED)"
+    package_root = os.path.dirname(os.path.dirname(svm.__file__))      # this spherevm, not an installed one
+    env = dict(os.environ, SPHEREVM_MALLOC="system", PYTHONPATH=package_root)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"

@@ -58,15 +58,26 @@ extern "C" __global__ void bending_cell_normals(
     cell.cell_end(c);
 }
 
-// One thread per cell, over its neighbours (CSR start/neighbors, each pair listed from both ends):
-// the cell's energy (half of each pair, B/4 |n_i - n_j|^2), the per-replica sum, and
+// The cell across the edge that leaves vertex v of cell c (counter-clockwise): corner (v, s) with
+// vertex_cells[v, s] == c runs along that edge, which borders vertex_cells[v, s - 1].
+__device__ __forceinline__ int cell_across(const int* __restrict__ vertex_cells, int v, long c)
+{
+    const int* vc = vertex_cells + 3 * (long)v;
+    int s = vc[0] == c ? 0 : (vc[1] == c ? 1 : 2);
+    return vc[(s + 2) % 3];
+}
+
+// One thread per cell, over its neighbours, found by walking its edges (from the State's arrays, so
+// nothing to rebuild after T1 flips; a neighbour across two edges counts once, as in bending.py's
+// pair list): the cell's energy (half of each pair, B/4 |n_i - n_j|^2), the per-replica sum, and
 // w_i = (dE/da_i) / 2 = B (s - (s.n_i) n_i) / |2 a_i| with s = sum_j (n_i - n_j). ADD: the energies
 // are added to what the vertex model's cell kernel wrote (fused), else they are stored.
 template <bool ADD>
 __device__ __forceinline__ void bending_cell_terms_body(
-    const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ start,
-    const int* __restrict__ neighbors, const int* __restrict__ cell_replica, const double* __restrict__ B,
-    int n_cells, double* __restrict__ w, double* __restrict__ cell_energy, double* __restrict__ replica_energy)
+    const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ cell_vertices,
+    const int* __restrict__ cell_sides, const int* __restrict__ vertex_cells, int n_cells, int max_sides,
+    const int* __restrict__ cell_replica, const double* __restrict__ B, double* __restrict__ w,
+    double* __restrict__ cell_energy, double* __restrict__ replica_energy)
 {
     long c = (long)blockIdx.x * blockDim.x + threadIdx.x;
     int rep = -1;
@@ -74,11 +85,17 @@ __device__ __forceinline__ void bending_cell_terms_body(
     if (c < n_cells) {
         rep = cell_replica[c];
         double Br = B[rep];
+        const int* row = cell_vertices + c * (long)max_sides;
+        int n = cell_sides[c];
         vec3 ni = load3(normal, c);
         vec3 s = v3(0.0, 0.0, 0.0);
         double sq = 0.0;
-        for (int k = start[c]; k < start[c + 1]; ++k) {
-            vec3 d = ni - load3(normal, neighbors[k]);
+        for (int k = 0; k < n; ++k) {
+            int j = cell_across(vertex_cells, row[k], c);
+            bool counted = j == c;
+            for (int i = 0; i < k && !counted; ++i) counted = cell_across(vertex_cells, row[i], c) == j;
+            if (counted) continue;
+            vec3 d = ni - load3(normal, j);
             sq += dot3(d, d);
             s = s + d;
         }
@@ -91,21 +108,23 @@ __device__ __forceinline__ void bending_cell_terms_body(
 }
 
 extern "C" __global__ void bending_cell_terms(
-    const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ start,
-    const int* __restrict__ neighbors, const int* __restrict__ cell_replica, const double* __restrict__ B,
-    int n_cells, double* __restrict__ w, double* __restrict__ cell_energy, double* __restrict__ replica_energy)
+    const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ cell_vertices,
+    const int* __restrict__ cell_sides, const int* __restrict__ vertex_cells, int n_cells, int max_sides,
+    const int* __restrict__ cell_replica, const double* __restrict__ B, double* __restrict__ w,
+    double* __restrict__ cell_energy, double* __restrict__ replica_energy)
 {
-    bending_cell_terms_body<false>(normal, inv_area, start, neighbors, cell_replica, B, n_cells, w, cell_energy,
-                                   replica_energy);
+    bending_cell_terms_body<false>(normal, inv_area, cell_vertices, cell_sides, vertex_cells, n_cells, max_sides,
+                                   cell_replica, B, w, cell_energy, replica_energy);
 }
 
 extern "C" __global__ void bending_cell_terms_add(
-    const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ start,
-    const int* __restrict__ neighbors, const int* __restrict__ cell_replica, const double* __restrict__ B,
-    int n_cells, double* __restrict__ w, double* __restrict__ cell_energy, double* __restrict__ replica_energy)
+    const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ cell_vertices,
+    const int* __restrict__ cell_sides, const int* __restrict__ vertex_cells, int n_cells, int max_sides,
+    const int* __restrict__ cell_replica, const double* __restrict__ B, double* __restrict__ w,
+    double* __restrict__ cell_energy, double* __restrict__ replica_energy)
 {
-    bending_cell_terms_body<true>(normal, inv_area, start, neighbors, cell_replica, B, n_cells, w, cell_energy,
-                                  replica_energy);
+    bending_cell_terms_body<true>(normal, inv_area, cell_vertices, cell_sides, vertex_cells, n_cells, max_sides,
+                                  cell_replica, B, w, cell_energy, replica_energy);
 }
 
 // One thread per vertex, no atomics: minus the gradient through its three cells, projected on the

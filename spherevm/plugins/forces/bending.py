@@ -73,20 +73,21 @@ def _build_topology(state):
     keep = lo != hi
     keys = xp.unique(lo[keep] * n + hi[keep])
     pairs = xp.stack((keys // n, keys % n), axis=1)
-    # per cell, its neighbours: each pair from both ends, sorted by cell then neighbour (CSR)
+    # per cell, its neighbours: each pair from both ends, sorted by cell then neighbour (CSR), for the
+    # NumPy path's per-cell pass in blocks of cells
     both_i = xp.concatenate((pairs[:, 0], pairs[:, 1]))
     both_j = xp.concatenate((pairs[:, 1], pairs[:, 0]))
     order = xp.argsort(both_i * n + both_j)
     both_i, both_j = both_i[order], both_j[order]
     start = xp.zeros(n + 1, dtype=xp.int64)
     start[1:] = xp.cumsum(xp.bincount(both_i, minlength=n))
-    cell_blocks = []                       # the NumPy path's per-cell pass, in blocks of cells
+    cell_blocks = []
     for c0, c1 in blocks(state, n):
         k0, k1 = int(start[c0]), int(start[c1])
         local = both_i[k0:k1] - c0
         cell_blocks.append(dict(lo=c0, hi=c1, i=both_i[k0:k1], j=both_j[k0:k1], local=local,
                                 components=(local[None] + (c1 - c0) * xp.arange(3)[:, None]).reshape(-1)))
-    return dict(pairs=pairs, start=start.astype(xp.int32), neighbors=both_j.astype(xp.int32), cell_blocks=cell_blocks)
+    return dict(pairs=pairs, cell_blocks=cell_blocks)
 
 
 def _topology(state):
@@ -241,15 +242,15 @@ class Bending(Force):
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
 
     def _cell_terms_gpu(self, state, module, normal, inv_area, cell_energy, energy, kernel):
-        """The per-cell kernel over the neighbours: energies into ``cell_energy`` and ``energy``;
-        returns the per-cell vectors the vertex kernels take (``dE/da / 2``, (n_cells, 3))."""
+        """The per-cell kernel over the neighbours (found from the State's arrays: no table to rebuild
+        after T1 flips): energies into ``cell_energy`` and ``energy``; returns the per-cell vectors
+        the vertex kernels take (``dE/da / 2``, (n_cells, 3))."""
         import cupy as cp
-        topo = _topology(state)
         nc = state.n_cells
         w = cp.empty((nc, 3))
         launch(module.get_function(kernel), nc,
-               (normal, inv_area, topo["start"], topo["neighbors"], state.cell_replica, self._device_B(state)[0],
-                np.int32(nc), w, cell_energy, energy))
+               (normal, inv_area, state.cell_vertices, state.cell_sides, state.vertex_cells, np.int32(nc),
+                np.int32(state.max_sides), state.cell_replica, self._device_B(state)[0], w, cell_energy, energy))
         return w
 
     @property

@@ -377,3 +377,39 @@ def test_rigidity_sweep_carries_forces_in_its_manifest(tmp_path, capsys):
     assert args.func(args) == 0
     import json
     assert json.loads((out / "manifest.json").read_text())["parameters"]["forces"] == [["bending", {"B": 0.2}]]
+
+
+# ------------------------------------------------------------------ the study (examples/bending_glassy.py)
+def _example():
+    import importlib.util
+    path = pathlib.Path(__file__).parent.parent / "examples" / "bending_glassy.py"
+    spec = importlib.util.spec_from_file_location("bending_glassy", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_study_fit_tells_arrhenius_from_sub_and_super_arrhenius():
+    ex = _example()
+    T = np.array([0.008, 0.01, 0.0125, 0.015, 0.02, 0.025, 0.03, 0.04])
+    rng = np.random.default_rng(0)
+    noise = 0.02 * rng.normal(size=len(T))
+    for c, word in ((0.0, "consistent with Arrhenius"), (-2e-4, "sub-Arrhenius"), (2e-4, "super-Arrhenius")):
+        fit = ex.fit_log_tau(T, 1.0 + 0.05 / T + c / T ** 2 + noise)
+        assert ex.verdict(fit).startswith(word)
+        assert abs(fit["quadratic"]["coef"][2] - c) < 5 * fit["quadratic"]["err"][2] + 1e-12
+
+
+def test_study_runs_one_ensemble_per_size_and_writes_its_results(tmp_path, capsys):
+    ex = _example()
+    out = tmp_path / "bg"
+    ex.main(["--cells", "32", "--B", "0", "0.1", "--T", "0.02", "0.01", "--replicas", "2", "--steps", "100",
+             "--relax", "200", "--device", "cpu", "--out", str(out)])
+    import json
+    rows = json.loads(out.with_suffix(".json").read_text())
+    assert [(r["N"], r["B"]) for r in rows] == [(32, 0.0), (32, 0.1)]
+    for r in rows:
+        assert r["T"] == [0.01, 0.02] and np.array(r["tau"]).shape == (2, 2)
+        assert len(r["msd_lowest_T"]["msd"]) == len(r["msd_lowest_T"]["lag"]) and r["msd_lowest_T"]["T"] == 0.01
+    text = capsys.readouterr().out
+    assert "N=32 production: 100/100 steps" in text and "N=32 B=0.1:" in text

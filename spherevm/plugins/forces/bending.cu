@@ -5,37 +5,43 @@
 // (vertex_model.cuh), and the per-cell kernel between them adding to its energies.
 #include "plugins/forces/vertex_model.cuh"
 
-// Per cell: the doubled area vector A = 2 a = sum over the corners (x_b - x_0) x (x_d - x_b), x_0
-// the cell's first vertex (the same terms as Sphere.cell_geometry's corners), its unit normal and
-// 1/|A|.
-struct BendingCell {
+// What bending adds to the vertex model's kernels (vertex_model.cuh), and what its own kernels run.
+// cell: the doubled area vector A = 2 a = sum over the corners (x_b - x_0) x (x_d - x_b), x_0 the
+// cell's first vertex (the same terms as Sphere.cell_geometry's corners; the closing corner adds
+// (x_{n-1} - x_0) x (x_0 - x_{n-1}) = 0), its unit normal and 1/|A|.
+// add_gradient: the gradient of the energy through the area vectors of the vertex's three cells. a_c
+// moves with x_v by (x_next - x_prev) x / 2 per corner; with w_c = (dE/da_c) / 2 and e_j =
+// x_{n_j} - x_v the sum over the corners is G = sum_j e_j x (w[slot j] - w[slot j-1]) (as
+// Sphere.shape_gradient), added as |x| G to the vertex model's unit-sphere terms (which are
+// multiplied by 1/|x| at the end).
+struct BendingTerms {
     double* normal;
     double* inv_area;          // 1 / |2 a|
-    vec3 x0, A;
-    __device__ BendingCell(double* normal_, double* inv_area_) : normal(normal_), inv_area(inv_area_) {}
-    __device__ __forceinline__ void cell_start(vec3 x) { x0 = x; A = v3(0.0, 0.0, 0.0); }
-    __device__ __forceinline__ void cell_corner(vec3 xb, vec3 xd) { A = A + cross3(xb - x0, xd - xb); }
-    __device__ __forceinline__ void cell_end(long c) {
+    const double* w;
+    __device__ __forceinline__ void cell(const double* __restrict__ pos, const int* __restrict__ row, int n,
+                                         long c) const {
+        vec3 x0 = load3(pos, row[0]);
+        vec3 xb = x0, A = v3(0.0, 0.0, 0.0);
+        for (int i = 1; i < n; ++i) {
+            vec3 xd = load3(pos, row[i]);
+            A = A + cross3(xb - x0, xd - xb);
+            xb = xd;
+        }
         double s = rsqrt(dot3(A, A));
         store3(normal, c, s * A);
         inv_area[c] = s;
     }
-};
-
-// Per vertex: the gradient of the energy through the area vectors of its three cells. a_c moves
-// with x_v by (x_next - x_prev) x / 2 per corner; with w_c = (dE/da_c) / 2 and e_j = x_{n_j} - x_v
-// the sum over the corners is sum_j e_j x (w[slot j] - w[slot j-1]) (as Sphere.shape_gradient).
-// add_gradient scales it to the vertex model's unit-sphere terms (multiplied by 1/|x| at the end).
-struct BendingVertex {
-    const double* w;
-    vec3 wc[3], G;
-    __device__ explicit BendingVertex(const double* w_) : w(w_) {}
-    __device__ __forceinline__ void vertex_start(const int* cells) {
-        for (int k = 0; k < 3; ++k) wc[k] = load3(w, cells[k]);
-        G = v3(0.0, 0.0, 0.0);
+    __device__ __forceinline__ void add_gradient(vec3& g, const double* __restrict__ pos,
+                                                 const int* __restrict__ vertex_neighbors,
+                                                 const int* __restrict__ vertex_cells, long v, vec3 x) const {
+        vec3 G = v3(0.0, 0.0, 0.0);
+#pragma unroll 1
+        for (int j = 0; j < 3; ++j) {    // not unrolled: 84 registers fused (92 unrolled; the vertex model alone 68)
+            vec3 e = load3(pos, vertex_neighbors[3 * v + j]) - x;
+            G = G + cross3(e, load3(w, vertex_cells[3 * v + j]) - load3(w, vertex_cells[3 * v + (j + 2) % 3]));
+        }
+        g = g + norm3(x) * G;
     }
-    __device__ __forceinline__ void vertex_edge(int j, vec3 e) { G = G + cross3(e, wc[j] - wc[(j + 2) % 3]); }
-    __device__ __forceinline__ void add_gradient(vec3& g, vec3 x) const { g = g + norm3(x) * G; }
 };
 
 // One thread per cell: its normal and 1/|2a| (bending alone).
@@ -45,17 +51,8 @@ extern "C" __global__ void bending_cell_normals(
 {
     long c = (long)blockIdx.x * blockDim.x + threadIdx.x;
     if (c >= n_cells) return;
-    const int* row = cell_vertices + c * (long)max_sides;
-    int n = cell_sides[c];
-    BendingCell cell(normal, inv_area);
-    vec3 xb = load3(pos, row[0]);
-    cell.cell_start(xb);
-    for (int i = 1; i < n; ++i) {          // the closing corner (x_{n-1}, x_0) adds (x_{n-1} - x_0) x (x_0 - x_{n-1}) = 0
-        vec3 xd = load3(pos, row[i]);
-        cell.cell_corner(xb, xd);
-        xb = xd;
-    }
-    cell.cell_end(c);
+    BendingTerms terms = {normal, inv_area, nullptr};
+    terms.cell(pos, cell_vertices + c * (long)max_sides, cell_sides[c], c);
 }
 
 // The cell across the edge that leaves vertex v of cell c (counter-clockwise): corner (v, s) with
@@ -136,12 +133,13 @@ extern "C" __global__ void bending_vertex_forces(
     long v = (long)blockIdx.x * blockDim.x + threadIdx.x;
     if (v >= n_vertices) return;
     vec3 x = load3(pos, v);
-    BendingVertex vertex(w);
-    vertex.vertex_start(vertex_cells + 3 * v);
-    for (int j = 0; j < 3; ++j) vertex.vertex_edge(j, load3(pos, vertex_neighbors[3 * v + j]) - x);
-    vec3 g = vertex.G;
-    g = g - (dot3(g, x) / dot3(x, x)) * x;
-    store3(forces, v, -g);
+    double inv_rn = rsqrt(dot3(x, x));
+    vec3 u = inv_rn * x;
+    vec3 g = v3(0.0, 0.0, 0.0);
+    BendingTerms terms = {nullptr, nullptr, w};
+    terms.add_gradient(g, pos, vertex_neighbors, vertex_cells, v, x);
+    g = g - dot3(g, u) * u;
+    store3(forces, v, -(inv_rn * g));
 }
 
 // The vertex model's kernels with the bending terms fused in (Bending.combined).
@@ -152,15 +150,15 @@ extern "C" __global__ void vm_bending_cell_geometry(
     const double* __restrict__ P0, double* __restrict__ coef, double* __restrict__ cell_energy,
     double* __restrict__ replica_energy, double* __restrict__ normal, double* __restrict__ inv_area)
 {
-    BendingCell cell(normal, inv_area);
+    BendingTerms terms = {normal, inv_area, nullptr};
     vm_cell_geometry_body(pos, cell_vertices, cell_sides, cell_replica, radius, n_cells, max_sides, kA, kP, A0, P0,
-                          coef, cell_energy, replica_energy, cell);
+                          coef, cell_energy, replica_energy, terms);
 }
 
 extern "C" __global__ void vm_bending_vertex_forces(
     const double* __restrict__ pos, const int* __restrict__ vertex_neighbors, const int* __restrict__ vertex_cells,
     int n_vertices, const double* __restrict__ coef, const double* __restrict__ w, double* __restrict__ forces)
 {
-    BendingVertex vertex(w);
-    vm_vertex_forces_body(pos, vertex_neighbors, vertex_cells, n_vertices, coef, forces, vertex);
+    BendingTerms terms = {nullptr, nullptr, w};
+    vm_vertex_forces_body(pos, vertex_neighbors, vertex_cells, n_vertices, coef, forces, terms);
 }

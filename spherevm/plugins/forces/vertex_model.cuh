@@ -1,26 +1,23 @@
 // The vertex model's two kernel bodies, as templates over what a force fused into them adds: the
 // vertex model alone instantiates them with NoExtra (vertex_model.cu), the bending force with its
-// terms (bending.cu). An extra sees, per cell, the positions of its corners in order and, per
-// vertex, each of its three edges with the cells on both sides, and adds to the gradient before
-// the tangent projection.
+// terms (bending.cu). An extra gets, after the vertex model's own loop, the cell (its vertex row)
+// or the vertex (its position), and adds to the vertex's gradient before the tangent projection.
+// It runs its own loop over the positions the vertex model has just loaded (from L1/L2), so its
+// registers are not live across the vertex model's (fewer registers, no spills).
 #pragma once
 #include "geometry/sphere.cuh"
 #include "device_common.cuh"
 
 struct NoExtra {
-    __device__ __forceinline__ void cell_start(vec3) {}
-    __device__ __forceinline__ void cell_corner(vec3, vec3) {}
-    __device__ __forceinline__ void cell_end(long) {}
-    __device__ __forceinline__ void vertex_start(const int*) {}
-    __device__ __forceinline__ void vertex_edge(int, vec3) {}
-    __device__ __forceinline__ void add_gradient(vec3&, vec3) const {}
+    __device__ __forceinline__ void cell(const double*, const int*, int, long) const {}
+    __device__ __forceinline__ void add_gradient(vec3&, const double*, const int*, const int*, long, vec3) const {}
 };
 
 // One thread per cell: area (fan about the cell's first vertex a, each triangle (a, b, d) as
 // den + i num with num = (a - b).(b x d), den = 1 + b.d + a.(b + d), the area 2 arg of their
 // product: one atan2 per cell, valid below a hemisphere), perimeter, the cell's energy, the
 // per-replica energy sum, and the two coefficients the vertex kernel needs:
-// coef = (2 kA (A - A0) R^2, 2 kP (P - P0) R). The extra sees the corners (x_b, x_d) in positions.
+// coef = (2 kA (A - A0) R^2, 2 kP (P - P0) R).
 template <class Extra>
 __device__ __forceinline__ void vm_cell_geometry_body(
     const double* __restrict__ pos, const int* __restrict__ cell_vertices, const int* __restrict__ cell_sides,
@@ -36,14 +33,11 @@ __device__ __forceinline__ void vm_cell_geometry_body(
         rep = cell_replica[c];
         const int* row = cell_vertices + c * max_sides;
         int n = cell_sides[c];
-        vec3 xa = load3(pos, row[0]);
-        vec3 a = normalize3(xa);
-        vec3 b = a, xb = xa;
-        extra.cell_start(xa);
+        vec3 a = normalize3(load3(pos, row[0]));
+        vec3 b = a;
         double P = 0.0, re = 1.0, im = 0.0;
         for (int i = 0; i < n; ++i) {
-            vec3 xd = i + 1 < n ? load3(pos, row[i + 1]) : xa;
-            vec3 d = i + 1 < n ? normalize3(xd) : a;
+            vec3 d = i + 1 < n ? normalize3(load3(pos, row[i + 1])) : a;
             edge_terms t = make_edge(b, d);
             P += half_angle(t);
             double num = dot3(a - b, t.x);
@@ -51,11 +45,9 @@ __device__ __forceinline__ void vm_cell_geometry_body(
             double r = re * den - im * num;
             im = re * num + im * den;
             re = r;
-            extra.cell_corner(xb, xd);
             b = d;
-            xb = xd;
         }
-        extra.cell_end(c);
+        extra.cell(pos, row, n, c);
         double R = radius[rep];
         double A = 2.0 * atan2(im, re) * (R * R);
         P *= 2.0 * R;
@@ -71,8 +63,8 @@ __device__ __forceinline__ void vm_cell_geometry_body(
 // One thread per vertex, no atomics: each of its three edges v -> n_j lies in cell j (slot j) and,
 // as n_j -> v, in cell j-1 (slot j+2 mod 3); minus the surface gradient of the energy,
 // sum_j (coefA[j-1] - coefA[j]) w(v, n_j) + (coefP[j] + coefP[j-1]) d theta_j / dv, as in
-// Sphere.shape_gradient. The extra sees each edge e_j = x_{n_j} - x_v in positions and adds its
-// gradient (in positions) before the tangent projection.
+// Sphere.shape_gradient. The extra adds its gradient (in units of these unit-sphere terms) before
+// the tangent projection.
 template <class Extra>
 __device__ __forceinline__ void vm_vertex_forces_body(
     const double* __restrict__ pos, const int* __restrict__ vertex_neighbors, const int* __restrict__ vertex_cells,
@@ -84,16 +76,13 @@ __device__ __forceinline__ void vm_vertex_forces_body(
     double inv_rn = rsqrt(dot3(r, r));
     vec3 u = inv_rn * r;
     vec3 g = v3(0.0, 0.0, 0.0);
-    extra.vertex_start(vertex_cells + 3 * v);
     for (int j = 0; j < 3; ++j) {
         int c_next = vertex_cells[3 * v + j], c_prev = vertex_cells[3 * v + (j + 2) % 3];
-        vec3 xn = load3(pos, vertex_neighbors[3 * v + j]);
-        edge_terms t = make_edge(u, normalize3(xn));
+        edge_terms t = make_edge(u, normalize3(load3(pos, vertex_neighbors[3 * v + j])));
         g = g + (coef[2 * c_prev] - coef[2 * c_next]) * edge_area_term(t)
               + (coef[2 * c_next + 1] + coef[2 * c_prev + 1]) * edge_length_term(t);
-        extra.vertex_edge(j, xn - r);
     }
-    extra.add_gradient(g, r);
+    extra.add_gradient(g, pos, vertex_neighbors, vertex_cells, v, r);
     g = g - dot3(g, u) * u;
     store3(forces, v, -(inv_rn * g));
 }

@@ -21,10 +21,11 @@ def median_time(fn, device=None, repeat=11, warmup=2):
     return statistics.median(times)
 
 
-def median_times(fns, device=None, repeat=11, warmup=2):
-    """Median wall times (seconds) of several callables, timed in turn within each round (round
-    robin), so that a change of machine load over the run affects them alike: for ratios on a
-    shared machine."""
+def median_times(fns, device=None, repeat=11, warmup=2, clock=time.perf_counter):
+    """Median times (seconds; wall time unless ``clock`` says otherwise, e.g. ``time.process_time``
+    for the CPU time of all the process's threads) of several callables, timed in turn within each
+    round (round robin), so that a change of machine load over the run affects them alike: for
+    ratios on a shared machine."""
     for fn in fns:
         for _ in range(warmup):
             fn()
@@ -33,9 +34,9 @@ def median_times(fns, device=None, repeat=11, warmup=2):
     times = [[] for _ in fns]
     for _ in range(repeat):
         for fn, t in zip(fns, times):
-            t0 = time.perf_counter()
+            t0 = clock()
             fn()
             if device is not None:
                 device.synchronize()
-            t.append(time.perf_counter() - t0)
+            t.append(clock() - t0)
     return [statistics.median(t) for t in times]

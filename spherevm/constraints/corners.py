@@ -18,16 +18,17 @@ PARALLEL_MIN_VERTICES = 16384   # below this, one thread; blocks hold at least h
 BLOCK_VERTICES = 16384          # per block: its per-corner vectors (3 x 3 x 16384 doubles, 1.2 MB) stay in cache
 
 
-def blocks(state, n):
-    """Contiguous ranges over ``n`` items (vertices, or cells) for large NumPy states: at least one
-    per CPU core (NumPy releases the GIL inside its loops, so blocks run on all cores at once) and
-    small enough that a block's temporaries stay in cache (measured, 65,536 cells on 2 cores:
-    28-30 ms in blocks of 16,384 vertices, 32-35 ms in blocks of 32,768 or 65,536). One range on
-    the GPU and for small states."""
+def blocks(state, n, size=BLOCK_VERTICES):
+    """Contiguous ranges over ``n`` items (vertices, cells, pairs) for large NumPy states: at least
+    one per CPU core (NumPy releases the GIL inside its loops, so blocks run on all cores at once)
+    and at most ``size`` items, so that a block's temporaries stay in cache (measured, 65,536 cells
+    on 2 cores: 28-30 ms in blocks of 16,384 vertices, 32-35 ms in blocks of 32,768 or 65,536; a
+    pass whose blocks each add into whole-length sums takes ``size=n``: one block per core). One
+    range on the GPU and for small states."""
     workers = os.cpu_count() or 1
     if state.device.is_gpu or n < PARALLEL_MIN_VERTICES:
         return [(0, n)]
-    count = max(min(workers, n // (PARALLEL_MIN_VERTICES // 2)), -(-n // BLOCK_VERTICES))
+    count = max(min(workers, n // (PARALLEL_MIN_VERTICES // 2)), -(-n // size))
     edges = np.linspace(0, n, count + 1).astype(int)
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
 

@@ -73,21 +73,15 @@ def _build_topology(state):
     keep = lo != hi
     keys = xp.unique(lo[keep] * n + hi[keep])
     pairs = xp.stack((keys // n, keys % n), axis=1)
-    # per cell, its neighbours: each pair from both ends, sorted by cell then neighbour (CSR), for the
-    # NumPy path's per-cell pass in blocks of cells
-    both_i = xp.concatenate((pairs[:, 0], pairs[:, 1]))
-    both_j = xp.concatenate((pairs[:, 1], pairs[:, 0]))
-    order = xp.argsort(both_i * n + both_j)
-    both_i, both_j = both_i[order], both_j[order]
-    start = xp.zeros(n + 1, dtype=xp.int64)
-    start[1:] = xp.cumsum(xp.bincount(both_i, minlength=n))
-    cell_blocks = []
-    for c0, c1 in blocks(state, n):
-        k0, k1 = int(start[c0]), int(start[c1])
-        local = both_i[k0:k1] - c0
-        cell_blocks.append(dict(lo=c0, hi=c1, i=both_i[k0:k1], j=both_j[k0:k1], local=local,
-                                components=(local[None] + (c1 - c0) * xp.arange(3)[:, None]).reshape(-1)))
-    return dict(pairs=pairs, cell_blocks=cell_blocks)
+    # the NumPy path's pass over the pairs, one block per core: each block sums into whole-length arrays
+    offsets = n * xp.arange(3)[:, None]
+    pair_blocks = []
+    for k0, k1 in blocks(state, len(pairs), size=len(pairs)):
+        first, second = pairs[k0:k1, 0], pairs[k0:k1, 1]
+        pair_blocks.append(dict(both=xp.concatenate((first, second)), first=first, second=second,
+                                first_components=(first[None] + offsets).reshape(-1),
+                                second_components=(second[None] + offsets).reshape(-1)))
+    return dict(pairs=pairs, pair_blocks=pair_blocks)
 
 
 def _topology(state):
@@ -96,27 +90,34 @@ def _topology(state):
 
 def _cell_terms(state, B_cell, area_vector):
     """Per cell, from the area vectors ``(n_cells, 3)``: the energy (half of each of its pairs) and
-    ``dE/da_c`` ``(3, n_cells)``, over its neighbours, in blocks of cells on all cores.
+    ``dE/da_c`` ``(3, n_cells)``, over the neighbour pairs, in blocks on all cores.
 
-    Each pair from both ends: ``d = n_i - n_j``, ``E = B sum_pairs |d|^2 / 2``; ``dE/dn_i = B s_i``
-    with ``s_i = sum_j (n_i - n_j)``, and through ``n = a/|a|``, ``dE/da_i = B (I - n n^T) s_i / |a_i|``.
+    Each pair once: ``d = n_i - n_j``, ``E = B sum_pairs |d|^2 / 2``; ``dE/dn_i = B s_i`` with
+    ``s_i = sum_j (n_i - n_j)`` (``d`` added for i, subtracted for j), and through ``n = a/|a|``,
+    ``dE/da_i = B (I - n n^T) s_i / |a_i|``.
     """
     xp = state.device.xp
+    nc = state.n_cells
     a = area_vector.T
     norm = xp.sqrt(_dot(a, a))
     n = a / norm
-    cell_energy, d_area_vector = xp.empty(state.n_cells), xp.empty((3, state.n_cells))
 
-    def cells(b):
-        lo, hi = b["lo"], b["hi"]
-        d = xp.take(n, b["i"], axis=1) - xp.take(n, b["j"], axis=1)
-        cell_energy[lo:hi] = (0.25 * B_cell[lo:hi]) * xp.bincount(b["local"], weights=_dot(d, d), minlength=hi - lo)
-        s = xp.bincount(b["components"], weights=d.reshape(-1), minlength=3 * (hi - lo)).reshape(3, -1)
-        nc = n[:, lo:hi]
-        d_area_vector[:, lo:hi] = (B_cell[lo:hi] / norm[lo:hi]) * (s - _dot(s, nc) * nc)
+    def pairs(b):
+        m = len(b["first"])
+        ends = xp.take(n, b["both"], axis=1)
+        d = ends[:, :m] - ends[:, m:]
+        squares = _dot(d, d)
+        return (xp.bincount(b["first"], weights=squares, minlength=nc) +
+                xp.bincount(b["second"], weights=squares, minlength=nc),
+                xp.bincount(b["first_components"], weights=d.reshape(-1), minlength=3 * nc) -
+                xp.bincount(b["second_components"], weights=d.reshape(-1), minlength=3 * nc))
 
-    in_parallel(cells, _topology(state)["cell_blocks"])
-    return cell_energy, d_area_vector
+    parts = in_parallel(pairs, _topology(state)["pair_blocks"])
+    squares, s = parts[0]
+    for more in parts[1:]:
+        squares, s = squares + more[0], s + more[1]
+    s = s.reshape(3, nc)
+    return (0.25 * B_cell) * squares, (B_cell / norm) * (s - _dot(s, n) * n)
 
 
 class Bending(Force):

@@ -217,6 +217,7 @@ def test_vertex_model_and_bending_together_in_one_pass():
     assert _rel(both.energy, a.energy + b.energy) <= 1e-14
     assert _rel(both.cell_energy, a.cell_energy + b.cell_energy) <= 1e-14
     assert vm.combined(bend, s) is None and bend.combined(Bending(1.0), s) is None
+    assert bend.combined(type("MyModel", (VertexModel,), {})(), s) is None      # a subclass may differ
     from spherevm.plugins.base import compute_all
     other = VertexModel(kA=0.0, kP=0.2, A0=0.0, P0=1.0)
     results = compute_all([vm, other, bend], s)

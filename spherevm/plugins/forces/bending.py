@@ -183,8 +183,9 @@ class Bending(Force):
     def combined(self, other, state):
         """With a :class:`VertexModel`: both forces from one pass over the corners (NumPy: one
         ``cell_geometry`` with area vectors, one ``shape_gradient`` of both forces' terms; CUDA: the
-        vertex model's kernels with the bending terms fused in, bending.cu). None for other forces."""
-        if not isinstance(other, VertexModel):
+        vertex model's kernels with the bending terms fused in, bending.cu). None for other forces,
+        subclasses of VertexModel included (they may compute something else)."""
+        if type(other) is not VertexModel:
             return None
         return self.implementation("combined", state)(other, state)
 

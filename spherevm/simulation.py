@@ -8,7 +8,7 @@ import numpy as np
 
 from . import shapes
 from .device import resolve
-from .plugins.base import Force, Integrator, Minimizer, Updater, Writer
+from .plugins.base import Force, Integrator, Minimizer, Updater, Writer, compute_all
 from .validation import integer
 
 
@@ -249,7 +249,7 @@ class Simulation:
                 zero = xp.zeros(self._state.n_replicas)
                 self._cache = (xp.zeros_like(self._state.positions), zero, xp.zeros(self._state.n_cells))
                 return self._cache[:2]
-            results = [f.compute(self._state) for f in self.operations.forces]
+            results = compute_all(self.operations.forces, self._state)
             forces, energy = results[0].forces, results[0].energy
             for res in results[1:]:
                 forces = forces + res.forces

@@ -31,6 +31,14 @@ class PlaneGeometry:
         self._center = center
 
     @property
+    def area_vector(self):
+        """``(0, 0, A_c)`` per cell, ``(n_cells, 3)``: the vector area of a polygon in the plane."""
+        xp = array_module(self.area)
+        out = xp.zeros((len(self.area), 3))
+        out[:, 2] = self.area
+        return out
+
+    @property
     def center(self):
         if callable(self._center):
             self._center = self._center()
@@ -171,12 +179,13 @@ class PeriodicPlane(Constraint):
         e, r = self._slot_edges(state, self.corner_edges(state) if edge is None else edge)
         return t["first"], t["valid"], e.transpose(2, 1, 0), r.transpose(2, 1, 0)
 
-    def cell_geometry(self, state) -> PlaneGeometry:
+    def cell_geometry(self, state, area_vectors: bool = False, metric: bool = True) -> PlaneGeometry:
         """Areas (shoelace) and perimeters, each polygon unwrapped edge by edge from its first vertex:
         vertex j sits at ``sum_{i<j} e_i`` with ``e_i`` the minimum-image edges along the cell, so only
         edges, not whole cells, need to be shorter than half the box. Every edge's minimum image is
         taken once, per corner, and read by the cells' slots; sums run in slot order (as in
-        geometry/plane.cuh)."""
+        geometry/plane.cuh). Area vectors (``(0, 0, A_c)``) come with the areas: the two flags of
+        :meth:`Sphere.cell_geometry` change nothing here."""
         xp = state.device.xp
         t = self._tables(state)
         edge = self.corner_edges(state)                                     # (2, 3, V)
@@ -202,8 +211,11 @@ class PeriodicPlane(Constraint):
         """``(0, 0, 1)`` for every cell."""
         return self.normal(state.device.xp.zeros((state.n_cells, 3)))
 
-    def shape_gradient(self, state, geometry: PlaneGeometry, d_area, d_perimeter):
-        """Gradient (V, 3), z = 0, of ``sum_c d_area[c] A_c + d_perimeter[c] P_c``.
+    def shape_gradient(self, state, geometry: PlaneGeometry, d_area, d_perimeter, d_area_vector=None):
+        """Gradient (V, 3), z = 0, of ``sum_c d_area[c] A_c + d_perimeter[c] P_c + d_area_vector[c] . a_c``.
+
+        The area vector is ``(0, 0, A_c)``: its term adds the z component of ``d_area_vector`` to
+        ``d_area`` (either of ``d_area``, ``d_perimeter`` may be None when the energy lacks it).
 
         At vertex v, with edges ``e_k`` to its neighbours and cells ``C_k`` between ``e_k`` and
         ``e_{k+1}``: ``dA(C_k)/dx_v = rot(e_k - e_{k+1}) / 2`` with ``rot(x, y) = (y, -x)`` (the
@@ -212,6 +224,10 @@ class PeriodicPlane(Constraint):
         """
         xp = state.device.xp
         t = self._tables(state)
+        zero = xp.zeros(state.n_cells)
+        d_area = zero if d_area is None else d_area
+        d_area = d_area if d_area_vector is None else d_area + d_area_vector[:, 2]
+        d_perimeter = zero if d_perimeter is None else d_perimeter
         a, a_before = d_area[t["cells"]], d_area[t["cells_before"]]        # (3, V)
         p, p_before = d_perimeter[t["cells"]], d_perimeter[t["cells_before"]]
         ex, ey = geometry.edge

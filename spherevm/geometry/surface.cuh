@@ -8,7 +8,9 @@
 //   vertex_size               whether the vertex-force kernel needs each vertex's size
 //   cell_measures(...)        a cell's area and perimeter
 //   area_unit, length_unit    what the vertex-force coefficients are scaled by
-//   vertex_force(...)         minus the surface gradient of sum_c a_c A_c + p_c P_c at a vertex
+//   vertex_force(...)         minus the surface gradient of sum_c a_c A_c + p_c P_c at a vertex (on the
+//                             sphere a force fused into the vertex model adds its gradient through
+//                             an `extra`, see plugins/forces/vertex_model.cuh)
 //   normal(x)                 the unit normal at x
 //   place(y, n, s)            P_N: the surface point for y, whose normal n = normal(y) the caller has
 //   cell_normal(...)          the normal at a cell's centre (active cell directors)
@@ -18,6 +20,12 @@
 
 #include "geometry/plane.cuh"
 #include "geometry/sphere.cuh"
+
+// What a force fused into the vertex model's kernels adds (nothing): see plugins/forces/vertex_model.cuh.
+struct NoExtra {
+    __device__ __forceinline__ void cell(const double*, const int*, int, long) const {}
+    __device__ __forceinline__ void add_gradient(vec3&, const double*, const int*, const int*, long, vec3) const {}
+};
 
 // ------------------------------------------------------------------------------------ the sphere
 struct SphereSurface {
@@ -57,8 +65,9 @@ struct SphereSurface {
     // mod 3): sum_j (coefA[j-1] - coefA[j]) w(v, n_j) + (coefP[j] + coefP[j-1]) d theta_j / dv on
     // the unit sphere (coefficients carry R^2 and R), projected on the tangent plane, as in
     // Sphere.shape_gradient.
+    template <class Extra = NoExtra>
     __device__ static vec3 vertex_force(const double* pos, const int* vn, const int* vc, long v, Size,
-                                        const double* coef) {
+                                        const double* coef, const Extra& extra = Extra()) {
         vec3 r = load3(pos, v);
         double inv_rn = rsqrt(dot3(r, r));
         vec3 u = inv_rn * r;
@@ -69,6 +78,7 @@ struct SphereSurface {
             g = g + (coef[2 * c_prev] - coef[2 * c_next]) * edge_area_term(t)
                   + (coef[2 * c_next + 1] + coef[2 * c_prev + 1]) * edge_length_term(t);
         }
+        extra.add_gradient(g, pos, vn, vc, v, r);   // a fused force's terms, in the same units
         g = g - dot3(g, u) * u;
         return -(inv_rn * g);
     }
@@ -129,8 +139,9 @@ struct PlaneSurface {
         plane_cell_measures(pos, row, n, b, area, perimeter);
     }
 
+    template <class Extra = NoExtra>   // no force is fused into the plane's kernels (bending is zero there)
     __device__ static vec3 vertex_force(const double* pos, const int* vn, const int* vc, long v, Size b,
-                                        const double* coef) {
+                                        const double* coef, const Extra& = Extra()) {
         return -plane_vertex_gradient(pos, vn, vc, v, b, coef);
     }
 

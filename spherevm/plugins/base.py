@@ -218,6 +218,13 @@ class Force(Operation):
     def compute(self, state) -> ForceResult:
         raise NotImplementedError
 
+    def combined(self, other, state):
+        """A :class:`ForceResult` of this force and ``other`` together (forces, energies and cell
+        energies summed), where this force computes the pair in fewer passes than the two apart;
+        None (the default) otherwise. :func:`compute_all` asks each pair of attached forces, both
+        ways round."""
+        return None
+
     def energy(self, state):
         """Energy per replica, as a NumPy array."""
         return state.device.to_numpy(self.compute(state).energy)
@@ -225,6 +232,24 @@ class Force(Operation):
     def forces(self, state):
         """Forces ``(n_vertices, 3)``, as a NumPy array."""
         return state.device.to_numpy(self.compute(state).forces)
+
+
+def compute_all(forces, state):
+    """The :class:`ForceResult` of each of ``forces`` on ``state``, in order, except that a pair one
+    of which computes both together (:meth:`Force.combined`) gives one result for the two."""
+    left, results = list(forces), []
+    while left:
+        force = left.pop(0)
+        for i, other in enumerate(left):
+            result = force.combined(other, state)
+            result = other.combined(force, state) if result is None else result
+            if result is not None:
+                del left[i]
+                break
+        else:
+            result = force.compute(state)
+        results.append(result)
+    return results
 
 
 class Integrator(Operation):
@@ -455,24 +480,3 @@ class Writer(Operation):
     def close(self):
         pass
 
-
-def trigger_first(writer, args, trigger, target, default_trigger, target_name):
-    """A writer's ``(trigger, target)`` from up to two positional ``args``, in HOOMD-blue's order
-    (``hoomd.write.GSD(trigger, filename)``), the keywords ``trigger`` and ``target_name`` filling
-    what is not given. The order of spherevm 0.1, a path first (``GSD("run.gsd", trigger=100)``),
-    still works and warns."""
-    import os
-    import warnings
-    if len(args) > 2:
-        raise TypeError(f"{writer}() takes at most 2 positional arguments (trigger, {target_name}), got {len(args)}")
-    if args and isinstance(args[0], (str, os.PathLike)):
-        warnings.warn(f"{writer}(path, trigger) is the old argument order; write {writer}(trigger, path) as "
-                      "HOOMD-blue does, or use keywords", DeprecationWarning, stacklevel=3)
-        args = tuple(reversed(args)) if len(args) == 2 else (None,) + args
-    args = tuple(args) + (None,) * (2 - len(args))
-    out = []
-    for name, by_position, by_keyword in (("trigger", args[0], trigger), (target_name, args[1], target)):
-        if by_position is not None and by_keyword is not None:
-            raise TypeError(f"{writer}() got {name} both by position and by keyword")
-        out.append(by_keyword if by_position is None else by_position)
-    return (default_trigger if out[0] is None else out[0]), out[1]

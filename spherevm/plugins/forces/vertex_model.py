@@ -122,8 +122,8 @@ class VertexModel(Force):
         if self._dimensionless is not None:
             self._dimensionless = tuple(arrays[k] for k in ("kr", "p0", "a0"))
 
-    def _device_parameters(self, state):
-        """Per-cell parameters on the device, cached for the State they were made for."""
+    def device_parameters(self, state):
+        """Per-cell ``(kA, kP, A0, P0)`` on the device, cached for the State they were made for."""
         return state.cached((self, "parameters"), lambda: [state.device.asarray(np.ascontiguousarray(p))
                                                             for p in self.parameters(state)])
 
@@ -137,15 +137,20 @@ class VertexModel(Force):
     def compute(self, state) -> ForceResult:
         return self.implementation("compute", state)(state)
 
-    def _compute_cpu(self, state) -> ForceResult:
-        xp = state.device.xp
-        kA, kP, A0, P0 = self._device_parameters(state)
-        geometry = state.constraint.cell_geometry(state)
+    def cell_terms(self, state, geometry):
+        """Per cell, from the surface's ``cell_geometry``: the energy, ``dE/dA`` and ``dE/dP`` (what
+        ``shape_gradient`` turns into forces; a force fused with this one passes them on)."""
+        kA, kP, A0, P0 = self.device_parameters(state)
         dA_cell = geometry.area - A0
         dP_cell = geometry.perimeter - P0
-        cell_energy = kA * dA_cell ** 2 + kP * dP_cell ** 2
+        return kA * dA_cell ** 2 + kP * dP_cell ** 2, 2.0 * kA * dA_cell, 2.0 * kP * dP_cell
+
+    def _compute_cpu(self, state) -> ForceResult:
+        xp = state.device.xp
+        geometry = state.constraint.cell_geometry(state)
+        cell_energy, d_area, d_perimeter = self.cell_terms(state, geometry)
         energy = xp.bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)
-        forces = -state.constraint.shape_gradient(state, geometry, 2.0 * kA * dA_cell, 2.0 * kP * dP_cell)
+        forces = -state.constraint.shape_gradient(state, geometry, d_area, d_perimeter)
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
 
     def __repr__(self):
@@ -158,7 +163,7 @@ class VertexModel(Force):
         """Two fused kernels (vertex_model.cu, compiled for the State's surface): cell geometry and
         energy, then vertex forces."""
         import cupy as cp
-        kA, kP, A0, P0 = self._device_parameters(state)
+        kA, kP, A0, P0 = self.device_parameters(state)
         module, size = surface_kernels(_KERNELS, state)
         nc, nv = state.n_cells, state.n_vertices
         coef, cell_energy = cp.empty((nc, 2)), cp.empty(nc)

@@ -12,7 +12,8 @@ import numpy as np
 from ... import gsdio
 from ...shapes import cell_shapes, shape_index_of
 from ...logging import Logger
-from ..base import Writer, trigger_first
+from ..base import Writer
+from .arguments import trigger_first
 
 DEFAULT_LOG = ("energy", "energy_per_cell", "mean_shape_index", "max_force")
 _FORCE_LOGGABLES = {"energy", "energy_per_cell", "max_force"}

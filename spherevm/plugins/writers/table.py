@@ -6,7 +6,8 @@ import sys
 import numpy as np
 
 from ...logging import Logger
-from ..base import Writer, trigger_first
+from ..base import Writer
+from .arguments import trigger_first
 
 DEFAULT_QUANTITIES = ("timestep", "energy_per_cell", "mean_shape_index", "max_force")
 

@@ -9,7 +9,8 @@ comparisons (< <= > >= == != and ``is``/``is not``, ``in``/``not in``), ``and``/
 other ints, x -> 1.5 x for floats). Docstrings and other strings are left alone.
 
 The repository is copied to a temporary folder and mutated there, so the working tree is never
-touched. A mutant is killed when the tests fail (or run past ``--timeout`` seconds). Survivors are
+touched. The tests are run once unmutated first and must pass. A mutant is killed when the tests
+fail (or run past ``--timeout`` seconds). Survivors are
 listed with their line and the mutation, to be killed with a test or judged harmless by hand.
 ``--jobs N`` runs N mutants at once, each in its own copy (on a machine with cores to spare).
 """
@@ -115,6 +116,11 @@ def main(argv=None):
         for _ in range(max(1, min(args.jobs, len(todo)))):
             copies.put(_work_copy(root))
         cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *args.tests]
+        work = copies.queue[0]
+        env = dict(os.environ, PYTHONPATH=work, PYTHONDONTWRITEBYTECODE="1")
+        rc = subprocess.run(cmd, cwd=work, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode
+        if rc != 0:   # a kill means something only if the tests pass without a mutation
+            sys.exit(f"the tests fail (rc={rc}) on the unmutated module: fix that first: {' '.join(cmd[1:])}")
 
         def run(item):
             k, (index, desc, how) = item

@@ -157,3 +157,27 @@ def test_an_edge_exactly_at_the_threshold_is_not_short():
     u, slot, _ = t.short_edges(s)
     assert sorted((3 * u + slot).tolist()) == sorted(e["corner"][c2 < limit].tolist())
     assert not np.isin(e["corner"][c2 == limit], 3 * u + slot).any()
+
+
+@pytest.mark.gpu
+def test_gpu_pass_with_more_candidates_than_room_matches_numpy():
+    """Nearly every edge short: more candidates than the GPU's first candidate room and flip log
+    (1024 rows), so a pass regrows both and replays the log; it still flips as NumPy does."""
+    state = svm.init.random_tiling(1000, replicas=2, seed=5)
+    sims = {}
+    for dev in ("cpu", "gpu"):
+        sim = svm.Simulation(device=dev)
+        sim.state = state
+        sim.operations.updaters.append(T1(threshold=1.0, new_length=1.5, max_flip_backs=10 ** 6))
+        sims[dev] = sim
+    c, g = sims["cpu"], sims["gpu"]
+    for _ in range(3):
+        c._update()
+        g._update()
+        for name in ("t1_flips", "t1_refused", "t1_total_flips", "t1_total_refused", "t1_flip_backs"):
+            assert np.array_equal(g.log(name), c.log(name)), name
+        assert np.array_equal(g.state.vertex_neighbors.get(), c.state.vertex_neighbors)
+        assert np.array_equal(g.state.vertex_cells.get(), c.state.vertex_cells)
+        assert np.abs(g.state.positions.get() - c.state.positions).max() <= 1e-12
+    assert int(c.log("t1_flips").sum()) > 0
+    assert g.operations.updaters[0]._gpu["capacity"] > 1024

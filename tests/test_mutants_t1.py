@@ -159,6 +159,21 @@ def test_an_edge_exactly_at_the_threshold_is_not_short():
     assert not np.isin(e["corner"][c2 == limit], 3 * u + slot).any()
 
 
+
+def test_checkpoint_round_trip_and_wrong_replica_count():
+    sim, t = _attached(threshold=50.0, new_length=60.0)
+    sim.run(2)
+    saved = t.state_to_save()
+    assert len(saved["separated"]) > 1 and np.all(saved["total_flips"] > 0)
+    _, fresh = _attached(threshold=50.0, new_length=60.0)
+    fresh.restore_state({k: v.copy() for k, v in saved.items()})
+    for name in ("last_flips", "last_refused", "total_flips", "total_refused", "flip_backs"):
+        assert np.array_equal(getattr(fresh, name), saved[name]), name
+    assert np.array_equal(fresh._separated, saved["separated"]) and np.array_equal(fresh._rejoins, saved["rejoins"])
+    with pytest.raises(ValueError, match="'total_flips' has 3 replicas, the State 2"):
+        fresh.restore_state(dict(saved, total_flips=np.zeros(3, dtype=np.int64)))
+
+
 @pytest.mark.gpu
 def test_gpu_pass_with_more_candidates_than_room_matches_numpy():
     """Nearly every edge short: more candidates than the GPU's first candidate room and flip log

@@ -12,7 +12,8 @@ The repository is copied to a temporary folder and mutated there, so the working
 touched. The tests are run once unmutated first and must pass. A mutant is killed when the tests
 fail (or run past ``--timeout`` seconds). Survivors are
 listed with their line and the mutation, to be killed with a test or judged harmless by hand.
-``--jobs N`` runs N mutants at once, each in its own copy (on a machine with cores to spare).
+``--only 3,17`` runs those mutants (numbered as printed), ``--lines 15,197-300`` the sites on those
+lines; ``--jobs N`` runs N mutants at once, each in its own copy (on a machine with cores to spare).
 """
 import argparse
 import ast
@@ -102,6 +103,8 @@ def main(argv=None):
     p.add_argument("tests", nargs="+", help="test files to run against each mutant")
     p.add_argument("--timeout", type=float, default=120.0)
     p.add_argument("--only", type=str, default=None, help="comma-separated mutant numbers to run")
+    p.add_argument("--lines", type=str, default=None,
+                   help="run only the sites on these source lines, e.g. 15,197-300 (numbers stay those of all sites)")
     p.add_argument("--jobs", type=int, default=1, help="mutants run at once, each in its own copy")
     args = p.parse_args(argv)
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -110,7 +113,10 @@ def main(argv=None):
     doc = _docstring_ids(tree)
     all_sites = [s for s in sites(tree) if id(list(ast.walk(tree))[s[0]]) not in doc]
     only = None if args.only is None else {int(k) for k in args.only.split(",")}
-    todo = [(k, site) for k, site in enumerate(all_sites) if only is None or k in only]
+    lines = None if args.lines is None else _line_set(args.lines)
+    nodes = list(ast.walk(tree))
+    todo = [(k, site) for k, site in enumerate(all_sites) if (only is None or k in only)
+            and (lines is None or getattr(nodes[site[0]], "lineno", None) in lines)]
     copies = queue.Queue()
     try:
         for _ in range(max(1, min(args.jobs, len(todo)))):
@@ -153,6 +159,15 @@ def main(argv=None):
     finally:
         while not copies.empty():
             shutil.rmtree(copies.get(), ignore_errors=True)
+
+
+def _line_set(text):
+    """``"15,197-300"`` -> the set of those line numbers."""
+    out = set()
+    for part in text.split(","):
+        lo, _, hi = part.partition("-")
+        out.update(range(int(lo), int(hi or lo) + 1))
+    return out
 
 
 def _work_copy(root):

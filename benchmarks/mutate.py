@@ -9,18 +9,22 @@ comparisons (< <= > >= == != and ``is``/``is not``, ``in``/``not in``), ``and``/
 other ints, x -> 1.5 x for floats). Docstrings and other strings are left alone.
 
 The repository is copied to a temporary folder and mutated there, so the working tree is never
-touched. A mutant is killed when the tests fail (or run past ``--timeout`` seconds). Survivors are
+touched. The tests are run once unmutated first and must pass. A mutant is killed when the tests
+fail (or run past ``--timeout`` seconds). Survivors are
 listed with their line and the mutation, to be killed with a test or judged harmless by hand.
+``--only 3,17`` runs those mutants (numbered as printed), ``--lines 15,197-300`` the sites on those
+lines; ``--jobs N`` runs N mutants at once, each in its own copy (on a machine with cores to spare).
 """
 import argparse
 import ast
-import copy
 import os
 import shutil
 import subprocess
 import sys
+import queue
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 SWAP_BIN = {ast.Add: ast.Sub, ast.Sub: ast.Add, ast.Mult: ast.Div, ast.Div: ast.Mult,
             ast.Pow: ast.Mult, ast.FloorDiv: ast.Mult, ast.Mod: ast.FloorDiv,
@@ -99,6 +103,9 @@ def main(argv=None):
     p.add_argument("tests", nargs="+", help="test files to run against each mutant")
     p.add_argument("--timeout", type=float, default=120.0)
     p.add_argument("--only", type=str, default=None, help="comma-separated mutant numbers to run")
+    p.add_argument("--lines", type=str, default=None,
+                   help="run only the sites on these source lines, e.g. 15,197-300 (numbers stay those of all sites)")
+    p.add_argument("--jobs", type=int, default=1, help="mutants run at once, each in its own copy")
     args = p.parse_args(argv)
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     source = open(os.path.join(root, args.module)).read()
@@ -106,38 +113,71 @@ def main(argv=None):
     doc = _docstring_ids(tree)
     all_sites = [s for s in sites(tree) if id(list(ast.walk(tree))[s[0]]) not in doc]
     only = None if args.only is None else {int(k) for k in args.only.split(",")}
-    work = tempfile.mkdtemp(prefix="mutate-")
+    lines = None if args.lines is None else _line_set(args.lines)
+    nodes = list(ast.walk(tree))
+    todo = [(k, site) for k, site in enumerate(all_sites) if (only is None or k in only)
+            and (lines is None or getattr(nodes[site[0]], "lineno", None) in lines)]
+    copies = queue.Queue()
     try:
-        for name in ("spherevm", "tests"):
-            shutil.copytree(os.path.join(root, name), os.path.join(work, name),
-                            ignore=shutil.ignore_patterns("__pycache__", "*.so", "build"))
-        shutil.copy(os.path.join(root, "pyproject.toml"), work)
-        target = os.path.join(work, args.module)
-        env = dict(os.environ, PYTHONPATH=work, PYTHONDONTWRITEBYTECODE="1")
+        for _ in range(max(1, min(args.jobs, len(todo)))):
+            copies.put(_work_copy(root))
         cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *args.tests]
-        killed, survived = [], []
-        for k, (index, desc, how) in enumerate(all_sites):
-            if only is not None and k not in only:
-                continue
-            with open(target, "w") as fh:
-                fh.write(mutant_source(source, index, how))
-            t0 = time.time()
+        work = copies.queue[0]
+        env = dict(os.environ, PYTHONPATH=work, PYTHONDONTWRITEBYTECODE="1")
+        rc = subprocess.run(cmd, cwd=work, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode
+        if rc != 0:   # a kill means something only if the tests pass without a mutation
+            sys.exit(f"the tests fail (rc={rc}) on the unmutated module: fix that first: {' '.join(cmd[1:])}")
+
+        def run(item):
+            k, (index, desc, how) = item
+            work = copies.get()
             try:
-                rc = subprocess.run(cmd, cwd=work, env=env, stdout=subprocess.DEVNULL,
-                                    stderr=subprocess.DEVNULL, timeout=args.timeout).returncode
-            except subprocess.TimeoutExpired:
-                rc = "timeout"
-            status = "survived" if rc == 0 else "killed"
-            (survived if rc == 0 else killed).append((k, desc))
-            print(f"[{k:3d}] {status:8s} {desc}  ({time.time() - t0:.1f}s, rc={rc})", flush=True)
-        with open(target, "w") as fh:
-            fh.write(source)
-        print(f"\n{args.module}: {len(killed) + len(survived)} mutants, {len(killed)} killed, "
+                with open(os.path.join(work, args.module), "w") as fh:
+                    fh.write(mutant_source(source, index, how))
+                env = dict(os.environ, PYTHONPATH=work, PYTHONDONTWRITEBYTECODE="1")
+                t0 = time.time()
+                try:
+                    rc = subprocess.run(cmd, cwd=work, env=env, stdout=subprocess.DEVNULL,
+                                        stderr=subprocess.DEVNULL, timeout=args.timeout).returncode
+                except subprocess.TimeoutExpired:
+                    rc = "timeout"
+                with open(os.path.join(work, args.module), "w") as fh:
+                    fh.write(source)
+            finally:
+                copies.put(work)
+            print(f"[{k:3d}] {'survived' if rc == 0 else 'killed':8s} {desc}  ({time.time() - t0:.1f}s, rc={rc})",
+                  flush=True)
+            return k, desc, rc
+
+        with ThreadPoolExecutor(max_workers=copies.qsize()) as pool:
+            results = sorted(pool.map(run, todo))
+        survived = [(k, desc) for k, desc, rc in results if rc == 0]
+        print(f"\n{args.module}: {len(results)} mutants, {len(results) - len(survived)} killed, "
               f"{len(survived)} survived")
         for k, desc in survived:
             print(f"  survivor [{k}] {desc}")
     finally:
-        shutil.rmtree(work, ignore_errors=True)
+        while not copies.empty():
+            shutil.rmtree(copies.get(), ignore_errors=True)
+
+
+def _line_set(text):
+    """``"15,197-300"`` -> the set of those line numbers."""
+    out = set()
+    for part in text.split(","):
+        lo, _, hi = part.partition("-")
+        out.update(range(int(lo), int(hi or lo) + 1))
+    return out
+
+
+def _work_copy(root):
+    """A temporary copy of the package and its tests, to mutate without touching the working tree."""
+    work = tempfile.mkdtemp(prefix="mutate-")
+    for name in ("spherevm", "tests"):
+        shutil.copytree(os.path.join(root, name), os.path.join(work, name),
+                        ignore=shutil.ignore_patterns("__pycache__", "*.so", "build"))
+    shutil.copy(os.path.join(root, "pyproject.toml"), work)
+    return work
 
 
 if __name__ == "__main__":

@@ -195,3 +195,194 @@ def test_box_of_a_small_sphere(tmp_path):
     extent = max(0.3, np.abs(s.positions).max(), chord.max())
     with gsd.hoomd.open(path) as t:
         assert t[0].configuration.box[0] == np.float32(2.2 * extent * (1 + 1e-6))
+
+
+# ---------------------------------------------------------------- the full pass (every site of gsdio.py)
+def _one_frame(path, state, checkpoint=None, mode="w"):
+    with gsd.hoomd.open(path, mode) as t:
+        gsdio.FrameWriter(t).append(state, len(t), {}, {}, {}, checkpoint)
+
+
+def test_reading_validates_by_default(tmp_path):
+    path = tmp_path / "bad.gsd"
+    s = svm.init.random_tiling(16, seed=1)
+    s.vertex_neighbors[[0, 1]] = s.vertex_neighbors[[1, 0]]     # tables no longer reciprocal
+    _one_frame(path, s)
+    with pytest.raises(ValueError, match="the stored state is invalid.*validate=False reads it anyway"):
+        gsdio.read_state(path)
+    with gsdio.Reader(path) as r:
+        with pytest.raises(ValueError, match="the stored state is invalid"):
+            r.state()
+        assert np.array_equal(r.state(validate=False).vertex_neighbors, s.vertex_neighbors)
+    assert gsdio.read_state(path, validate=False).n_cells == 16
+
+
+def _damaged(tmp_path, name, damage):
+    """A one-frame spherevm file whose chunk ``spherevm/<name>`` is replaced by ``damage(chunk)``
+    (left out where that is None)."""
+    good, bad = tmp_path / "good.gsd", tmp_path / "bad.gsd"
+    _one_frame(good, svm.init.random_tiling(16, seed=1))
+    with gsd.hoomd.open(good) as t:
+        frame = t[0]
+        chunks = {n: t.file.read_chunk(frame=0, name=n) for n in t.file.find_matching_chunk_names("spherevm/")}
+    chunks["spherevm/" + name] = damage(chunks["spherevm/" + name])
+    with gsd.hoomd.open(bad, "w") as t:
+        for n, a in chunks.items():
+            if a is not None:
+                t.file.write_chunk(n, np.ascontiguousarray(a))
+        t.append(frame)
+    return bad
+
+
+@pytest.mark.parametrize("name, damage", [
+    ("position", lambda a: a[:, :2]), ("vertex_neighbors", lambda a: a[:-1]),
+    ("vertex_cells", lambda a: a[:, :2]), ("cell_vertices", lambda a: a[:-1])])
+def test_inconsistent_chunk_shapes_are_refused_even_without_validation(tmp_path, name, damage):
+    bad = _damaged(tmp_path, name, damage)
+    for validate in (True, False):
+        with pytest.raises(ValueError, match="inconsistent spherevm chunks"):
+            gsdio.read_state(bad, validate=validate)
+
+
+def test_a_missing_chunk_is_named(tmp_path):
+    bad = _damaged(tmp_path, "cell_start", lambda a: None)
+    with pytest.raises(ValueError, match="frame 0 lacks chunk 'spherevm/cell_start'"):
+        gsdio.read_state(bad, validate=False)
+
+
+def test_checkpoint_chunks_round_trip_and_default_to_the_last_frame(tmp_path):
+    path = tmp_path / "ck.gsd"
+    s = svm.init.random_tiling(16, seed=1)
+    saved = [{"op/mine/flag": np.array([True, False, True]), "op/mine/v": np.linspace(0.1, 0.9, 4) * k,
+              "simulation/count": np.int64(k)} for k in (1, 2, 3)]
+    for k, ck in enumerate(saved):
+        _one_frame(path, s, ck, mode="w" if k == 0 else "a")
+    with gsdio.Reader(path) as r:
+        assert len(r) == 3
+        for frame, k in ((None, 2), (-1, 2), (1, 1), (0, 0)):
+            got = r.checkpoint() if frame is None else r.checkpoint(frame)
+            assert got["simulation"]["count"].tolist() == [k + 1]
+            assert got["op"]["mine"]["flag"].dtype == np.uint8
+            assert got["op"]["mine"]["flag"].tolist() == [1, 0, 1]
+            assert got["op"]["mine"]["v"].tobytes() == saved[k]["op/mine/v"].tobytes()
+
+
+def test_appending_to_a_one_frame_file_keeps_its_box_and_per_vertex_keys(tmp_path):
+    """A file of exactly one frame, reopened: the box does not shrink and frame 0's per-vertex
+    keys are written (NaN) in a later frame that lacks them, with that frame's length."""
+    path = tmp_path / "one.gsd"
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_tiling(16, seed=1, radius=3.0)
+    sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=3.8))
+    with GSD(path) as w:
+        w.write(sim, 0)
+    sim.operations.forces.clear()
+    sim.state = svm.init.random_tiling(24, seed=2, radius=1.0)
+    with GSD(path, mode="ab") as w:
+        w.write(sim, 1)
+    with gsd.hoomd.open(path) as t:
+        assert t[1].configuration.box[0] == t[0].configuration.box[0] >= 2.2 * 3.0
+        assert t[1].log["particles/force"].shape == (t[1].particles.N, 3) != t[0].log["particles/force"].shape
+        assert np.all(np.isnan(t[1].log["particles/force"]))
+
+
+def test_one_writer_a_frame_like_the_last_not_the_first(tmp_path):
+    """Frames A, B, B from one writer (never closed): the third keeps B's topology."""
+    from conftest import assert_same_state, snapshot
+    from test_gsd_topology import flip_somewhere
+    path = tmp_path / "abb.gsd"
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_tiling(24, seed=3)
+    refs = []
+    with GSD(path, trigger=1) as w:
+        for step in range(3):
+            if step == 1:
+                flip_somewhere(sim.state, np.random.default_rng(1))
+                sim.state_changed()
+            w.write(sim, step)
+            refs.append(snapshot(sim.state))
+    for i, ref in enumerate(refs):
+        assert_same_state(gsdio.read_state(path, frame=i), ref, f"frame {i}")
+
+
+class SphereKeepingItsName(Sphere):
+    """A user subclass that keeps the parent's ``name``: the stored class name tells them apart."""
+
+
+def test_constraint_class_is_chosen_by_name_and_class():
+    for constraint in (Sphere(), SphereKeepingItsName()):
+        assert constraint.name == "sphere"
+        back = gsdio._constraint_from_json(gsdio._constraint_json(constraint), "p")
+        assert type(back) is type(constraint)
+
+
+@pytest.mark.parametrize("value", ["nv", -2])
+def test_cell_vertex_outside_the_vertex_range_is_named(tmp_path, value):
+    path = tmp_path / "range.gsd"
+    s = svm.init.random_tiling(16, seed=1)
+    s.cell_vertices[3, 0] = s.n_vertices if value == "nv" else value
+    _one_frame(path, s)
+    with pytest.raises(ValueError, match=rf"cell_vertices of cell 3 is .*outside -1..{s.n_vertices - 1}") as err:
+        gsdio.read_state(path)
+    assert "validate=False reads it anyway" in str(err.value)
+    assert gsdio.read_state(path, validate=False).cell_vertices[3, 0] == s.cell_vertices[3, 0]
+
+
+def test_an_integer_per_vertex_key_missing_from_a_later_frame_is_minus_one(tmp_path):
+    path = tmp_path / "tags.gsd"
+    a, b = svm.init.random_tiling(16, seed=1), svm.init.random_tiling(24, seed=2)
+    with gsd.hoomd.open(path, "w") as t:
+        w = gsdio.FrameWriter(t)
+        w.append(a, 0, {}, {}, {"tag": np.arange(a.n_vertices, dtype=np.int32)})
+        w.append(b, 1, {}, {}, {})
+    with gsd.hoomd.open(path) as t:
+        tag = t[1].log["particles/tag"]
+        assert tag.dtype == np.int32 and tag.tolist() == [-1] * b.n_vertices
+
+
+def test_reopened_file_leaves_out_topology_equal_to_frame_0(tmp_path):
+    """Frames A, A (frame 1 stores no topology), closed, reopened, A again: left out again."""
+    path = tmp_path / "aaa.gsd"
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_tiling(16, seed=1)
+    with GSD(path, trigger=1) as w:
+        w.write(sim, 0)
+        w.write(sim, 1)
+    with GSD(path, trigger=1, mode="ab") as w:
+        w.write(sim, 2)
+    with gsd.hoomd.open(path) as t:
+        for name in gsdio.TOPOLOGY:
+            assert [t.file.chunk_exists(frame=i, name="spherevm/" + name) for i in range(3)] == [True, False, False]
+
+
+def test_reopened_file_takes_the_last_frame_box_and_keys_first_seen_there(tmp_path):
+    """Frames at radius 1 without forces, then radius 3 with forces; reopened, a frame at radius 1
+    without forces keeps the last (largest) box and writes the force key, NaN."""
+    path = tmp_path / "last.gsd"
+    sim = svm.Simulation(device="cpu")
+    with GSD(path, trigger=1) as w:
+        sim.state = svm.init.random_tiling(16, seed=1, radius=1.0)
+        w.write(sim, 0)
+        sim.state = svm.init.random_tiling(16, seed=1, radius=3.0)
+        sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=3.8))
+        w.write(sim, 1)
+    sim.operations.forces.clear()
+    sim.state = svm.init.random_tiling(16, seed=1, radius=1.0)
+    with GSD(path, trigger=1, mode="ab") as w:
+        w.write(sim, 2)
+    with gsd.hoomd.open(path) as t:
+        assert t[0].configuration.box[0] < t[1].configuration.box[0] == t[2].configuration.box[0]
+        assert t[2].log["particles/force"].shape == (t[2].particles.N, 3)
+        assert np.all(np.isnan(t[2].log["particles/force"]))
+
+
+def test_planar_frame_positions_are_centred_in_the_largest_box(tmp_path):
+    path = tmp_path / "plane.gsd"
+    s = svm.State.concatenate([svm.init.random_planar_tiling(16, seed=1, box=(4.0, 5.0)),
+                               svm.init.random_planar_tiling(16, seed=2, box=(6.0, 3.0))])
+    _one_frame(path, s)
+    with gsd.hoomd.open(path) as t:
+        f = t[0]
+    assert f.configuration.box.tolist() == [6.0, 5.0, 0.0, 0.0, 0.0, 0.0] and f.configuration.dimensions == 2
+    assert np.array_equal(f.particles.position, (s.positions - [3.0, 2.5, 0.0]).astype(np.float32))
+    assert np.all(f.particles.position[:, 2] == 0)

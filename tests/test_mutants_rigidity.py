@@ -286,3 +286,75 @@ def test_flat_F_gives_nan_density_without_a_warning():
         warnings.simplefilter("error")
         d = rigidity.transition_density(x, [0.5, 0.5, 0.5], 0.05, x)
     assert np.all(np.isnan(d))
+
+
+# ------------------------------------------------------------------ the full pass (every site outside the plots)
+def test_binomial_error_of_a_single_replica_is_zero():
+    assert rigidity.binomial_error([0, 1], [1, 1]).tolist() == [0.0, 0.0]
+
+
+def test_density_normalised_by_a_partial_rise_of_F():
+    x = np.array([3.6, 3.7, 3.8])
+    F = np.array([0.2, 0.45, 0.7])                       # mass 0.5, slope 2.5 everywhere
+    grid = np.linspace(3.0, 4.4, 14001)
+    d = rigidity.transition_density(x, F, 0.01, grid)
+    assert d.sum() * (grid[1] - grid[0]) == pytest.approx(1.0, abs=1e-6)
+    assert d[np.searchsorted(grid, 3.7)] == pytest.approx(5.0, rel=1e-6)    # slope 2.5 / mass 0.5
+
+
+def test_F_back_where_it_started_gives_nan_not_infinity():
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        est = rigidity.p0_star([3.6, 3.7, 3.8], [0.0, 1.0, 0.0], sigma=0.05)
+        flat = rigidity.p0_star([3.6, 3.7, 3.8], [0.5, 0.5, 0.5], sigma=0.05)
+    assert math.isnan(est.mean) and math.isnan(est.std)
+    assert math.isnan(flat.mean) and math.isnan(flat.p0_half)
+
+
+def test_one_resample_gives_nan_without_a_warning():
+    import warnings
+    n = np.full(len(X), 50)
+    k = np.rint(_logistic(X, 3.8, 0.03) * n)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert math.isnan(rigidity.p0_star(X, k / n, n, resamples=1).mean_err)
+
+
+def test_std_at_zero_and_negative_variance():
+    # noisy (non-monotone) F on a grid where the moments are exact in binary:
+    # variance exactly 0, and exactly -1
+    zero = rigidity.p0_star([0.0, 3.0, 6.0, 9.0], [0.0, 0.25, 0.875, 0.75], sigma=0.5)
+    assert zero.std_unsmoothed == 0.0 and zero.std == 0.5
+    negative = rigidity.p0_star([0.0, 3.0, 6.0], [0.0, 0.875, 0.75], sigma=1.0)
+    assert math.isnan(negative.std_unsmoothed) and negative.std == 0.0
+    assert math.isnan(rigidity.p0_star([0.0, 3.0, 6.0], [0.0, 0.875, 0.75], sigma=0.5).std)
+
+
+def test_summarize_defaults_and_no_density_for_a_flat_F_with_a_given_sigma():
+    import inspect
+    defaults = {k: p.default for k, p in inspect.signature(rigidity.summarize).parameters.items()}
+    assert defaults["grid_points"] == 401 and defaults["resamples"] == 400
+    n_cells = [16] * 40 + [32] * 40
+    p0 = list(np.repeat([3.7, 3.8, 3.9, 4.0], 10)) * 2
+    status = ["zero" if (p > 3.75 + 0.01 * (i % 10)) else "rigid" for i, p in enumerate(p0[:40])] + ["rigid"] * 40
+    frac, p0star, density = rigidity.summarize(n_cells, p0, status, sigma=0.05)
+    assert np.unique(density["n_cells"]).tolist() == [16] and len(density["p0"]) == 401
+    sel = frac["n_cells"] == 16
+    est = rigidity.p0_star(frac["p0"][sel], frac["F"][sel], frac["n_zero"][sel] + frac["n_rigid"][sel],
+                           sigma=0.05, resamples=400)
+    assert p0star["p0_star_err"][0] == est.mean_err and np.isfinite(est.mean_err)
+    assert math.isnan(p0star["p0_star"][1])
+
+
+def test_wilson_interval_of_a_single_replica():
+    lo, hi = rigidity.wilson_interval([0, 1], [1, 1])
+    assert lo.tolist() == [0.0, 0.5] and hi.tolist() == [0.5, 1.0]
+
+
+def test_density_on_a_grid_of_any_shape():
+    x, F = np.array([3.6, 3.7, 3.8, 3.9]), np.array([0.0, 0.2, 0.9, 1.0])
+    grid = np.linspace(3.5, 4.0, 12)
+    flat = rigidity.transition_density(x, F, 0.05, grid)
+    square = rigidity.transition_density(x, F, 0.05, grid.reshape(3, 4))
+    assert square.shape == (3, 4) and np.array_equal(square.reshape(-1), flat)

@@ -117,3 +117,82 @@ def test_chord_threshold_on_the_sphere():
     L = 0.1 * np.sqrt(s.mean_cell_area)
     R = s.radius_np()
     assert np.allclose(t.chord_threshold2(s), (2 * R * np.sin(L / (2 * R))) ** 2, rtol=1e-14)
+
+
+def test_counters_are_empty_before_attaching():
+    t = T1()
+    for name in ("last_flips", "last_refused", "total_flips", "total_refused", "flip_backs"):
+        assert getattr(t, name).shape == (0,)
+
+
+def test_pairs_with_one_dropped_cell_are_dropped():
+    keys = np.array([1 * 6 + 5, 0 * 6 + 2, 2 * 6 + 3])
+    cell_map = np.array([-1, 2, 0, 1, 0, -1])          # (1, 5) and (0, 2) lose one cell, (2, 3) -> (0, 1)
+    new, keep = T1._pairs_between(keys, 6, cell_map, 3)
+    assert new.tolist() == [1] and keep.tolist() == [2]
+
+
+def test_short_edges_of_a_tissue_without_any():
+    sim, t = _attached(threshold=1e-6, new_length=0.12)
+    u, slot, lengths = t.short_edges(sim.state)
+    assert u.shape == slot.shape == lengths.shape == (0,)
+
+
+def test_an_edge_exactly_at_the_threshold_is_not_short():
+    """A honeycomb and a threshold, within a few ulps of its edge length, whose chord limit equals
+    some edges' squared chord exactly: those edges are not candidates, the shorter ones are."""
+    s = svm.init.hexagonal_tiling(4, 4)
+    probe = T1()
+    e = probe._edge_list(s)
+    d = s.constraint.displacement(s, e["u"], e["v"])
+    c2 = (d * d).sum(axis=1)
+    threshold = np.sqrt(c2.max() / s.mean_cell_area[0]) * (1 - 8 * np.finfo(float).eps)
+    for _ in range(32):
+        t = T1(threshold=threshold, new_length=1.0)
+        limit = t.chord_threshold2(s)[0]
+        if np.any(c2 == limit) and np.any(c2 < limit):
+            break
+        threshold = np.nextafter(threshold, 1.0)
+    assert np.any(c2 == limit) and np.any(c2 < limit)
+    u, slot, _ = t.short_edges(s)
+    assert sorted((3 * u + slot).tolist()) == sorted(e["corner"][c2 < limit].tolist())
+    assert not np.isin(e["corner"][c2 == limit], 3 * u + slot).any()
+
+
+
+def test_checkpoint_round_trip_and_wrong_replica_count():
+    sim, t = _attached(threshold=50.0, new_length=60.0)
+    sim.run(2)
+    saved = t.state_to_save()
+    assert len(saved["separated"]) > 1 and np.all(saved["total_flips"] > 0)
+    _, fresh = _attached(threshold=50.0, new_length=60.0)
+    fresh.restore_state({k: v.copy() for k, v in saved.items()})
+    for name in ("last_flips", "last_refused", "total_flips", "total_refused", "flip_backs"):
+        assert np.array_equal(getattr(fresh, name), saved[name]), name
+    assert np.array_equal(fresh._separated, saved["separated"]) and np.array_equal(fresh._rejoins, saved["rejoins"])
+    with pytest.raises(ValueError, match="'total_flips' has 3 replicas, the State 2"):
+        fresh.restore_state(dict(saved, total_flips=np.zeros(3, dtype=np.int64)))
+
+
+@pytest.mark.gpu
+def test_gpu_pass_with_more_candidates_than_room_matches_numpy():
+    """Nearly every edge short: more candidates than the GPU's first candidate room and flip log
+    (1024 rows), so a pass regrows both and replays the log; it still flips as NumPy does."""
+    state = svm.init.random_tiling(1000, replicas=2, seed=5)
+    sims = {}
+    for dev in ("cpu", "gpu"):
+        sim = svm.Simulation(device=dev)
+        sim.state = state
+        sim.operations.updaters.append(T1(threshold=1.0, new_length=1.5, max_flip_backs=10 ** 6))
+        sims[dev] = sim
+    c, g = sims["cpu"], sims["gpu"]
+    for _ in range(3):
+        c._update()
+        g._update()
+        for name in ("t1_flips", "t1_refused", "t1_total_flips", "t1_total_refused", "t1_flip_backs"):
+            assert np.array_equal(g.log(name), c.log(name)), name
+        assert np.array_equal(g.state.vertex_neighbors.get(), c.state.vertex_neighbors)
+        assert np.array_equal(g.state.vertex_cells.get(), c.state.vertex_cells)
+        assert np.abs(g.state.positions.get() - c.state.positions).max() <= 1e-12
+    assert int(c.log("t1_flips").sum()) > 0
+    assert g.operations.updaters[0]._gpu["capacity"] > 1024

@@ -57,7 +57,7 @@ def test_edge_lengths_are_minimum_image_distances():
 
 def test_unwrapped_cells_and_centres_against_an_independent_unwrapping():
     s = _tiling()
-    first, valid, e, r = PeriodicPlane.unwrapped_cells(s)
+    first, valid, e, r = s.constraint.unwrapped_cells(s)
     centres = s.constraint.cell_centers(s)
     assert centres.shape == (s.n_cells, 3) and np.all(centres[:, 2] == 0)
     for c in range(s.n_cells):

@@ -241,7 +241,8 @@ class Reader:
             raise ValueError(f"{self.path!r} is a directory, not a GSD file")
         try:
             self.file = gsd.fl.open(name=self.path, mode="r")
-        except (RuntimeError, OSError) as exc:
+            self.file.find_matching_chunk_names("")   # decodes every chunk name once: a damaged index fails here
+        except (RuntimeError, OSError, UnicodeDecodeError) as exc:
             raise ValueError(f"{self.path!r} is not a readable GSD file ({exc}); pass a .gsd trajectory written "
                              "by spherevm.plugins.writers.GSD") from exc
 

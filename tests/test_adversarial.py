@@ -176,3 +176,41 @@ def test_absurd_radius_is_refused_with_the_reason(radius):
 def test_nan_cell_count_is_refused():
     with pytest.raises(ValueError, match="n_cells"):
         svm.init.random_tiling(float("nan"))
+
+
+def test_seed_beyond_philox_key_is_refused_at_construction():
+    with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 4294967295\]"):
+        svm.Simulation(device="cpu", seed=2 ** 40)
+
+
+def test_t1_new_edge_shorter_than_the_old_is_refused():
+    with pytest.raises(ValueError, match="length_factor must be > 1"):
+        svm.plugins.updaters.T1(length_factor=0.5)
+
+
+def test_gsd_writer_given_a_directory_is_refused_at_construction(tmp_path):
+    with pytest.raises(ValueError, match="is a directory; give a file name such as"):
+        GSD(tmp_path)
+
+
+def test_cli_out_in_proc_is_a_usage_error_naming_out():
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-m", "spherevm", "minimize", "--cells", "16", "--replicas", "1", "-q",
+                          "--out", "/proc/x.gsd"], capture_output=True, text=True,
+                         env=dict(os.environ, PYTHONPATH=os.getcwd()))
+    assert out.returncode == 2 and "argument --out" in out.stderr and "Traceback" not in out.stderr, out.stderr
+
+
+def test_single_p0_sweep_says_why_there_is_no_p0_star(tmp_path, capsys):
+    """One p0 value: F(p0) is measured and written, and the table and a note say p0* needs two."""
+    from spherevm import cli
+    rc = cli.main(["rigidity", "--cells", "16", "--p0", "3.8", "--replicas", "3", "--device", "cpu", "-j", "1",
+                   "--no-plots", "--out", str(tmp_path / "one")])
+    out, err = capsys.readouterr()
+    assert rc == 0
+    assert "F at fewer than two p0 values: no p0*" in out and "transition not inside" not in out
+    assert "p0* needs F at two or more p0 values" in err and "widen --p0" not in err
+    header, row = (tmp_path / "one" / "fraction.csv").read_text().splitlines()
+    values = dict(zip(header.split(","), row.split(",")))
+    assert values["n_cells"] == "16" and float(values["p0"]) == 3.8 and 0 <= float(values["F"]) <= 1

@@ -129,7 +129,10 @@ def run(args) -> int:
         err.write(f"spherevm: {len(result.computed)} chunk(s) computed, {result.reused} found on disk, "
                   f"{result.elapsed:.1f} s; not converged: {n_max} max_steps, {n_osc} t1_oscillation "
                   f"(left out of F, counted in fraction.csv)\n")
-        if not all(tables["p0star"]["bracketed"]):
+        if len(sweep.p0) < 2:
+            err.write("spherevm: note: one p0 value: F(p0, N) is in fraction.csv, but p0* needs F at two or more "
+                      "p0 values (give a range such as --p0 3.6:4.0:0.02)\n")
+        elif not all(tables["p0star"]["bracketed"]):
             err.write("spherevm: note: for some N, F does not go from 0 to 1 inside the p0 grid; widen --p0\n")
         if tables["plot_note"]:
             err.write(f"spherevm: note: {tables['plot_note']}\n")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import math
 import os
+import signal
 import time
 from dataclasses import dataclass, field
 
@@ -116,7 +117,25 @@ def default_executor(device="auto", workers=None):
         return InProcessExecutor(), dev.name, True
     import multiprocessing
     # spawn: no fork of a process that may hold a CUDA context or threads
-    return cf.ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn")), dev.name, True
+    return cf.ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"),
+                                  initializer=_ignore_interrupts), dev.name, True
+
+
+def _ignore_interrupts():
+    """In a pool worker: Ctrl-C is the main process's business (it stops the workers), so a worker
+    neither prints a traceback nor reports a chunk as failed when the terminal sends SIGINT to all."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _stop_now(executor):
+    """Shut an owned executor down without waiting for the chunks still running: a process pool's
+    workers are terminated, else Ctrl-C would wait for each to finish its chunk (minutes)."""
+    processes = list((getattr(executor, "_processes", None) or {}).values())
+    executor.shutdown(wait=False, cancel_futures=True)
+    for p in processes:
+        p.terminate()
+    for p in processes:
+        p.join(timeout=5)
 
 
 # ---------------------------------------------------------------------------------------- progress
@@ -286,7 +305,7 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         # a failed chunk or Ctrl-C: do not wait for the chunks still running (finished ones are on disk)
         if owned:
             owned = False
-            executor.shutdown(wait=False, cancel_futures=True)
+            _stop_now(executor)
         raise
     finally:
         if owned:

@@ -35,9 +35,10 @@ def add_parser(subparsers):
     g = m.add_argument_group("minimiser")
     g.add_argument("--dt", type=real(strict=True), default=0.02, help="FIRE time step, > 0 (default: %(default)s)")
     g.add_argument("--force-tol", type=real(), default=1e-8,
-                   help="a replica converges when its largest vertex force is below this (default: %(default)s)")
+                   help="a replica converges when its largest vertex force is below this, in units of "
+                        "kP sqrt(<A>) (default: %(default)s)")
     g.add_argument("--energy-tol", type=real(), default=1e-14,
-                   help="... or its energy per cell below this (default: %(default)s)")
+                   help="... or its energy per cell below this, in units of kP <A> (default: %(default)s)")
     g.add_argument("--max-steps", type=integer(0), default=20000, help="step limit (default: %(default)s)")
     g.add_argument("--check-every", type=integer(1), default=10,
                    help="steps between convergence checks and progress updates (default: %(default)s)")

@@ -41,9 +41,10 @@ def add_parser(subparsers):
     g.add_argument("--dt", type=real(strict=True), default=RigiditySweep.dt,
                    help="FIRE time step (default: %(default)s)")
     g.add_argument("--force-tol", type=real(), default=RigiditySweep.force_tol,
-                   help="stop a replica when its largest vertex force is below this (default: %(default)s)")
+                   help="stop a replica when its largest vertex force is below this, in units of kP sqrt(<A>) "
+                        "(default: %(default)s)")
     g.add_argument("--energy-tol", type=real(), default=RigiditySweep.energy_tol,
-                   help="... or its energy per cell below this (default: %(default)s)")
+                   help="... or its energy per cell below this, in units of kP <A> (default: %(default)s)")
     g.add_argument("--max-steps", type=integer(1), default=RigiditySweep.max_steps,
                    help="step limit; replicas reaching it are reported as not converged (default: %(default)s)")
     g.add_argument("--t1", type=real(strict=True), default=RigiditySweep.t1_threshold, metavar="THRESHOLD",

@@ -204,6 +204,12 @@ class Force(Operation):
     def compute(self, state) -> ForceResult:
         raise NotImplementedError
 
+    def energy_scale(self, state):
+        """This force's natural energy per cell, one value per replica (NumPy ``(n_replicas,)``), or
+        None if it defines none (the default). A :class:`Minimizer` measures its tolerances in the
+        largest scale its forces declare, so that a state is minimised alike at any size."""
+        return None
+
     def energy(self, state):
         """Energy per replica, as a NumPy array."""
         return state.device.to_numpy(self.compute(state).energy)
@@ -289,6 +295,13 @@ class Minimizer(Integrator):
     below ``energy_tol``, and those that an operation halts (:meth:`Operation.halted`); the others
     go on. HOOMD-style use: ``while not fire.done: sim.run(100)``, or ``sim.minimize()``.
 
+    The tolerances are relative to each replica's natural units (:meth:`tolerance_units`): energy
+    per cell in ``e = `` the largest :meth:`Force.energy_scale` of the forces (the vertex model's
+    is the paper's ``kP <A>``, or ``kA <A>^2`` without perimeter stiffness), force in
+    ``e / sqrt(<A>)`` (``kP sqrt(<A>)``). So the same tiling at radius 1e-9 or 1e6 stops in the same
+    shape, and at <A> = 1 with kP = 1 the tolerances are the absolute numbers they always were.
+    Without a force declaring a scale they are absolute.
+
     Per replica (NumPy): ``replica_converged``, ``reason`` ("force", "energy", an operation's
     ``halt_reason``, or "running"), ``steps`` (the iteration at which it stopped, -1 while running).
     ``converged``: every replica reached a tolerance; ``done``: every replica stopped.
@@ -368,6 +381,17 @@ class Minimizer(Integrator):
     def done(self) -> bool:
         return bool(self.stopped.all())
 
+    @staticmethod
+    def tolerance_units(simulation):
+        """``(energy per cell, force)`` per replica (NumPy): the units of ``energy_tol`` and
+        ``force_tol``. Energy: the largest :meth:`Force.energy_scale` of the simulation's forces
+        (1 where none declares one, or where it is 0); force: that over sqrt(<A>)."""
+        state = simulation.state
+        scales = [s for s in (f.energy_scale(state) for f in simulation.operations.forces) if s is not None]
+        energy = np.max(scales, axis=0) if scales else np.ones(state.n_replicas)
+        energy = np.where(np.isfinite(energy) & (energy > 0), energy, 1.0)
+        return energy, energy / np.sqrt(state.mean_cell_area)
+
     def check_convergence(self, simulation):
         """Stop the replicas that reached a tolerance now, or that an operation halts."""
         self._checked_at = self.iteration
@@ -376,9 +400,10 @@ class Minimizer(Integrator):
         _, energy = simulation.compute_forces()
         fmax = to_np(simulation.max_force())
         epc = to_np(energy) / state.cells_per_replica
+        energy_unit, force_unit = self.tolerance_units(simulation)
         running = ~self.stopped
-        by_force = running & (fmax < self.force_tol)
-        by_energy = running & ~by_force & (epc < self.energy_tol)
+        by_force = running & (fmax < self.force_tol * force_unit)
+        by_energy = running & ~by_force & (epc < self.energy_tol * energy_unit)
         self.reason[by_force], self.reason[by_energy] = "force", "energy"
         newly = by_force | by_energy
         for op in simulation.operations:

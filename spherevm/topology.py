@@ -269,6 +269,99 @@ def _split_in_rows(table, sides, rows, vert, first, second):
     sides[rows] += 1
 
 
+def t1_new_positions(state, pos, u, v, a, b, c, d, new_length):
+    """Where a T1 flip of the edges ``(u, v)`` puts its two vertices: ``(on the C1 side, on the C2
+    side)``, rotating each edge by 90 degrees about the surface normal at its midpoint, the two
+    points ``new_length`` apart symmetrically about it (``pos``: host positions; a..d as from
+    :func:`t1_cells`). The CUDA twin is ``t1_new_positions`` in plugins/updaters/t1_fold.cuh."""
+    con = state.constraint
+    radius = con.size_np(state)[state.vertex_replica_np()[u]]     # the surface size (a box on a plane)
+    pu = pos[u]
+    pv, pa, pb, pc, pd = (con.unwrap(pos[w], pu, radius) for w in (v, a, b, c, d))  # nearest images
+    mid = con.project_normal(0.5 * (pu + pv), radius)
+    normal = con.normal(mid)
+    along = con.project_tangent(mid, pv - pu)
+    norm = np.linalg.norm(along, axis=1)
+    # a zero-length edge has no direction: fall back to the direction between the cells' sides
+    across_c1 = con.project_tangent(mid, 0.5 * (pa + pd) - 0.5 * (pb + pc))
+    tiny = norm <= 1e-12 * con.length_scale(radius)
+    perp = np.cross(normal, along / np.where(tiny, 1.0, norm)[:, None])
+    perp[tiny] = across_c1[tiny]
+    perp /= np.linalg.norm(perp, axis=1)[:, None]
+    half = 0.5 * np.broadcast_to(np.asarray(new_length, dtype=np.float64), u.shape)
+    return con.geodesic_offset(mid, perp, half, radius), con.geodesic_offset(mid, -perp, half, radius)
+
+
+def t1_folds(state, u, slot, new_length):
+    """Which of the flips of the edges ``(u, vertex_neighbors[u, slot])`` (to ``new_length``) would
+    fold the network: leave one of the four cells with signed area <= 0, or invert a corner that
+    was not inverted: turn the three edges at one of the six vertices whose edges change (the
+    flipped pair and a, b, c, d) clockwise (two of the three turns between consecutive edges
+    negative). An edge the dynamics pushed through zero length already has inverted corners at
+    its ends; flipping it is the cure, not a fold, so only new inversions count.
+
+    Areas: what the constraint will measure after the flip, the fan about each cell's first vertex
+    after the flip (at its new place if it is u or v), over the cell's edges that do not touch u or
+    v in table order, then its new edges (:func:`t1_flip`'s rows); so a fan that would wrap (a big
+    cell, A - 4 pi R^2) is refused too. Exactly what ``t1_would_fold`` in
+    plugins/updaters/t1_fold.cuh computes, in the same order."""
+    dev = state.device
+    vn, vc = dev.to_numpy(state.vertex_neighbors), dev.to_numpy(state.vertex_cells)
+    table, sides = dev.to_numpy(state.cell_vertices), dev.to_numpy(state.cell_sides)
+    pos = dev.to_numpy(state.positions)
+    con = state.constraint
+    size = con.size_np(state)[state.vertex_replica_np()[u]]
+    v, a, b, c, d, C1, C2, C3, C4 = t1_cells(vn, vc, u, slot)
+    px, py = t1_new_positions(state, pos, u, v, a, b, c, d, new_length)
+    n, width = len(u), table.shape[1]
+    # areas of C1..C4 (axis 1): old sides not touching u or v, then the new chains (a X d), (c Y b),
+    # (b Y X a), (d X Y c), all as one array of fan triangles summed left to right (cumsum)
+    rows = table[np.stack([C1, C2, C3, C4], axis=1)]                       # (n, 4, width)
+    k = sides[np.stack([C1, C2, C3, C4], axis=1)][..., None]
+    col = np.arange(width)
+    nxt = np.take_along_axis(rows, np.broadcast_to((col + 1) % k, rows.shape), axis=2)
+    hit = (rows == u[:, None, None]) | (rows == v[:, None, None])
+    keep = (col < k) & ~hit & ~((nxt == u[:, None, None]) | (nxt == v[:, None, None]))
+    p, q = pos[np.where(keep, rows, 0)], pos[np.where(keep, nxt, 0)]      # (n, 4, width, 3)
+    pa, pb, pc, pd = pos[a], pos[b], pos[c], pos[d]
+    chain = np.stack([np.stack(e, axis=1) for e in ((pa, px, pd, pd), (pc, py, pb, pb), (pb, py, px, pa),
+                                                     (pd, px, py, pc))], axis=1)   # (n, 4, 4, 3); 3 edges each
+    p = np.concatenate([p, chain[:, :, :3]], axis=2)
+    q = np.concatenate([q, chain[:, :, 1:]], axis=2)
+    keep = np.concatenate([keep, np.broadcast_to([True, True, False], (n, 4, 3)),], axis=2)
+    keep[:, 2:, width + 2] = True                                          # C3 and C4 have three new edges
+    moved = np.stack([px, py, py, px], axis=1)                             # each row's first vertex after
+    apex = np.where(hit[:, :, :1], moved, pos[rows[:, :, 0]])
+    tri = con.triangle_area(np.broadcast_to(apex[:, :, None], p.shape), p, q, _per_row(size, 2))
+    area = np.cumsum(np.where(keep, tri, 0.0), axis=2)[:, :, -1]
+    bad = ~(area > 0).all(axis=1)
+    # corners: X = v's new row (Y, d, a), Y = u's (X, b, c); a, d, b, c with u or v at its new place
+    ring_now = pos[vn[np.stack([v, u, a, d, b, c], axis=1)]]                # (n, 6, 3 neighbours, 3)
+    ring_new = ring_now.copy()
+    ring_new[:, 0], ring_new[:, 1] = np.stack([py, pd, pa], axis=1), np.stack([px, pb, pc], axis=1)
+    for i, (w, old, new) in enumerate(((a, u, px), (d, v, px), (b, u, py), (c, v, py)), start=2):
+        ring_new[:, i] = np.where((vn[w] == old[:, None])[..., None], new[:, None], ring_now[:, i])
+    centre_now = pos[np.stack([v, u, a, d, b, c], axis=1)]
+    centre_new = np.concatenate([np.stack([px, py], axis=1), centre_now[:, 2:]], axis=1)
+    bad |= (_inverted(con, centre_new, ring_new, size) & ~_inverted(con, centre_now, ring_now, size)).any(axis=1)
+    return bad
+
+
+def _per_row(size, axes):
+    """Per-candidate surface sizes (a radius, or a box (Lx, Ly)) broadcast over ``axes`` more axes."""
+    return size.reshape(size.shape[:1] + (1,) * axes + size.shape[1:])
+
+
+def _inverted(con, w, ring, size):
+    """Corners ``w`` (..., 3) whose edges to ``ring`` (..., 3, 3) turn clockwise: two of the three
+    turns between consecutive edges negative about the outward normal."""
+    normal = con.normal(w)
+    e = con.unwrap(ring, w[..., None, :], _per_row(size, 2)) - w[..., None, :]
+    cross = np.cross(e, np.roll(e, -1, axis=-2))
+    turns = (np.einsum("...j,...kj->...k", normal, cross) < 0).sum(axis=-1)
+    return turns >= 2
+
+
 def t1_flip(state, u, slot, new_length, sense: int = 1):
     """Flip the edges ``(u[i], vertex_neighbors[u[i], slot[i]])`` of ``state`` in place.
 
@@ -308,24 +401,7 @@ def t1_flip(state, u, slot, new_length, sense: int = 1):
     _remove_from_rows(table, sides, C2, X)
     _split_in_rows(table, sides, C3, u, Y, X)
     _split_in_rows(table, sides, C4, v, X, Y)
-    # positions: rotate the edge about the normal at its midpoint
-    con = state.constraint
-    radius = con.size_np(state)[state.vertex_replica_np()[u]]     # the surface size (a box on a plane)
-    pu = pos[u]
-    pv, pa, pb, pc, pd = (con.unwrap(pos[w], pu, radius) for w in (v, a, b, c, d))  # nearest images
-    mid = con.project_normal(0.5 * (pu + pv), radius)
-    normal = con.normal(mid)
-    along = con.project_tangent(mid, pv - pu)
-    norm = np.linalg.norm(along, axis=1)
-    # a zero-length edge has no direction: fall back to the direction between the cells' sides
-    across_c1 = con.project_tangent(mid, 0.5 * (pa + pd) - 0.5 * (pb + pc))
-    tiny = norm <= 1e-12 * con.length_scale(radius)
-    perp = np.cross(normal, along / np.where(tiny, 1.0, norm)[:, None])
-    perp[tiny] = across_c1[tiny]
-    perp /= np.linalg.norm(perp, axis=1)[:, None]
-    half = 0.5 * np.broadcast_to(np.asarray(new_length, dtype=np.float64), u.shape)
-    pos[X] = con.geodesic_offset(mid, perp, half, radius)
-    pos[Y] = con.geodesic_offset(mid, -perp, half, radius)
+    pos[X], pos[Y] = t1_new_positions(state, pos, u, v, a, b, c, d, new_length)
     xp = dev.xp
     state.vertex_neighbors = xp.asarray(vn)
     state.vertex_cells = xp.asarray(vc)

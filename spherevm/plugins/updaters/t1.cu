@@ -2,17 +2,21 @@
 // A pass is two kernels: t1_detect (one thread per vertex, its edges to higher-numbered
 // neighbours) lists the candidates and lets each claim its four cells (lowest edge index wins);
 // after one small read-back of the counters, t1_apply (one thread per candidate) flips the
-// winners. Winners touch disjoint cells and vertices, so they need no locks.
+// winners. Winners touch disjoint cells and vertices, so they need no locks. A candidate whose flip
+// would fold the network (t1_fold.cuh) is refused in t1_detect, as one losing a triangle's side.
 #include "geometry/sphere.cuh"
+#include "plugins/updaters/t1_fold.cuh"
 
 #define CAND_INTS 12   // u, k, v, a, b, c, d, C1, C2, C3, C4, replica
 #define LOG_INTS 6     // pass, C1, C2, C3, C4, replica
 
 // counters: [0] candidates, [1] a C3/C4 row is full (widen the table)
+// new_length[r] > 0: absolute new length per replica; else length_factor times the old length.
 extern "C" __global__ void t1_detect(
     const double* __restrict__ pos, const int* __restrict__ vn, const int* __restrict__ vc,
-    const int* __restrict__ sides, const int* __restrict__ vertex_replica, const double* __restrict__ radius,
-    const double* __restrict__ chord2, const bool* __restrict__ active, int n_vertices, int max_sides,
+    const int* __restrict__ sides, const int* __restrict__ cell_vertices, const int* __restrict__ vertex_replica,
+    const double* __restrict__ radius, const double* __restrict__ chord2, const double* __restrict__ new_length,
+    double length_factor, const bool* __restrict__ active, int n_vertices, int max_sides,
     int* __restrict__ claim, int* __restrict__ refused, unsigned long long* __restrict__ total_refused,
     int* __restrict__ counters, int* __restrict__ cand, double* __restrict__ cand_len, int capacity)
 {
@@ -35,7 +39,15 @@ extern "C" __global__ void t1_detect(
         int c = vn[3 * v + (j + 1) % 3], d = vn[3 * v + (j + 2) % 3];
         int C4 = vc[3 * v + (j + 1) % 3];
         bool distinct = C1 != C2 && C1 != C3 && C1 != C4 && C2 != C3 && C2 != C4 && C3 != C4;
-        if (sides[C1] <= 3 || sides[C2] <= 3 || !distinct) {
+        bool refuse = sides[C1] <= 3 || sides[C2] <= 3 || !distinct;
+        if (!refuse) {
+            vec3 px, py;
+            double full = new_length[r] > 0.0 ? new_length[r] : length_factor * L;
+            t1_new_positions(pu, pv, load3(pos, a), load3(pos, b), load3(pos, c), load3(pos, d), radius[r], full,
+                             &px, &py);
+            refuse = t1_would_fold(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px, py);
+        }
+        if (refuse) {
             atomicAdd(refused + r, 1);
             atomicAdd(total_refused + r, 1ull);
             continue;
@@ -109,27 +121,13 @@ extern "C" __global__ void t1_apply(
     n = sides[C2]; remove_from_row(cell_vertices + (long)C2 * max_sides, &n, X); sides[C2] = n;
     n = sides[C3]; split_in_row(cell_vertices + (long)C3 * max_sides, &n, u, Y, X); sides[C3] = n;
     n = sides[C4]; split_in_row(cell_vertices + (long)C4 * max_sides, &n, v, X, Y); sides[C4] = n;
-    // geometry: rotate the edge about the normal at its midpoint, exact geodesic offsets
-    double R = radius[r];
-    vec3 pu = load3(pos, u), pv = load3(pos, v);
-    vec3 mid = R * normalize3(0.5 * (pu + pv));
-    vec3 nrm = normalize3(mid);
-    vec3 w = pv - pu;
-    vec3 along = w - dot3(w, nrm) * nrm;
-    double len = norm3(along);
-    vec3 perp;
-    if (len <= 1e-12 * R) {
-        vec3 s = 0.5 * (load3(pos, a) + load3(pos, d)) - 0.5 * (load3(pos, b) + load3(pos, c));
-        perp = s - dot3(s, nrm) * nrm;
-    } else {
-        perp = cross3(nrm, v3(along.x / len, along.y / len, along.z / len));
-    }
-    perp = normalize3(perp);
+    // geometry: rotate the edge about the normal at its midpoint (the places t1_detect checked)
+    vec3 px, py;
     double full = new_length[r] > 0.0 ? new_length[r] : length_factor * cand_len[i];
-    double phi = 0.5 * full / R;
-    vec3 m = normalize3(mid);
-    store3(pos, X, R * (cos(phi) * m + sin(phi) * perp));
-    store3(pos, Y, R * (cos(phi) * m + sin(phi) * (-perp)));
+    t1_new_positions(load3(pos, u), load3(pos, v), load3(pos, a), load3(pos, b), load3(pos, c), load3(pos, d),
+                     radius[r], full, &px, &py);
+    store3(pos, X, px);
+    store3(pos, Y, py);
     atomicAdd(flips + r, 1);
     atomicAdd(total_flips + r, 1ull);
     moved[2 * i] = u;              // for Integrator.reset_vertices

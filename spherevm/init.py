@@ -83,8 +83,9 @@ def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, v
     Small spheres: a point set lying within one hemisphere (probability (N^2 - N + 2)/2^N, so
     common for N < 16 and below 1e-6 from N = 32) has the origin outside its hull and gives a cell
     larger than a hemisphere; facet centroids can also fold a cell over when a facet is very
-    obtuse. Such draws are rejected and redrawn from the stream ``(seed, r, attempt)``, so every
-    tiling returned has all cells counter-clockwise with positive area. This conditions the
+    obtuse, or push one past a hemisphere. Such draws are rejected and redrawn from the stream
+    ``(seed, r, attempt)``, so every tiling returned has all cells counter-clockwise with positive
+    area, each smaller than a hemisphere (what :meth:`State.validate` requires). This conditions the
     ensemble of small-N tilings; at N >= 32 it practically never happens.
 
     ``sort=True`` numbers cells and vertices along a Morton curve on the sphere
@@ -157,7 +158,8 @@ def _tilings(n, keys, R, vertices, sort, device):
                 attempts[i] += 1
         state = _batched_dual(n, hulls, R, vertices, sort)
         area = state.constraint.cell_areas_np(state)
-        folded = np.unique(state.cell_replica_np()[area <= 0])   # a very obtuse facet folded a cell
+        half = 0.5 * state.constraint.total_area_np(R)            # a cell over a hemisphere is refused too
+        folded = np.unique(state.cell_replica_np()[(area <= 0) | (area > half)])   # a very obtuse facet
         attempts[folded] += 1
         todo = folded.tolist()
     state = state.to(device) if device is not CPU else state

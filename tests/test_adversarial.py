@@ -152,6 +152,68 @@ def test_folded_states_read_unless_orientation_is_asked(tmp_path):
     assert cv.shape == state.cell_vertices.shape
 
 
+# ------------------------------------------------------------------ item 8: cells larger than a hemisphere
+def squeezed_dodecahedron(factor):
+    """The dodecahedron with every polar angle scaled by ``factor`` (the issue's reproduction)."""
+    s = svm.init.regular_tiling("dodecahedron")
+    R = float(s.radius_np()[0])
+    p = s.positions
+    theta, phi = factor * np.arccos(p[:, 2] / R), np.arctan2(p[:, 1], p[:, 0])
+    s.positions = R * np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], axis=1)
+    return s
+
+
+@pytest.mark.parametrize("factor", [0.45, 0.55])
+def test_a_cell_larger_than_a_hemisphere_is_refused_at_validation(factor, tmp_path):
+    s = squeezed_dodecahedron(factor)
+    total = s.constraint.cell_areas_np(s).sum()
+    assert abs(total - 4 * np.pi * s.radius_np()[0] ** 2) > 1           # the invariant is broken (0, not 4 pi R^2)
+    for orientation in (False, True):          # not reported as "clockwise", with or without the sign test
+        with pytest.raises(ValueError, match=r"replica 0: the cell areas add up to .* larger than a hemisphere"):
+            s.validate(orientation=orientation)
+    with pytest.raises(ValueError, match="larger than a hemisphere"):
+        svm.State(s.positions, s.cell_vertices, s.cell_sides, s.vertex_neighbors, s.vertex_cells, s.vertex_start,
+                  s.cell_start, s.radius)
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.State(s.positions, s.cell_vertices, s.cell_sides, s.vertex_neighbors, s.vertex_cells,
+                          s.vertex_start, s.cell_start, s.radius, validate=False)
+    svm.write_gsd(sim, tmp_path / "big.gsd")
+    with pytest.raises(ValueError, match=r"big.gsd.*frame 0.*larger than a hemisphere"):
+        svm.init.from_gsd(tmp_path / "big.gsd")
+
+
+@pytest.mark.parametrize("factor", [0.6, 0.75, 0.9, 1.0])
+def test_the_total_area_invariant_holds_for_states_that_pass(factor):
+    """Squeezed less, the largest cell stays under a hemisphere: areas add up to 4 pi R^2, no cell is
+    clockwise, and the state is valid."""
+    s = squeezed_dodecahedron(factor)
+    area = s.constraint.cell_areas_np(s)
+    R = s.radius_np()[0]
+    assert abs(area.sum() - 4 * np.pi * R ** 2) <= 1e-12 * 4 * np.pi * R ** 2
+    assert area.min() > 0 and area.max() < 2 * np.pi * R ** 2
+    s.validate()
+
+
+def test_a_cell_over_a_hemisphere_measured_right_is_refused_too():
+    """The sum may hold while one cell covers more than half the sphere: refused, it is beyond what
+    cell centres and fans are exact for."""
+    s = svm.init.regular_tiling("dodecahedron")
+    area = s.constraint.cell_areas_np(s)
+    big = area.copy()
+    big[0], big[1:] = 0.6 * area.sum(), 0.4 * area.sum() / (len(area) - 1)
+    with pytest.raises(ValueError, match="cell 0 covers 0.6 of its sphere, more than a hemisphere"):
+        svm.topology._check_cover(s, big)
+    svm.topology._check_cover(s, area)
+
+
+def test_small_random_tilings_have_no_cell_over_a_hemisphere():
+    """random_tiling redraws such draws (facet centroids can push a cell past a hemisphere at N = 6)."""
+    for seed in range(3):
+        s = svm.init.random_tiling(6, replicas=6, seed=seed)
+        area = s.constraint.cell_areas_np(s)
+        assert area.max() < 2 * np.pi * s.radius_np()[0] ** 2
+
+
 # ------------------------------------------------------------------ item 3: size guard
 def test_huge_tiling_is_refused_before_allocating():
     with pytest.raises(svm.validation.InsufficientMemory, match=r"needs about .* GiB of host memory, but only"):

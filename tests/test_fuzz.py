@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import spherevm as svm
-from spherevm import topology
+from spherevm import folding
 from spherevm.plugins.updaters import T1
 
 from conftest import to_numpy
@@ -149,7 +149,7 @@ def test_fuzz_thousands_of_flips_and_no_fold(device):
 
 def test_fuzz_finds_the_folds_the_rule_refuses(monkeypatch):
     """Without the rule the same fuzzing makes folds: the counter sees what the rule prevents."""
-    monkeypatch.setattr(topology, "t1_folds", lambda state, u, slot, new_length: np.zeros(len(u), dtype=bool))
+    monkeypatch.setattr(folding, "t1_folds", lambda state, u, slot, new_length: np.zeros(len(u), dtype=bool))
     folds = FoldCounter()
     for seed in range(2):
         fuzz(svm.init.random_tiling(60, replicas=2, seed=seed), seed, passes=100, device="cpu", check_every=50,
@@ -179,7 +179,7 @@ def test_hot_tiny_spheres_flip_without_folding(device):
 
 
 def test_hot_tiny_spheres_folded_without_the_rule(monkeypatch):
-    monkeypatch.setattr(topology, "t1_folds", lambda state, u, slot, new_length: np.zeros(len(u), dtype=bool))
+    monkeypatch.setattr(folding, "t1_folds", lambda state, u, slot, new_length: np.zeros(len(u), dtype=bool))
     folds, _ = hot_brownian_folds("cpu")
     assert folds.cells > 10 and folds.corners > 10, (folds.cells, folds.corners)
 

@@ -2,7 +2,7 @@
 cells with positive signed area (as the forces will measure it) and must not invert a corner
 (turn the three edges at one of its six vertices clockwise) that was not inverted.
 
-Checked here: the rule (spherevm.topology.t1_folds) against flipping a copy and measuring it with
+Checked here: the rule (spherevm.folding.t1_folds) against flipping a copy and measuring it with
 code written here; constructed flips that fold, on the sphere and the plane; the CUDA header
 t1_fold.cuh compiled on the CPU against the NumPy rule (positions and decisions), and t1.cu
 compiled with nvcc where there is one. tests/test_fuzz.py counts folds under fuzzing."""
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import spherevm as svm
-from spherevm import topology
+from spherevm import folding, topology
 from spherevm.plugins.updaters import T1
 
 from test_cuda_headers import HERE, PACKAGE, build_harness, find_compiler
@@ -59,7 +59,7 @@ def candidates(state, threshold):
 def test_rule_is_what_flipping_a_copy_shows(n_cells, seed, kick, threshold):
     state = kicked(n_cells, seed, kick)
     u, slot, new = candidates(state, threshold)
-    rule = topology.t1_folds(state, u, slot, new)
+    rule = folding.t1_folds(state, u, slot, new)
     seen = folds_when_flipped(state, u, slot, new)
     assert len(u) > 20 and rule.any() and (~rule).any(), (len(u), rule.sum())
     assert np.array_equal(rule, seen), np.flatnonzero(rule != seen)
@@ -116,18 +116,18 @@ def test_ordinary_minimisations_refuse_nothing_that_does_not_fold():
     sim.operations.updaters.append(T1())
     sim.operations.integrator = svm.plugins.integrators.FIRE(dt=0.02)
     checked = []
-    rule = topology.t1_folds
+    rule = folding.t1_folds
 
     def spy(state, u, slot, new_length):
         out = rule(state, u, slot, new_length)
         checked.append(np.array_equal(out, folds_when_flipped(state, u, slot, np.asarray(new_length))))
         return out
 
-    topology.t1_folds = spy
+    folding.t1_folds = spy
     try:
         res = sim.minimize(force_tol=1e-9, max_steps=3000)
     finally:
-        topology.t1_folds = rule
+        folding.t1_folds = rule
     assert res.all_converged and len(checked) > 10 and all(checked)
 
 
@@ -166,7 +166,7 @@ def test_cuda_header_agrees_with_numpy(fold_header, n_cells, seed, kick, thresho
                                 _p(table), _p(np.ascontiguousarray(state.cell_sides, np.int32)),
                                 ctypes.c_int(table.shape[1]), _p(cand), _p(np.ascontiguousarray(px)),
                                 _p(np.ascontiguousarray(py)), _p(host))
-    rule = topology.t1_folds(state, u, slot, new)
+    rule = folding.t1_folds(state, u, slot, new)
     assert n > 20 and rule.any()
     assert np.array_equal(host.astype(bool), rule), np.flatnonzero(host.astype(bool) != rule)
 

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ... import topology
+from ... import folding, topology
 from ...constraints import Sphere
 from ...device import launch, load_module
 from ..base import Updater
@@ -31,7 +31,7 @@ class T1(Updater):
     * a flip that would leave a cell with fewer than 3 sides (a triangle losing a side), or fold
       the network (leave one of its four cells with signed area <= 0, or invert a corner: the
       three edges at one of its six vertices no longer counter-clockwise; see
-      :func:`spherevm.topology.t1_folds`), is refused and counted, never an error;
+      :func:`spherevm.folding.t1_folds`), is refused and counted, never an error;
     * conflicting flips (short edges touching a common cell) are resolved deterministically: an
       edge flips only if it has the lowest index among the candidate edges touching each of its
       four cells, so at most one flip per cell per pass; the rest wait for the next pass. The edge
@@ -160,7 +160,7 @@ class T1(Updater):
         distinct = (ordered[:, 1:] != ordered[:, :-1]).all(axis=1)
         refused = (sides[C1] <= 3) | (sides[C2] <= 3) | ~distinct
         rest = np.flatnonzero(~refused)
-        refused[rest] = topology.t1_folds(state, u[rest], slot[rest], self.new_lengths(state, u[rest], lengths[rest]))
+        refused[rest] = folding.t1_folds(state, u[rest], slot[rest], self.new_lengths(state, u[rest], lengths[rest]))
         index = 3 * u + slot
         claim = np.full(state.n_cells, np.iinfo(np.int64).max, dtype=np.int64)
         ok = ~refused

@@ -1,7 +1,8 @@
 // The geometry of a T1 flip on the sphere, shared by t1_detect and t1_apply (t1.cu): where the two
 // vertices go, and whether the flip would fold the network. The CUDA twin of
-// spherevm.topology.t1_new_positions and t1_folds, the same arithmetic in the same order (compiled
-// on the CPU and compared with them by tests/test_t1_fold.py). Names as in topology.t1_cells:
+// spherevm.topology.t1_new_positions and spherevm.folding.t1_folds, the same arithmetic in the
+// same order (compiled on the CPU and compared with them by tests/test_t1_fold.py). Names as in
+// topology.t1_cells:
 // C1 = (.., a, u, v, d, ..), C2 = (.., c, v, u, b, ..), C3 = (.., b, u, a, ..), C4 = (.., d, v, c, ..);
 // after the flip X = v sits on the C1 side with row (Y, d, a), Y = u on the C2 side with (X, b, c).
 #pragma once

@@ -216,16 +216,75 @@ def test_small_random_tilings_have_no_cell_over_a_hemisphere():
 
 # ------------------------------------------------------------------ item 3: size guard
 def test_huge_tiling_is_refused_before_allocating():
-    with pytest.raises(svm.validation.InsufficientMemory, match=r"needs about .* GiB of host memory, but only"):
+    with pytest.raises(svm.validation.InsufficientMemory, match=r"needs about .* TiB of host memory, but only"):
         svm.init.random_tiling(10 ** 12)
 
 
-def test_cli_huge_request_is_a_usage_error(tmp_path):
+def test_cli_huge_request_is_a_usage_error_at_once(tmp_path):
     import subprocess
     import sys
+    import time
+    start = time.monotonic()
     out = subprocess.run([sys.executable, "-m", "spherevm", "minimize", "--cells", "1000000000", "--replicas", "1",
                           "-q"], capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=os.getcwd()))
-    assert out.returncode == 2 and "GiB of host memory" in out.stderr, out.stderr
+    assert out.returncode == 2, out.stderr
+    assert "minimize --cells 1000000000 --replicas 1 needs about" in out.stderr and "is available" in out.stderr
+    assert time.monotonic() - start < 60          # refused before anything is built (it was killed at 24 GB)
+
+
+@pytest.fixture
+def half_a_gib(monkeypatch):
+    """The machine, as the guards see it, has 0.5 GiB of host memory and 0.25 GiB free on its GPU."""
+    monkeypatch.setattr(svm.validation, "available_host_memory", lambda: 2 ** 29)
+    monkeypatch.setattr(svm.validation, "available_device_memory", lambda: 2 ** 28)
+
+
+@pytest.mark.parametrize("make", [lambda: svm.init.random_tiling(200_000, replicas=2),
+                                  lambda: svm.init.random_tilings(300_000, [1]),
+                                  lambda: svm.init_plane.random_planar_tiling(300_000),
+                                  lambda: svm.init_plane.random_planar_tilings(200_000, [1, 2])],
+                         ids=["random_tiling", "random_tilings", "random_planar_tiling", "random_planar_tilings"])
+def test_initialisers_refuse_what_does_not_fit(half_a_gib, make):
+    """States of 500 B per cell plus 2.5 kB per cell of the tiling being built: 0.65 to 0.84 GiB."""
+    with pytest.raises(svm.validation.InsufficientMemory, match=r"needs about [0-9.]+ GiB of host memory, but only "
+                                                                 r"0.5 GiB is available"):
+        make()
+
+
+@pytest.mark.parametrize("argv, what", [
+    (["minimize", "--cells", "150000", "--replicas", "1"], "minimize --cells 150000 --replicas 1"),
+    (["dynamics", "--cells", "150000", "--replicas", "1"], "dynamics of 1 replica(s) of 150000 cells"),
+])
+def test_cli_runs_refuse_what_does_not_fit(half_a_gib, capsys, argv, what):
+    """150,000 cells: the State alone (~75 MB) would fit, the CPU run (~0.7 GiB) does not."""
+    from spherevm import cli
+    assert cli.main([*argv, "--device", "cpu", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert f"{what} needs about 0.698 GiB of host memory, but only 0.5 GiB is available" in err, err
+
+
+def test_sweep_refuses_what_does_not_fit_before_making_anything(half_a_gib, tmp_path):
+    sweep = svm.sweeps.RigiditySweep(cells=(150_000,), p0=(3.7, 3.8), replicas=1)
+    with pytest.raises(svm.validation.InsufficientMemory, match=r"the sweep \(1 worker\(s\), chunks of up to 150000 "
+                                                                 r"cells\) needs about .* fewer workers"):
+        svm.sweeps.run_sweep(sweep, tmp_path / "sweep", device="cpu", workers=1)
+    assert not (tmp_path / "sweep").exists()
+
+
+def test_gpu_estimates_are_checked_against_free_gpu_memory(half_a_gib):
+    """A GPU run needs its State on the host and ~400 B per cell on the GPU (0.25 GiB free here)."""
+    svm.validation.check_run_memory("a run", 100_000, 100_000, gpu=True)             # 38 MB on the GPU
+    with pytest.raises(svm.validation.InsufficientMemory, match=r"a run needs about 0.373 GiB of GPU memory, but "
+                                                                 r"only 0.25 GiB is free"):
+        svm.validation.check_run_memory("a run", 1_000_000, 1000, gpu=True)
+
+
+@pytest.mark.gpu
+def test_a_gpu_simulation_refuses_a_state_the_gpu_cannot_hold(monkeypatch):
+    monkeypatch.setattr(svm.validation, "available_device_memory", lambda: 1000)
+    sim = svm.Simulation(device="gpu")
+    with pytest.raises(svm.validation.InsufficientMemory, match="a run of 64 cells on the GPU needs about"):
+        sim.state = svm.init.random_tiling(64)
 
 
 # ------------------------------------------------------------------ item 9: messages at the point of the mistake

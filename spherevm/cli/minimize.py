@@ -141,6 +141,8 @@ def run(args) -> int:
         device = svm.device.resolve(surface_device(args.surface, args.device))
         sim = svm.Simulation(device=device, seed=args.seed)
         if args.restart is None:
+            svm.validation.check_run_memory(f"minimize --cells {args.cells} --replicas {args.replicas}",
+                                            args.cells * args.replicas, args.cells, gpu=device.is_gpu)
             tiling = svm.init.random_planar_tiling if args.surface == "plane" else svm.init.random_tiling
             sim.state = tiling(args.cells, replicas=args.replicas, seed=args.seed)
         else:

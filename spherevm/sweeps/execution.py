@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..progress import StatusLine
-from ..validation import integer
+from ..validation import check_run_memory, integer
 from .spec import Chunk, RigiditySweep, plan_chunks, tiling_seed
 from .store import (CHUNK_DIR, RECORD_COLUMNS, merge_records, open_sweep_folder, scan_chunks, sorted_records,
                     write_columns)
@@ -138,6 +138,17 @@ def _stop_now(executor):
         p.join(timeout=5)
 
 
+def _check_sweep_memory(sweep, batch_cells, device_name, workers):
+    """Refuse (InsufficientMemory) a sweep whose largest chunk, in every worker at once, cannot fit
+    on this machine, before the folder or any worker is made."""
+    largest = max(sweep.cells)
+    chunk = max(min(max(1, batch_cells // n) * n, sweep.units_per_size * n) for n in sweep.cells)
+    copies = min(workers, sum(-(-sweep.units_per_size // max(1, batch_cells // n)) for n in sweep.cells))
+    check_run_memory(f"the sweep ({copies} worker(s), chunks of up to {chunk} cells)", chunk, largest,
+                     gpu=device_name == "gpu", copies=copies,
+                     advice="use smaller systems (cells), fewer workers or a smaller batch_cells")
+
+
 # ---------------------------------------------------------------------------------------- progress
 @dataclass
 class SweepProgress:
@@ -254,6 +265,12 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         device_name = device.name if isinstance(device, Device) else device.lower()
     if batch_cells is None:
         batch_cells = GPU_BATCH_CELLS if device_name == "gpu" else CPU_BATCH_CELLS
+    if owned:
+        try:
+            _check_sweep_memory(sweep, batch_cells, device_name, getattr(executor, "_max_workers", 1))
+        except BaseException:
+            executor.shutdown(wait=False, cancel_futures=True)
+            raise
     try:
         path = open_sweep_folder(sweep, out, create=True)
         done, parts, bad = scan_chunks(sweep, path, clean=True)

@@ -19,3 +19,24 @@ def median_time(fn, device=None, repeat=11, warmup=2):
             device.synchronize()
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
+
+
+def median_times(fns, device=None, repeat=11, warmup=2, clock=time.perf_counter):
+    """Median times (seconds; wall time unless ``clock`` says otherwise, e.g. ``time.process_time``
+    for the CPU time of all the process's threads) of several callables, timed in turn within each
+    round (round robin), so that a change of machine load over the run affects them alike: for
+    ratios on a shared machine."""
+    for fn in fns:
+        for _ in range(warmup):
+            fn()
+    if device is not None:
+        device.synchronize()
+    times = [[] for _ in fns]
+    for _ in range(repeat):
+        for fn, t in zip(fns, times):
+            t0 = clock()
+            fn()
+            if device is not None:
+                device.synchronize()
+            t.append(clock() - t0)
+    return [statistics.median(t) for t in times]

@@ -2,13 +2,16 @@
 
 tau_alpha(T) at p0 = 3.775, kr = 0, for B = 0, 0.01, 0.1, 1 (B in units of kP <A>, the energy unit
 of the dimensionless model), from ``spherevm.protocols.glassy_dynamics`` with ``Bending(B)`` added.
-Each B runs its whole temperature series as one ensemble (one temperature per replica). Per B:
-tau_alpha per T (mean and standard error over replicas, in log), the fit
+Each system size runs as one ensemble: every (B, T) pair has its replicas, with per-replica B and
+T. Per B: tau_alpha per T (mean and standard error over replicas, in log), the fit
 log tau = a + b/T + c/T^2 (c < 0: sub-Arrhenius, c > 0: super-Arrhenius, c = 0: Arrhenius) with
 the standard error of c, an Arrhenius plot and the MSD at the lowest T.
 
-    python examples/bending_glassy.py                 # N = 128, a few minutes on a CPU
-    python examples/bending_glassy.py --full          # N = 128 and 1024, more temperatures and steps
+    python examples/bending_glassy.py                 # N = 128, minutes on a CPU
+    python examples/bending_glassy.py --full          # N = 128 and 1024, more temperatures and steps: one GPU
+
+Progress goes to stdout; the results (``--out``.json, rewritten after each system size) and the
+figure (``--out``.png) are written as they come.
 """
 from __future__ import annotations
 
@@ -20,6 +23,10 @@ import numpy as np
 
 from spherevm.plugins.forces import Bending
 from spherevm.protocols import glassy_dynamics
+
+SMALL = dict(cells=[128], T=[0.015, 0.02, 0.025, 0.03, 0.04], replicas=2, steps=4000, relax=500)
+FULL = dict(cells=[128, 1024], T=[0.008, 0.01, 0.0125, 0.015, 0.02, 0.025, 0.03, 0.04], replicas=4, steps=60_000,
+            relax=5000)
 
 
 def fit_log_tau(T, log_tau, weights=None):
@@ -49,74 +56,106 @@ def verdict(fit):
     return f"{kind} (c = {c:.3g} +- {dc:.2g}, {abs(c) / dc:.1f} sigma)"
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--full", action="store_true")
-    ap.add_argument("--cells", type=int, nargs="+", default=None)
-    ap.add_argument("--B", type=float, nargs="+", default=[0.0, 0.01, 0.1, 1.0])
-    ap.add_argument("--T", type=float, nargs="+", default=None)
-    ap.add_argument("--replicas", type=int, default=None, help="replicas per temperature")
-    ap.add_argument("--steps", type=int, default=None)
-    ap.add_argument("--dt", type=float, default=0.05)
-    ap.add_argument("--relax", type=int, default=None)
-    ap.add_argument("--device", default="auto")
-    ap.add_argument("--out", default="bending_glassy", help="prefix of the JSON results and the figure")
-    args = ap.parse_args(argv)
-    cells = args.cells or ([128, 1024] if args.full else [128])
-    temps = np.array(args.T or ([0.003, 0.004, 0.005, 0.006, 0.008, 0.01, 0.013, 0.016] if args.full
-                                else [0.015, 0.02, 0.025, 0.03, 0.04]))
-    reps = args.replicas or (8 if args.full else 2)
-    steps = args.steps or (100_000 if args.full else 4000)
-    relax = args.relax if args.relax is not None else (10_000 if args.full else 500)
-    results = []
-    for n in cells:
-        for B in args.B:
-            t0 = time.perf_counter()
-            T = np.repeat(temps, reps)
-            res = glassy_dynamics(n, 3.775, 0.0, T, dt=args.dt, steps=steps, replicas=len(T), seed=12,
-                                  device=args.device, relax_steps=relax, extra_forces=[Bending(B)] if B > 0 else [])
-            tau = res.tau_alpha_per_replica.reshape(len(temps), reps)
-            row = dict(N=n, B=B, T=temps.tolist(), tau=tau.tolist(), seconds=time.perf_counter() - t0)
-            ok = np.all(np.isfinite(tau), axis=1)
-            logt = np.array([np.log(t).mean() if k else np.nan for t, k in zip(tau, ok)])
-            se = np.array([np.log(t).std(ddof=1) / np.sqrt(reps) if k and reps > 1 else np.nan for t, k in zip(tau, ok)])
-            row.update(log_tau=logt.tolist(), log_tau_se=se.tolist())
-            if ok.sum() >= 4:
-                w = 1.0 / np.maximum(se[ok], 0.05) ** 2
-                row["fit"] = fit_log_tau(temps[ok], logt[ok], w)
-                row["verdict"] = verdict(row["fit"])
-            else:
-                row["verdict"] = f"only {int(ok.sum())} temperatures relaxed within the run: no fit"
-            T_low = temps[0]
-            row["msd_lowest_T"] = dict(lag=res.lag.tolist(),
-                                       msd=res.msd_per_replica[:, :reps].mean(axis=1).tolist(), T=float(T_low))
-            results.append(row)
-            print(f"N={n} B={B:g} ({row['seconds']:.0f} s): " + "  ".join(
-                f"T={t:g}: tau={np.exp(l):.4g}" + ("" if not np.isfinite(s) else f" (x/ {np.exp(s):.2f})")
-                for t, l, s in zip(temps, logt, se)) + f"\n    {row['verdict']}", flush=True)
-    with open(args.out + ".json", "w") as fh:
-        json.dump(results, fh, indent=1)
+def analyse(n, B, temps, tau, lag, msd, seconds):
+    """One row of results: ``tau`` (temperatures, replicas) for one B; ``msd`` (lags, replicas) at the lowest T."""
+    reps = tau.shape[1]
+    row = dict(N=n, B=B, T=temps.tolist(), tau=tau.tolist(), seconds=seconds)
+    ok = np.all(np.isfinite(tau), axis=1)
+    logt = np.array([np.log(t).mean() if k else np.nan for t, k in zip(tau, ok)])
+    se = np.array([np.log(t).std(ddof=1) / np.sqrt(reps) if k and reps > 1 else np.nan for t, k in zip(tau, ok)])
+    row.update(log_tau=logt.tolist(), log_tau_se=se.tolist())
+    if ok.sum() >= 4:
+        w = 1.0 / np.maximum(np.nan_to_num(se[ok], nan=0.05), 0.05) ** 2
+        row["fit"] = fit_log_tau(temps[ok], logt[ok], w)
+        row["verdict"] = verdict(row["fit"])
+    else:
+        row["verdict"] = f"only {int(ok.sum())} temperatures relaxed within the run: no fit"
+    row["msd_lowest_T"] = dict(lag=lag.tolist(), msd=msd.mean(axis=1).tolist(), T=float(temps[0]))
+    print(f"N={n} B={B:g}: " + "  ".join(
+        f"T={t:g}: tau={np.exp(lt):.4g}" + ("" if not np.isfinite(s) else f" (x/ {np.exp(s):.2f})")
+        for t, lt, s in zip(temps, logt, se)) + f"\n    {row['verdict']}", flush=True)
+    return row
+
+
+def progress_printer(n, started):
+    """``progress(stage, done, total)`` for glassy_dynamics: a line per stage and per tenth of it."""
+    last = {}
+
+    def report(stage, done, total):
+        tenth = int(10 * done / max(total, 1))
+        if last.get(stage) != tenth:
+            last[stage] = tenth
+            print(f"  N={n} {stage}: {done}/{total} steps, {time.perf_counter() - started:.0f} s", flush=True)
+    return report
+
+
+def plot(results, path):
     try:
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
-        for row in results:
-            T, lt, se = np.array(row["T"]), np.array(row["log_tau"]), np.array(row["log_tau_se"])
-            label = f"N={row['N']} B={row['B']:g}"
-            line = ax1.errorbar(1 / T, lt, yerr=np.nan_to_num(se), marker="o", ls="", label=label)
-            if "fit" in row:
-                x = np.linspace((1 / T).min(), (1 / T).max(), 50)
-                a, b, c = row["fit"]["quadratic"]["coef"]
-                ax1.plot(x, a + b * x + c * x * x, color=line[0].get_color())
-            m = row["msd_lowest_T"]
-            ax2.loglog(m["lag"][1:], m["msd"][1:], label=f"{label} T={m['T']:g}")
-        ax1.set_xlabel("1/T"), ax1.set_ylabel("log tau_alpha"), ax1.legend(fontsize=7)
-        ax2.set_xlabel("t"), ax2.set_ylabel("MSD / <A>"), ax2.legend(fontsize=7)
-        fig.tight_layout()
-        fig.savefig(args.out + ".png", dpi=120)
     except ImportError:
-        pass
+        return
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    for row in results:
+        T, lt, se = np.array(row["T"]), np.array(row["log_tau"]), np.array(row["log_tau_se"])
+        label = f"N={row['N']} B={row['B']:g}"
+        line = ax1.errorbar(1 / T, lt, yerr=np.nan_to_num(se), marker="o", ls="", label=label)
+        if "fit" in row:
+            x = np.linspace((1 / T).min(), (1 / T).max(), 50)
+            a, b, c = row["fit"]["quadratic"]["coef"]
+            ax1.plot(x, a + b * x + c * x * x, color=line[0].get_color())
+        m = row["msd_lowest_T"]
+        ax2.loglog(m["lag"][1:], m["msd"][1:], label=f"{label} T={m['T']:g}")
+    ax1.set_xlabel("1/T"), ax1.set_ylabel("log tau_alpha"), ax1.legend(fontsize=7)
+    ax2.set_xlabel("t"), ax2.set_ylabel("MSD / <A>"), ax2.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--full", action="store_true", help=f"the GPU study: {FULL}")
+    ap.add_argument("--cells", type=int, nargs="+", default=None)
+    ap.add_argument("--B", type=float, nargs="+", default=[0.0, 0.01, 0.1, 1.0])
+    ap.add_argument("--T", type=float, nargs="+", default=None)
+    ap.add_argument("--replicas", type=int, default=None, help="replicas per (B, T)")
+    ap.add_argument("--steps", type=int, default=None, help="production steps (equilibration: a tenth)")
+    ap.add_argument("--dt", type=float, default=0.05)
+    ap.add_argument("--relax", type=int, default=None, help="FIRE steps at most before the dynamics")
+    ap.add_argument("--device", default="auto")
+    ap.add_argument("--out", default="bending_glassy", help="prefix of the JSON results and the figure")
+    args = ap.parse_args(argv)
+    preset = FULL if args.full else SMALL
+    cells = args.cells or preset["cells"]
+    temps = np.array(args.T or preset["T"], dtype=float)
+    temps.sort()
+    reps = args.replicas or preset["replicas"]
+    steps = args.steps or preset["steps"]
+    relax = args.relax if args.relax is not None else preset["relax"]
+    Bs = np.array(args.B, dtype=float)
+    # replicas ordered (B, T, replica): one ensemble per system size
+    B_all, T_all = np.repeat(Bs, len(temps) * reps), np.tile(np.repeat(temps, reps), len(Bs))
+    print(f"bending_glassy: N = {cells}, B = {Bs.tolist()}, T = {temps.tolist()}, {reps} replicas per (B, T) "
+          f"({len(T_all)} per N), {relax} FIRE + {steps // 10} + {steps} Brownian steps at dt = {args.dt}, "
+          f"device = {args.device}", flush=True)
+    results = []
+    for n in cells:
+        t0 = time.perf_counter()
+        res = glassy_dynamics(n, 3.775, 0.0, T_all, dt=args.dt, steps=steps, replicas=len(T_all), seed=12,
+                              device=args.device, relax_steps=relax, extra_forces=[Bending(B_all)],
+                              progress=progress_printer(n, t0))
+        seconds = time.perf_counter() - t0
+        print(f"N={n}: {seconds:.0f} s on {res.simulation.device.name}", flush=True)
+        tau = res.tau_alpha_per_replica.reshape(len(Bs), len(temps), reps)
+        msd = res.msd_per_replica.reshape(len(res.lag), len(Bs), len(temps), reps)
+        for k, B in enumerate(Bs):
+            results.append(analyse(n, float(B), temps, tau[k], res.lag, msd[:, k, 0], seconds))
+        with open(args.out + ".json", "w") as fh:
+            json.dump(results, fh, indent=1)
+        plot(results, args.out + ".png")
+    print(f"results: {args.out}.json, figure: {args.out}.png")
 
 
 if __name__ == "__main__":

@@ -50,7 +50,7 @@ def parse_args(argv=None):
     p.add_argument("--surface", default="both", choices=("both", "sphere", "plane"),
                    help="which panels to compute (default: %(default)s)")
     p.add_argument("--device", default="auto", choices=("cpu", "gpu", "auto"),
-                   help="for the sphere; the plane runs on the CPU")
+                   help="where the minimisations run, on both surfaces")
     p.add_argument("--workers", type=int, default=None, help="CPU processes (default: all cores)")
     p.add_argument("--out", default="rigidity_sweep", help="output folder (default: %(default)s)")
     return p.parse_args(argv)
@@ -80,7 +80,7 @@ def run_one(args, surface):
     bar = sweeps.TextProgress(sys.stderr, label=f"rigidity ({surface})")
     t0 = time.perf_counter()
     try:
-        result = sweeps.run_sweep(sweep, out, device="cpu" if surface == "plane" else args.device,
+        result = sweeps.run_sweep(sweep, out, device=args.device,
                                   workers=args.workers, progress=bar)
     finally:
         bar.close()

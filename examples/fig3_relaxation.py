@@ -4,8 +4,9 @@
     python examples/fig3_relaxation.py --full --device gpu
     python examples/fig3_relaxation.py --full --device gpu --sizes 1024 --prefix fig3_1024
 
-Main panel: for each N, one ensemble holds every temperature (Brownian takes one T per replica),
-relaxed with FIRE + T1, equilibrated, then run with T1 exchanges; tau_alpha is where the
+Main panel: one ensemble holds every size and temperature (Brownian takes one T per replica; tissues
+of different N sit side by side, so a GPU steps them all in about the time of the largest alone;
+``--separate``: one ensemble per size), relaxed with FIRE + T1, equilibrated, then run with T1 exchanges; tau_alpha is where the
 self-overlap Q_s (b = 1/2, co-rotating frame) reaches 1/e, averaged over the replicas at each T.
 Inset: MSD at T = 5e-4, p0 = 3.75, kr = 1, averaged over 8192/N tissues (--full) or fewer.
 Writes fig3_relaxation.png and fig3_tau_alpha.csv / fig3_msd.csv.
@@ -18,7 +19,15 @@ import time
 
 import numpy as np
 
+from spherevm import State, init
 from spherevm.protocols import glassy_dynamics
+
+
+def tilings(sizes, counts, seed_of):
+    """Random tilings of several sizes as one State: ``counts`` (one number, or one per size) tissues of
+    each size ``n``, seeded ``seed_of(n)``."""
+    counts = np.broadcast_to(counts, (len(sizes),))
+    return State.concatenate([init.random_tiling(n, replicas=int(c), seed=seed_of(n)) for n, c in zip(sizes, counts)])
 
 
 def main(argv=None):
@@ -28,6 +37,8 @@ def main(argv=None):
                     "run, to fit a time limit)")
     ap.add_argument("--device", default="auto")
     ap.add_argument("--prefix", default="fig3")
+    ap.add_argument("--separate", action="store_true", help="one ensemble per size (default: all sizes in one "
+                    "ensemble, which a GPU steps in about the time of the largest alone)")
     args = ap.parse_args(argv)
     if args.full:
         sizes, temps, reps, steps, msd_total, msd_steps = [32, 128, 1024], [0.02, 0.01, 0.007, 0.005, 0.004], 8, \
@@ -39,21 +50,32 @@ def main(argv=None):
     dt = 0.05
     rows, t0 = [], time.time()
     curves = {}
-    for n in sizes:
-        T = np.repeat(temps, reps)
-        res = glassy_dynamics(n, 3.775, 0.0, T=T, dt=dt, steps=steps, replicas=len(T), seed=n, device=args.device,
-                              relax_steps=5000, equilibrate_steps=steps // 10)
-        for Ti in temps:
-            taus = res.tau_alpha_per_replica[T == Ti]
-            relaxed = np.isfinite(taus)
-            tau = float(np.mean(taus[relaxed])) if relaxed.all() else float("nan")
-            rows.append((n, Ti, tau, int(relaxed.sum()), len(taus)))
-            print(f"N={n:5d}  T={Ti:<7g} tau_alpha={tau:10.4g}  ({relaxed.sum()}/{len(taus)} replicas relaxed)  "
-                  f"[{time.time() - t0:6.1f} s]", flush=True)
-        inset = glassy_dynamics(n, 3.75, 1.0, T=5e-4, dt=dt, steps=msd_steps, replicas=max(1, msd_total // n),
-                                seed=n + 1, device=args.device, relax_steps=5000)
-        curves[n] = (inset.lag, inset.msd)
-        print(f"N={n:5d}  MSD at t={inset.lag[-1]:g}: {inset.msd[-1]:.4g}  [{time.time() - t0:6.1f} s]", flush=True)
+    groups = [[n] for n in sizes] if args.separate else [sizes]
+    for group in groups:
+        # main panel: every size and temperature of the group in one ensemble (tilings seeded by N)
+        T = np.tile(np.repeat(temps, reps), len(group))
+        res = glassy_dynamics(None, 3.775, 0.0, T=T, dt=dt, steps=steps, seed=group[0], device=args.device,
+                              relax_steps=5000, equilibrate_steps=steps // 10,
+                              initial_state=tilings(group, len(temps) * reps, seed_of=lambda n: n))
+        per_size = len(temps) * reps
+        for g, n in enumerate(group):
+            mine = slice(g * per_size, (g + 1) * per_size)
+            for Ti in temps:
+                taus = res.tau_alpha_per_replica[mine][T[mine] == Ti]
+                relaxed = np.isfinite(taus)
+                tau = float(np.mean(taus[relaxed])) if relaxed.all() else float("nan")
+                rows.append((n, Ti, tau, int(relaxed.sum()), len(taus)))
+                print(f"N={n:5d}  T={Ti:<7g} tau_alpha={tau:10.4g}  ({relaxed.sum()}/{len(taus)} replicas relaxed)  "
+                      f"[{time.time() - t0:6.1f} s]", flush=True)
+        # inset: msd_total / N tissues of each size, one ensemble
+        counts = [max(1, msd_total // n) for n in group]
+        inset = glassy_dynamics(None, 3.75, 1.0, T=5e-4, dt=dt, steps=msd_steps, seed=group[0] + 1, device=args.device,
+                                relax_steps=5000, initial_state=tilings(group, counts, seed_of=lambda n: n + 1))
+        start = np.cumsum([0] + counts)
+        for g, n in enumerate(group):
+            m = inset.msd_per_replica[:, start[g]:start[g + 1]].mean(axis=1)   # tissues of one size: equal weights
+            curves[n] = (inset.lag, m)
+            print(f"N={n:5d}  MSD at t={inset.lag[-1]:g}: {m[-1]:.4g}  [{time.time() - t0:6.1f} s]", flush=True)
 
     with open(f"{args.prefix}_tau_alpha.csv", "w", newline="") as f:
         w = csv.writer(f)

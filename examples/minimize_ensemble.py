@@ -26,7 +26,7 @@ def main(out=None):
     sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=KR, p0=P0))
     sim.operations.integrator = svm.plugins.integrators.FIRE(dt=0.05)
     if out is not None:
-        sim.operations.writers.append(svm.plugins.writers.GSD(out, trigger=svm.trigger.Periodic(500)))
+        sim.operations.writers.append(svm.plugins.writers.GSD(svm.trigger.Periodic(500), out))
 
     print(f"{REPLICAS} random tilings of {N_CELLS} cells, p0 = {P0}, kr = {KR}, on {sim.device.name}")
     print("before: energy/cell per replica", np.round(sim.log("energy_per_cell"), 3))

@@ -43,7 +43,7 @@ def main(argv=None):
     if not args.no_t1:  # topology changes between frames; every frame still restores exactly
         sim.operations.updaters.append(svm.plugins.updaters.T1())
     sim.operations.integrator = FIRE(dt=0.02)
-    writer = GSD(args.out, trigger=args.every, mode="wb",
+    writer = GSD(args.every, args.out, mode="wb",
                  log=("energy", "energy_per_cell", "mean_shape_index", "max_force"))
     sim.operations.writers.append(writer)
 

@@ -39,6 +39,10 @@ class Device:
     def is_gpu(self) -> bool:
         return self.name == "gpu"
 
+    def __reduce__(self):
+        # pickled by name (its array module cannot be): a CPU State travels to worker processes
+        return resolve, (self.name,)
+
     def asarray(self, a, dtype=None):
         """Copy or move ``a`` onto this device."""
         return self.xp.asarray(a, dtype=dtype)
@@ -48,6 +52,29 @@ class Device:
         if self.is_gpu and type(a).__module__.startswith("cupy"):
             return a.get()
         return np.asarray(a)
+
+    def fit(self, buffer, data, dtype):
+        """``(buffer, view)``: ``data`` (NumPy or on this device) copied into the first rows of
+        ``buffer`` when they fit (same dtype and row shape), else into a new buffer; ``view`` is
+        those rows, a contiguous array of ``data``'s shape. A new buffer has exactly the rows
+        needed the first time (``buffer`` None, or another dtype or row shape) and at least twice the
+        old capacity when only the length grew, so an
+        array whose length changes now and then (a growing tissue) is reallocated O(log n) times.
+        The view aliases the buffer: the next ``fit`` into it overwrites what it shows."""
+        dtype = np.dtype(dtype)
+        data = data if hasattr(data, "shape") else np.asarray(data)
+        shape = tuple(data.shape)
+        same_rows = buffer is not None and buffer.dtype == dtype and buffer.shape[1:] == shape[1:]
+        if not same_rows or len(buffer) < shape[0]:
+            # grow geometrically only a buffer of the same row shape (a new width starts afresh)
+            rows = max(shape[0], 2 * len(buffer)) if same_rows else shape[0]
+            buffer = self.xp.empty((rows,) + shape[1:], dtype=dtype)
+        view = buffer[:shape[0]]
+        if self.is_gpu and isinstance(data, np.ndarray):
+            view.set(np.ascontiguousarray(data, dtype=dtype))      # host to device, no temporary
+        else:
+            view[...] = data
+        return buffer, view
 
     def segment_max(self, values, segments, n_segments):
         """Per-segment maximum of non-negative ``values`` (0 for an empty segment)."""
@@ -123,23 +150,68 @@ def info() -> dict:
     return out
 
 
+def tune_allocator() -> bool:
+    """Fixed malloc thresholds for the NumPy path (glibc only); True if they were set.
+
+    glibc maps every allocation above its mmap threshold afresh (128 KiB at start, raised only when
+    such a block is freed) and gives freed heap above its trim threshold back to the system, so
+    the NumPy path, whose temporaries are 0.1 to 10 MB, can pay a page fault per 4 KiB of every
+    temporary in every step, depending on what was allocated before (measured on a 2-core VM:
+    the vertex model at 1,000 cells 0.6 or 1.3 ms; a cross product of (3, 3, 16384) vectors 0.3 or
+    1.6 ms). Fixed thresholds (32 MiB, the largest glibc takes, and 256 MiB) keep freed memory for
+    reuse. Called once when spherevm.device is imported; the environment variable
+    ``SPHEREVM_MALLOC=system`` leaves the allocator alone. Numbers do not change, only time.
+    """
+    import ctypes
+    import os
+    import sys
+    if os.environ.get("SPHEREVM_MALLOC", "") == "system" or not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):     # not glibc
+        return False
+    M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
+    return bool(mallopt(M_MMAP_THRESHOLD, 32 << 20)) and bool(mallopt(M_TRIM_THRESHOLD, 256 << 20))
+
+
+ALLOCATOR_TUNED = tune_allocator()
 _PACKAGE_DIR = __import__("pathlib").Path(__file__).resolve().parent
 _MODULES = {}
 BLOCK = 256
 
 
-def load_module(cu_file):
-    """Compile (once per process) the CUDA source ``cu_file`` and return its cupy.RawModule.
+class CompiledModule:
+    """A compiled cupy.RawModule whose kernels are looked up once: CuPy's ``get_function`` costs a
+    few microseconds a call, which small tissues pay at every launch."""
+
+    def __init__(self, module):
+        self.module, self._functions = module, {}
+
+    def get_function(self, name):
+        function = self._functions.get(name)
+        if function is None:
+            function = self._functions[name] = self.module.get_function(name)
+        return function
+
+
+def load_module(cu_file, defines=()):
+    """Compile (once per process and set of ``defines``) the CUDA source ``cu_file`` and return it
+    as a :class:`CompiledModule`.
 
     ``cu_file`` is a path to a ``.cu`` file beside the plugin that owns it; it may include the
-    package's headers (``geometry/sphere.cuh``, ``device_common.cuh``). Kernels use the NumPy
-    path's formulas; fused multiply-adds and rsqrt make them agree with it to rounding, not bitwise.
+    package's headers (``geometry/surface.cuh``, ``device_common.cuh``). ``defines``: macro names
+    passed as ``-D`` (``SVM_SURFACE_PLANE`` compiles the kernels for the periodic plane). Kernels use
+    the NumPy path's formulas; fused multiply-adds and rsqrt make them agree with it to rounding, not
+    bitwise.
     """
     import cupy
-    key = str(cu_file)
+    key = (str(cu_file), tuple(defines))
     if key not in _MODULES:
         code = __import__("pathlib").Path(cu_file).read_text()
-        _MODULES[key] = cupy.RawModule(code=code, options=("-std=c++17", f"-I{_PACKAGE_DIR}"))
+        options = ("-std=c++17", f"-I{_PACKAGE_DIR}") + tuple(f"-D{name}" for name in defines)
+        _MODULES[key] = CompiledModule(cupy.RawModule(code=code, options=options))
     return _MODULES[key]
 
 

@@ -106,9 +106,8 @@ class Editor:
         return self.size[self.crep[c]]
 
     def _unwrapped(self, c, verts):
-        size = self._size(c)
-        ref = self.point(verts[0])
-        return np.array([self.constraint.unwrap(self.point(v)[None], ref[None], size[None])[0] for v in verts])
+        points = np.array([self.point(v) for v in verts])
+        return self.constraint.unwrap(points, points[:1], self._size(c)[None])
 
     def _across(self, c, a, b):
         """The cell other than ``c`` holding both ``a`` and ``b`` (None unless exactly one)."""

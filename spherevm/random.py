@@ -29,13 +29,15 @@ import numpy as np
 
 __all__ = ["philox4x32", "uniform", "normal", "uniform_from_words",
            "STREAM_BROWNIAN", "STREAM_ACTIVE", "STREAM_DIRECTOR_INIT", "STREAM_DIVISION",
+           "STREAM_VERTEX_BIRTH",
            "PHILOX_M0", "PHILOX_M1", "PHILOX_W0", "PHILOX_W1", "TWO_PI"]
 
 # Streams: one per purpose. Draws indexed by vertex ids and by cell ids must not share a stream.
 STREAM_BROWNIAN = 0   #: translational noise of the integrator, indexed by vertex id
 STREAM_ACTIVE = 1     #: rotational noise of the cell polarity (director), indexed by cell id
 STREAM_DIRECTOR_INIT = 2   #: initial director angles (drawn at timestep 0), indexed by cell id
-STREAM_DIVISION = 3   #: cell division (draw 0: whether, draw 1: the cut's angle), indexed by cell id
+STREAM_DIVISION = 3   #: cell division (draw 0: whether, 1: the cut's angle, 2: the daughter's director), by cell id
+STREAM_VERTEX_BIRTH = 4   #: director of a vertex a division creates (vertex directors), indexed by vertex id
 
 # Philox4x32 constants (Salmon et al., SC'11; Random123 philox.h).
 PHILOX_M0 = 0xD2511F53   # multiplier applied to counter word 0

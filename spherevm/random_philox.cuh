@@ -41,7 +41,8 @@
 #define SVM_STREAM_BROWNIAN 0u /* integrator translational noise, indexed by vertex id */
 #define SVM_STREAM_ACTIVE 1u   /* cell director (polarity) rotational noise, indexed by cell id */
 #define SVM_STREAM_DIRECTOR_INIT 2u /* initial director angles (timestep 0), indexed by cell id */
-#define SVM_STREAM_DIVISION 3u /* cell division (draw 0: whether, draw 1: cut angle), indexed by cell id */
+#define SVM_STREAM_DIVISION 3u /* cell division (draw 0: whether, 1: cut angle, 2: daughter's director), by cell id */
+#define SVM_STREAM_VERTEX_BIRTH 4u /* director of a vertex a division creates, indexed by vertex id */
 
 /* Philox4x32 constants (Salmon et al., SC'11; Random123 philox.h). */
 #define SVM_PHILOX_M0 0xD2511F53u

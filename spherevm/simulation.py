@@ -8,7 +8,7 @@ import numpy as np
 
 from . import shapes
 from .device import resolve
-from .plugins.base import Force, Integrator, Minimizer, Updater, Writer
+from .plugins.base import Force, Integrator, Minimizer, Updater, Writer, compute_all
 from .validation import GPU_RUN_BYTES_PER_CELL, check_memory, integer
 
 
@@ -156,6 +156,7 @@ class Simulation:
         self._cache = None
         self._pending = {}          # operation state from a checkpoint, by key, until picked up
         self._updated_at = None     # the timestep at which the updaters last ran
+        self._held_back = False     # ... in a minimisation, which held back those with in_minimize False
         self.operations = Operations(self)
 
     # ------------------------------------------------------------------ state
@@ -171,14 +172,14 @@ class Simulation:
             raise TypeError(f"state must be a spherevm.State, got {type(value).__name__}")
         self._set_state(value, pending={})
 
-    def _set_state(self, value, pending, updated_at=None):
+    def _set_state(self, value, pending, updated_at=None, held_back=False):
         if self.device.is_gpu:        # refuse at once what the GPU cannot hold, not at the first kernel
             check_memory(f"a run of {value.n_cells} cells on the GPU", host_bytes=0.0,
                          device_bytes=float(value.n_cells) * GPU_RUN_BYTES_PER_CELL, gpu=True)
         self._state = value.copy() if value.device is self.device else value.to(self.device)
         self._cache = None
         self._pending = dict(pending)
-        self._updated_at = updated_at
+        self._updated_at, self._held_back = updated_at, held_back
         for key, op in list(self.operations.keyed()):
             op.attach(self)
             self._restore_pending(op, key, keyed=True)
@@ -211,16 +212,20 @@ class Simulation:
                           f"this one has seed={self.seed}; the random numbers will differ from the original run",
                           stacklevel=2)
         updated = int(sim["updated_at"][0]) if "updated_at" in sim else -1
+        held = bool(sim["held_back"][0]) if "held_back" in sim else False
         self.timestep = step
-        self._set_state(state, pending=saved.get("op", {}), updated_at=None if updated < 0 else updated)
+        self._set_state(state, pending=saved.get("op", {}), updated_at=None if updated < 0 else updated,
+                        held_back=held)
 
     def checkpoint(self) -> dict:
         """What a checkpoint frame holds besides the State: ``{chunk suffix: NumPy array}``, with
         ``op/<key>/<field>`` for every operation's :meth:`~spherevm.plugins.base.Operation.state_to_save`
-        and ``simulation/<field>`` for the Simulation's own (seed, the timestep its updaters last ran)."""
+        and ``simulation/<field>`` for the Simulation's own (seed, the timestep its updaters last ran,
+        whether a minimisation held some back then)."""
         out = {"simulation/seed": np.array([self.seed], dtype=np.int64),
                "simulation/updated_at": np.array([-1 if self._updated_at is None else self._updated_at],
-                                                 dtype=np.int64)}
+                                                 dtype=np.int64),
+               "simulation/held_back": np.array([int(self._held_back)], dtype=np.int64)}
         for key, op in self.operations.keyed():
             for field_name, value in op.state_to_save().items():
                 out[f"op/{key}/{field_name}"] = value
@@ -247,7 +252,7 @@ class Simulation:
                 zero = xp.zeros(self._state.n_replicas)
                 self._cache = (xp.zeros_like(self._state.positions), zero, xp.zeros(self._state.n_cells))
                 return self._cache[:2]
-            results = [f.compute(self._state) for f in self.operations.forces]
+            results = compute_all(self.operations.forces, self._state)
             forces, energy = results[0].forces, results[0].energy
             for res in results[1:]:
                 forces = forces + res.forces
@@ -297,16 +302,23 @@ class Simulation:
         return table[name](self)
 
     # ------------------------------------------------------------------ running
-    def _update_once(self):
+    def _update_once(self, minimizing=False):
         """The updaters of this timestep, unless they ran at it already (a ``minimize`` stops right
-        after they ran; a resumed one, or a restart from its last frame, must not run them twice)."""
+        after they ran; a resumed one, or a restart from its last frame, must not run them twice).
+        ``minimizing``: those that sit minimisations out (``Updater.in_minimize`` False: growth) are
+        held back; a ``run`` that goes on at the same timestep runs them."""
         if self._updated_at != self.timestep:
-            self._update()
+            self._update(minimizing)
+        elif self._held_back and not minimizing:
+            self._update(held_only=True)
 
-    def _update(self):
-        self._updated_at = self.timestep
+    def _update(self, minimizing=False, held_only=False):
+        """Run the updaters whose trigger fires now: every one, those with ``in_minimize`` while
+        ``minimizing``, or (``held_only``) those a minimisation held back at this timestep."""
+        self._updated_at, self._held_back = self.timestep, minimizing
         for u in self.operations.updaters:
-            if u.trigger(self.timestep):
+            runs = not u.in_minimize if held_only else (u.in_minimize or not minimizing)
+            if runs and u.trigger(self.timestep):
                 u.update(self, self.timestep)
 
     def _integrate(self):
@@ -403,6 +415,10 @@ class Simulation:
         ``minimize(2000)`` (when ``check_every`` divides 1000: the first call checks convergence at
         its last iteration).
 
+        Updaters run at every iteration (T1 exchanges), except those that change what the tissue
+        is (``Updater.in_minimize`` False: Division, Extrusion, RadiusSchedule): a minimisation
+        finds the inherent state of the tissue at its N and R, and those go on in the next ``run``.
+
         ``force_tol``, ``energy_tol`` and ``check_every`` set the minimiser's own (see
         :class:`spherevm.plugins.base.Minimizer`); None keeps them. ``progress`` is an optional
         callable ``progress(step, n_done, n_replicas)`` called at every convergence check.
@@ -437,7 +453,7 @@ class Simulation:
         self._write()
         try:
             while True:
-                self._update_once()
+                self._update_once(minimizing=True)
                 if fire.check_due() or (fire.iteration >= limit and fire._checked_at != fire.iteration):
                     fire.check_convergence(self)
                 if fire._checked_at == fire.iteration:
@@ -454,6 +470,9 @@ class Simulation:
         finally:
             while narrowed:
                 self._widen(*narrowed.pop())
+            for u in self.operations.updaters:
+                if not u.in_minimize:
+                    u.after_minimize(self)
         self._write(final=True)   # the state the minimisation ends in, for writers that ask for it
         self.flush()
         _, energy = self.compute_forces()

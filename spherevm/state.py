@@ -63,6 +63,7 @@ class State:
                                                      (len(self.vertex_start) - 1,)).copy())
         self.topology_version = 0   # bumped by every topology edit (T1 flips): caches key on it
         self._cached = {}
+        self._buffers = {}          # capacity of the arrays resize() refills (Device.fit)
         self._derive_layout()
         if validate:
             self.validate()
@@ -82,11 +83,15 @@ class State:
         if not np.all(np.isfinite(r)) or np.any(r <= 0):
             name = "box" if self.box is not None else "radius"
             raise ValueError(f"{name} must be positive and finite, got {r[~(np.isfinite(r) & (r > 0))][0]}")
-        xp = self.device.xp
         self._vertex_replica = np.repeat(np.arange(self.n_replicas, dtype=np.int32), np.diff(vs))
         self._cell_replica = np.repeat(np.arange(self.n_replicas, dtype=np.int32), np.diff(cs))
-        self.vertex_replica = xp.asarray(self._vertex_replica)
-        self.cell_replica = xp.asarray(self._cell_replica)
+        self._refill("vertex_replica", self._vertex_replica, np.int32)
+        self._refill("cell_replica", self._cell_replica, np.int32)
+
+    def _refill(self, name, data, dtype):
+        """Set array ``name`` to ``data`` through its capacity buffer (see :meth:`resize`)."""
+        self._buffers[name], view = self.device.fit(self._buffers.get(name), data, dtype)
+        setattr(self, name, view)
 
     def vertex_replica_np(self):
         return self._vertex_replica
@@ -94,8 +99,23 @@ class State:
     def cell_replica_np(self):
         return self._cell_replica
 
+    @property
+    def radius(self):
+        """Per-replica sphere radius on the device (None on a periodic plane). Assign a new array
+        to change it (RadiusSchedule does): the host copy :meth:`radius_np` follows assignments,
+        not edits in place."""
+        return self._radius
+
+    @radius.setter
+    def radius(self, value):
+        self._radius, self._radius_host = value, None
+
     def radius_np(self):
-        return np.asarray(self.device.to_numpy(self.radius))
+        """The radius as a NumPy array: a host copy kept from the last assignment, so reading it
+        every step costs no device-to-host transfer."""
+        if self._radius_host is None:
+            self._radius_host = np.asarray(self.device.to_numpy(self._radius))
+        return self._radius_host.copy()
 
     def box_np(self):
         """``(n_replicas, 2)`` (Lx, Ly) of a periodic plane; None on other surfaces."""
@@ -158,14 +178,17 @@ class State:
 
     def resize(self, positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells, vertex_start, cell_start):
         """Replace the arrays by ones with other numbers of vertices and cells per replica (cells
-        divided or removed, :mod:`spherevm.growth`), replicas back to back. A plain reallocation
-        (no spare capacity); ``topology_version`` bumps and every cached entry is dropped."""
-        xp = self.device.xp
-        self.positions = xp.asarray(positions, dtype=xp.float64)
-        self.cell_vertices = xp.asarray(cell_vertices, dtype=xp.int32)
-        self.cell_sides = xp.asarray(cell_sides, dtype=xp.int32)
-        self.vertex_neighbors = xp.asarray(vertex_neighbors, dtype=xp.int32)
-        self.vertex_cells = xp.asarray(vertex_cells, dtype=xp.int32)
+        divided or removed, :mod:`spherevm.growth`; NumPy or device arrays), replicas back to back.
+
+        Capacity: each array is refilled in place when its buffer has the rows, else moved to one
+        of at least twice the old capacity (:meth:`spherevm.device.Device.fit`), so a growing
+        tissue reallocates O(log N) times, not at every division. The arrays are then views of
+        those buffers: copy one to keep it across a resize. ``topology_version`` bumps and every
+        cached entry is dropped."""
+        for name, data, dtype in (("positions", positions, np.float64), ("cell_vertices", cell_vertices, np.int32),
+                                  ("cell_sides", cell_sides, np.int32), ("vertex_cells", vertex_cells, np.int32),
+                                  ("vertex_neighbors", vertex_neighbors, np.int32)):
+            self._refill(name, data, dtype)
         self.vertex_start = np.asarray(vertex_start, dtype=np.int64)
         self.cell_start = np.asarray(cell_start, dtype=np.int64)
         self._derive_layout()

@@ -1,4 +1,5 @@
-"""Triggers decide on which timesteps an operation runs (as in HOOMD-blue)."""
+"""Triggers decide on which timesteps an operation runs (as in HOOMD-blue: a subclass implements
+``compute(timestep)``, and the operation asks ``trigger(timestep)``)."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,10 +8,15 @@ from .validation import integer
 
 
 class Trigger:
-    """Base class: ``trigger(timestep) -> bool``. Combine with ``&``, ``|`` and ``~``."""
+    """Base class: a subclass implements ``compute(timestep) -> bool``, HOOMD-blue's name;
+    ``trigger(timestep)`` calls it. (A subclass written for spherevm 0.1 that overrides
+    ``__call__`` instead still works.) Combine with ``&``, ``|`` and ``~``."""
+
+    def compute(self, timestep: int) -> bool:
+        raise NotImplementedError(f"{type(self).__name__} must implement compute(timestep)")
 
     def __call__(self, timestep: int) -> bool:
-        raise NotImplementedError
+        return bool(self.compute(timestep))
 
     def __and__(self, other):
         return And(self, other)
@@ -31,7 +37,7 @@ class Periodic(Trigger):
             raise ValueError(f"period must be >= 1, got {period!r}")
         self.phase = integer("phase", phase)
 
-    def __call__(self, timestep):
+    def compute(self, timestep):
         return timestep >= self.phase and (timestep - self.phase) % self.period == 0
 
     def __repr__(self):
@@ -44,7 +50,7 @@ class On(Trigger):
     def __init__(self, timestep: int):
         self.timestep = integer("timestep", timestep)
 
-    def __call__(self, timestep):
+    def compute(self, timestep):
         return timestep == self.timestep
 
     def __repr__(self):
@@ -57,7 +63,7 @@ class After(Trigger):
     def __init__(self, timestep: int):
         self.timestep = integer("timestep", timestep)
 
-    def __call__(self, timestep):
+    def compute(self, timestep):
         return timestep > self.timestep
 
     def __repr__(self):
@@ -70,22 +76,29 @@ class Before(Trigger):
     def __init__(self, timestep: int):
         self.timestep = integer("timestep", timestep)
 
-    def __call__(self, timestep):
+    def compute(self, timestep):
         return timestep < self.timestep
 
     def __repr__(self):
         return f"Before({self.timestep})"
 
 
+def _trigger_list(name, triggers):
+    """``And(a, b)`` or HOOMD's ``And([a, b])``: a tuple of one or more Triggers."""
+    if len(triggers) == 1 and isinstance(triggers[0], (list, tuple)):
+        triggers = tuple(triggers[0])
+    if not triggers or not all(isinstance(t, Trigger) for t in triggers):
+        raise ValueError(f"{name} needs one or more Trigger objects")
+    return tuple(triggers)
+
+
 class And(Trigger):
     """True when all the given triggers are."""
 
     def __init__(self, *triggers):
-        if not triggers or not all(isinstance(t, Trigger) for t in triggers):
-            raise ValueError("And needs one or more Trigger objects")
-        self.triggers = triggers
+        self.triggers = _trigger_list("And", triggers)
 
-    def __call__(self, timestep):
+    def compute(self, timestep):
         return all(t(timestep) for t in self.triggers)
 
     def __repr__(self):
@@ -96,11 +109,9 @@ class Or(Trigger):
     """True when any of the given triggers is."""
 
     def __init__(self, *triggers):
-        if not triggers or not all(isinstance(t, Trigger) for t in triggers):
-            raise ValueError("Or needs one or more Trigger objects")
-        self.triggers = triggers
+        self.triggers = _trigger_list("Or", triggers)
 
-    def __call__(self, timestep):
+    def compute(self, timestep):
         return any(t(timestep) for t in self.triggers)
 
     def __repr__(self):
@@ -115,7 +126,7 @@ class Not(Trigger):
             raise ValueError("Not needs a Trigger")
         self.trigger = trigger
 
-    def __call__(self, timestep):
+    def compute(self, timestep):
         return not self.trigger(timestep)
 
     def __repr__(self):
@@ -134,7 +145,7 @@ class OnTimesteps(Trigger):
         self.timesteps = np.unique(arr.astype(np.int64))
         self._set = frozenset(int(t) for t in self.timesteps)
 
-    def __call__(self, timestep):
+    def compute(self, timestep):
         return int(timestep) in self._set
 
     @property
@@ -150,7 +161,7 @@ class OnTimesteps(Trigger):
 class Always(Trigger):
     """Every timestep."""
 
-    def __call__(self, timestep):
+    def compute(self, timestep):
         return True
 
     def __repr__(self):

@@ -46,6 +46,16 @@ def tiling200():
     return svm.init.random_tiling(200, seed=11)
 
 
+def fire_simulation(n_cells=16, replicas=2, seed=1, p0=3.8):
+    """A CPU Simulation of random tilings with the vertex model (kr = 1), T1 and a default FIRE."""
+    sim = svm.Simulation(device="cpu", seed=seed)
+    sim.state = svm.init.random_tiling(n_cells, replicas=replicas, seed=seed)
+    sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=p0))
+    sim.operations.updaters.append(svm.plugins.updaters.T1())
+    sim.operations.integrator = svm.plugins.integrators.FIRE()
+    return sim
+
+
 def finite_difference_forces(force, state, vertices, h=1e-6):
     """Minus the central finite-difference gradient of the total energy at the given vertices."""
     pos0 = state.positions.copy()

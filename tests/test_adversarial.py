@@ -18,7 +18,7 @@ def test_fire_exploding_step_is_refused_and_named(device, tmp_path):
     sim.state = svm.init.random_tiling(16, replicas=2, seed=1)
     sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
     sim.operations.integrator = FIRE(dt=1e6)
-    sim.operations.writers.append(GSD(tmp_path / "x.gsd", trigger=1))
+    sim.operations.writers.append(GSD(1, tmp_path / "x.gsd"))
     before = to_numpy(sim.state.positions).copy()
     with pytest.raises(FloatingPointError, match=r"exploding step at timestep \d+: replica \d+, vertex \d+"):
         sim.minimize(max_steps=200)
@@ -51,7 +51,7 @@ def good_file(tmp_path_factory):
     sim.state = svm.init.random_tiling(32, replicas=2, seed=3)
     sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
     sim.operations.integrator = FIRE(dt=0.05)
-    sim.operations.writers.append(GSD(path, trigger=50))
+    sim.operations.writers.append(GSD(50, path))
     sim.minimize(max_steps=120)
     return path
 

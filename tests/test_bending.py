@@ -206,6 +206,30 @@ def test_in_a_simulation_with_the_vertex_model():
     assert "bending_energy" in sim.loggables
 
 
+def test_vertex_model_and_bending_together_in_one_pass():
+    """Bending.combined (one cell_geometry, one shape_gradient) against the two forces apart; the
+    Simulation pairs them whatever their order and leaves other forces alone."""
+    s = svm.init.random_tiling(300, replicas=2, seed=8, radius=2.5)
+    vm, bend = VertexModel.dimensionless(kr=0.9, p0=3.75), Bending([0.3, 2.0])
+    a, b = vm.compute(s), bend.compute(s)
+    both = bend.combined(vm, s)
+    assert _rel(both.forces, a.forces + b.forces) <= 1e-14
+    assert _rel(both.energy, a.energy + b.energy) <= 1e-14
+    assert _rel(both.cell_energy, a.cell_energy + b.cell_energy) <= 1e-14
+    assert vm.combined(bend, s) is None and bend.combined(Bending(1.0), s) is None
+    assert bend.combined(type("MyModel", (VertexModel,), {})(), s) is None      # a subclass may differ
+    from spherevm.plugins.base import compute_all
+    other = VertexModel(kA=0.0, kP=0.2, A0=0.0, P0=1.0)
+    results = compute_all([vm, other, bend], s)
+    assert len(results) == 2
+    assert np.array_equal(results[0].forces, both.forces) and np.array_equal(results[1].forces, other.compute(s).forces)
+    sim = svm.Simulation(device="cpu")
+    sim.state = s
+    sim.operations.forces.extend([bend, vm])
+    forces, energy = sim.compute_forces()
+    assert np.array_equal(forces, both.forces) and np.array_equal(energy, both.energy)
+
+
 # ------------------------------------------------------------------ the plane
 def test_plane_gives_zero_energy_and_force():
     s = svm.init.random_planar_tiling(64, replicas=2, seed=3)
@@ -213,6 +237,10 @@ def test_plane_gives_zero_energy_and_force():
     assert np.all(r.energy == 0) and np.all(r.cell_energy == 0) and np.all(r.forces == 0)
     n = cell_normals(s)
     assert np.array_equal(n, np.tile([0.0, 0.0, 1.0], (s.n_cells, 1)))
+    # with the vertex model, in one pass: exactly the vertex model's forces and energies
+    vm = VertexModel.dimensionless(kr=1.0, p0=3.7)
+    both, alone = Bending(1.0).combined(vm, s), vm.compute(s)
+    assert np.array_equal(both.forces, alone.forces) and np.array_equal(both.energy, alone.energy)
     # area vectors through minimum images: their lengths are the cell areas
     assert _rel(cell_area_vectors(s)[:, 2], s.constraint.cell_geometry(s).area) <= 1e-12
 
@@ -251,6 +279,26 @@ def test_gpu_matches_numpy(n_cells, replicas, per_replica):
     assert _rel(rg.forces.get(), rc.forces) <= 1e-12
     assert _rel(rg.energy.get(), rc.energy) <= 1e-12
     assert _rel(rg.cell_energy.get(), rc.cell_energy) <= 1e-12
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize("n_cells, replicas", [(200, 1), (64, 16), (1000, 3)])
+def test_gpu_vertex_model_with_bending_fused_matches_numpy(n_cells, replicas):
+    """The fused kernels (vertex_model.cuh with bending's terms) against the NumPy path, and the
+    GPU Simulation taking them."""
+    cpu = svm.init.random_tiling(n_cells, replicas=replicas, seed=n_cells + 1)
+    vm, force = VertexModel.dimensionless(kr=0.8, p0=3.7), Bending(np.linspace(0.5, 2.0, replicas))
+    rc = force.combined(vm, cpu)
+    gpu = cpu.to("gpu")
+    rg = force.combined(vm, gpu)
+    assert _rel(rg.forces.get(), rc.forces) <= 1e-12
+    assert _rel(rg.energy.get(), rc.energy) <= 1e-12
+    assert _rel(rg.cell_energy.get(), rc.cell_energy) <= 1e-12
+    sim = svm.Simulation(device="gpu")
+    sim.state = gpu
+    sim.operations.forces.extend([vm, force])
+    forces, energy = sim.compute_forces()
+    assert _rel(forces.get(), rc.forces) <= 1e-12 and _rel(energy.get(), rc.energy) <= 1e-12
 
 
 @pytest.mark.gpu
@@ -330,3 +378,39 @@ def test_rigidity_sweep_carries_forces_in_its_manifest(tmp_path, capsys):
     assert args.func(args) == 0
     import json
     assert json.loads((out / "manifest.json").read_text())["parameters"]["forces"] == [["bending", {"B": 0.2}]]
+
+
+# ------------------------------------------------------------------ the study (examples/bending_glassy.py)
+def _example():
+    import importlib.util
+    path = pathlib.Path(__file__).parent.parent / "examples" / "bending_glassy.py"
+    spec = importlib.util.spec_from_file_location("bending_glassy", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_study_fit_tells_arrhenius_from_sub_and_super_arrhenius():
+    ex = _example()
+    T = np.array([0.008, 0.01, 0.0125, 0.015, 0.02, 0.025, 0.03, 0.04])
+    rng = np.random.default_rng(0)
+    noise = 0.02 * rng.normal(size=len(T))
+    for c, word in ((0.0, "consistent with Arrhenius"), (-2e-4, "sub-Arrhenius"), (2e-4, "super-Arrhenius")):
+        fit = ex.fit_log_tau(T, 1.0 + 0.05 / T + c / T ** 2 + noise)
+        assert ex.verdict(fit).startswith(word)
+        assert abs(fit["quadratic"]["coef"][2] - c) < 5 * fit["quadratic"]["err"][2] + 1e-12
+
+
+def test_study_runs_one_ensemble_per_size_and_writes_its_results(tmp_path, capsys):
+    ex = _example()
+    out = tmp_path / "bg"
+    ex.main(["--cells", "32", "--B", "0", "0.1", "--T", "0.02", "0.01", "--replicas", "2", "--steps", "100",
+             "--relax", "200", "--device", "cpu", "--out", str(out)])
+    import json
+    rows = json.loads(out.with_suffix(".json").read_text())
+    assert [(r["N"], r["B"]) for r in rows] == [(32, 0.0), (32, 0.1)]
+    for r in rows:
+        assert r["T"] == [0.01, 0.02] and np.array(r["tau"]).shape == (2, 2)
+        assert len(r["msd_lowest_T"]["msd"]) == len(r["msd_lowest_T"]["lag"]) and r["msd_lowest_T"]["T"] == 0.01
+    text = capsys.readouterr().out
+    assert "N=32 production: 100/100 steps" in text and "N=32 B=0.1:" in text

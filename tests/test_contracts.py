@@ -145,8 +145,8 @@ def test_device_path_is_looked_up_once_and_gpu_surfaces_are_checked():
     assert vm.implementation("compute", cpu_state) is vm.implementation("compute", cpu_state)
     # a state on the GPU (only its device and surface matter here) on a surface the kernels do not know
     fake = SimpleNamespace(device=Device("gpu", np), constraint=svm.constraints.Torus(3.0, 1.0))
-    with pytest.raises(ValueError, match=r"VertexModel on the GPU supports Sphere surfaces only, but the state "
-                                         r"is on Torus\(major_radius=3.0, minor_radius=1.0\)"):
+    with pytest.raises(ValueError, match=r"VertexModel on the GPU supports Sphere, PeriodicPlane surfaces only, but the "
+                                         r"state is on Torus\(major_radius=3.0, minor_radius=1.0\)"):
         vm.implementation("compute", fake)
     sphere = SimpleNamespace(device=Device("gpu", np), constraint=svm.constraints.Sphere())
     assert vm.implementation("compute", sphere) == vm._compute_gpu

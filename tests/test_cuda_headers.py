@@ -29,8 +29,10 @@ from conftest import PHILOX_KAT as KAT
 
 import spherevm as svm
 from spherevm import random as svr
+from spherevm.constraints import plane as cplane
 from spherevm.constraints import sphere as csphere
 from spherevm.geometry import sphere as geo
+from spherevm.plugins.forces import VertexModel
 
 HERE = pathlib.Path(__file__).resolve().parent / "cuda_host"
 PACKAGE = pathlib.Path(svm.__file__).resolve().parent
@@ -156,6 +158,83 @@ class Harness:
         names = ("m", "x", "m2", "q", "half", "area", "length")
         shapes = [(3,), (3,), (), (), (), (3,), (3,)]
         return dict(zip(names, self._map("h_edge", shapes, b, d)))
+
+    # ---- the plane, and both surfaces through geometry/surface.cuh (what the kernels call)
+    @staticmethod
+    def _i32(a):
+        return np.ascontiguousarray(a, dtype=np.int32)
+
+    @staticmethod
+    def _f64(a):
+        return np.ascontiguousarray(a, dtype=np.float64)
+
+    def image_wrap(self, d, x, box):
+        """minimum_image(d) and wrap_into_box(x), one box (n, 2) per point."""
+        d, x, box = self._vec(d), self._vec(x), self._f64(np.broadcast_to(box, (len(d), 2)))
+        image, wrapped = np.empty_like(d), np.empty_like(x)
+        self.lib.h_plane_image_wrap(ctypes.c_long(len(d)), self._p(d), self._p(x), self._p(box), self._p(image),
+                                    self._p(wrapped))
+        return image, wrapped
+
+    @staticmethod
+    def _size(state):
+        return np.ascontiguousarray(state.constraint.size_np(state), dtype=np.float64)
+
+    def cells(self, surface, state):
+        """Surface::cell_measures per cell: (area, perimeter, (area_unit, length_unit))."""
+        n, cv = state.n_cells, self._i32(state.cell_vertices)
+        area, per, units = np.empty(n), np.empty(n), np.empty((n, 2))
+        getattr(self.lib, f"h_{surface}_cells")(
+            ctypes.c_long(n), self._p(self._vec(state.positions)), self._p(cv), self._p(self._i32(state.cell_sides)),
+            self._p(self._i32(state.cell_replica)), self._p(self._size(state)), ctypes.c_int(cv.shape[1]),
+            self._p(area), self._p(per), self._p(units))
+        return area, per, units
+
+    def forces(self, surface, state, coef):
+        """Surface::vertex_force per vertex for per-cell coefficients coef (n_cells, 2)."""
+        out = np.empty((state.n_vertices, 3))
+        getattr(self.lib, f"h_{surface}_forces")(
+            ctypes.c_long(state.n_vertices), self._p(self._vec(state.positions)),
+            self._p(self._i32(state.vertex_neighbors)), self._p(self._i32(state.vertex_cells)),
+            self._p(self._i32(state.vertex_replica)), self._p(self._size(state)), self._p(self._f64(coef)),
+            self._p(out))
+        return out
+
+    def edges(self, surface, state, u, v):
+        """Surface::chord2 and Surface::edge_length of the pairs (u, v)."""
+        u, v = self._i32(u), self._i32(v)
+        rep = self._i32(state.vertex_replica[u])
+        chord2, length = np.empty(len(u)), np.empty(len(u))
+        getattr(self.lib, f"h_{surface}_edges")(
+            ctypes.c_long(len(u)), self._p(self._vec(state.positions)), self._p(u), self._p(v), self._p(rep),
+            self._p(self._size(state)), self._p(chord2), self._p(length))
+        return chord2, length
+
+    def project(self, surface, y, rep, size):
+        """Surface::normal(y) and Surface::place(y, normal(y)) (P_N)."""
+        y, rep, size = self._vec(y), self._i32(rep), self._f64(size)
+        normal, placed = np.empty_like(y), np.empty_like(y)
+        getattr(self.lib, f"h_{surface}_project")(ctypes.c_long(len(y)), self._p(y), self._p(rep), self._p(size),
+                                                  self._p(normal), self._p(placed))
+        return normal, placed
+
+    def t1(self, surface, state, quad, full):
+        """Surface::t1_positions of the flips quad (n, 6) = (u, v, a, b, c, d): new X = v and Y = u."""
+        quad, full = self._i32(quad), self._f64(full)
+        rep = self._i32(state.vertex_replica[quad[:, 0]])
+        x, y = np.empty((len(quad), 3)), np.empty((len(quad), 3))
+        getattr(self.lib, f"h_{surface}_t1")(ctypes.c_long(len(quad)), self._p(self._vec(state.positions)),
+                                             self._p(quad), self._p(rep), self._p(self._size(state)), self._p(full),
+                                             self._p(x), self._p(y))
+        return x, y
+
+    def cell_normals(self, surface, state):
+        cv = self._i32(state.cell_vertices)
+        out = np.empty((state.n_cells, 3))
+        getattr(self.lib, f"h_{surface}_cell_normals")(ctypes.c_long(state.n_cells), self._p(self._vec(state.positions)),
+                                                       self._p(cv), self._p(self._i32(state.cell_sides)),
+                                                       ctypes.c_int(cv.shape[1]), self._p(out))
+        return out
 
 
 @pytest.fixture(scope="session")
@@ -375,6 +454,171 @@ def test_header_edge_terms_match_the_sphere_constraint(harness):
     half = harness.edge(b, d)["half"]
     per = 2.0 * np.bincount(state.vertex_cells.reshape(-1), weights=half, minlength=state.n_cells)
     assert_close(per * state.radius[state.cell_replica], geom.perimeter, rtol=1e-13, what="perimeter")
+
+
+# ------------------------------------------------------------------------------------- the plane
+def test_header_minimum_image_and_wrap(harness):
+    """minimum_image and wrap_into_box (geometry/plane.cuh) against plane.minimum_image and
+    PeriodicPlane.project_normal, bitwise: displacements over many box lengths, exact half and
+    one-and-a-half boxes (rint rounds half to even), points on the box edges, just below 0 (they
+    round up to L and must come back to 0) and far outside."""
+    rng = np.random.default_rng(11)
+    n = 3000
+    box = rng.uniform(0.5, 40.0, size=(n, 2))
+    d = np.zeros((n, 3))
+    d[:, :2] = rng.normal(size=(n, 2)) * box * 3
+    x = np.zeros((n, 3))
+    x[:, :2] = rng.uniform(-5, 5, size=(n, 2)) * box
+    x[:, 2] = rng.normal(size=n)                       # P_N drops z
+    k = np.arange(12)
+    d[k, 0] = box[k, 0] * np.array([0.5, -0.5, 1.5, -1.5, 2.5, 0, -0.0, 1e-300, 0.5, 1, -1, 3])
+    x[k, 1] = box[k, 1] * np.array([0, 1, -1e-17, -1e-300, 2, -3, 1 - 1e-16, 0.5, 1e6, -1e6, 1e-17, 7])
+    image, wrapped = harness.image_wrap(d, x, box)
+    ref_image = cplane.minimum_image(d[:, :2], box)
+    ref_wrapped = cplane.PeriodicPlane().project_normal(x, box)
+    assert_bitwise(image[:, :2].copy(), ref_image, "minimum_image")
+    assert_bitwise(wrapped, ref_wrapped, "wrap_into_box")
+    assert np.all(image[:, 2] == 0) and np.all(np.abs(image[:, :2]) <= box / 2)
+    assert np.all(wrapped[:, :2] >= 0) and np.all(wrapped[:, :2] < box)
+    assert wrapped[2, 1] == 0.0                        # -1e-17 L rounds up to L, taken to 0
+
+
+def _planar():
+    """Two planar replicas with different boxes; cells straddle the boundary."""
+    state = svm.State.concatenate([svm.init.random_planar_tiling(200, seed=18),
+                                   svm.init.random_planar_tiling(150, seed=3, box=(9.0, 16.0 + 2.0 / 3.0))])
+    d = state.positions[state.vertex_neighbors] - state.positions[:, None]
+    assert (np.abs(d[..., :2]) > state.box_np()[state.vertex_replica][:, None] / 2).sum() > 20
+    return state
+
+
+SURFACE_STATES = {"plane": _planar, "sphere": lambda: svm.init.random_tiling(300, replicas=2, seed=18)}
+
+
+def assert_close_global(host, ref, rtol, what=""):
+    """``max |host - ref| <= rtol max |ref|`` (forces and positions: a global scale, no cancellation)."""
+    host, ref = np.asarray(host), np.asarray(ref)
+    assert host.shape == ref.shape, what
+    err = np.abs(host - ref).max()
+    assert err <= rtol * np.abs(ref).max(), f"{what}: {err:.3g} against {np.abs(ref).max():.3g} (rtol {rtol:g})"
+
+
+@pytest.mark.parametrize("surface", ["plane", "sphere"])
+def test_header_cell_measures_match_numpy(harness, surface):
+    """Surface::cell_measures (the force kernel's per-cell loop) against the constraint's
+    cell_geometry: on the plane bit for bit (the same edges, running sums and slot-order sums)."""
+    state = SURFACE_STATES[surface]()
+    geom = state.constraint.cell_geometry(state)
+    area, perimeter, units = harness.cells(surface, state)
+    if surface == "plane":
+        assert_bitwise(area, geom.area, "area")
+        assert_bitwise(perimeter, geom.perimeter, "perimeter")
+    assert_close(area, geom.area, rtol=RTOL, what="area")
+    assert_close(perimeter, geom.perimeter, rtol=RTOL, what="perimeter")
+    size = state.constraint.size_np(state)[state.cell_replica]
+    expected = np.ones((state.n_cells, 2)) if surface == "plane" else np.stack([size ** 2, size], axis=1)
+    assert_bitwise(units, expected, "area_unit, length_unit")
+    if surface == "plane":   # the cells tile each box
+        np.testing.assert_allclose(np.bincount(state.cell_replica, weights=area), state.box_np().prod(axis=1),
+                                   rtol=1e-13)
+
+
+@pytest.mark.parametrize("surface", ["plane", "sphere"])
+def test_header_vertex_forces_match_numpy(harness, surface):
+    """Surface::vertex_force against the constraint's shape_gradient, for random per-cell
+    coefficients (areas and perimeters weighted independently) and for the vertex model's own, whose
+    coefficients the cell loop makes (2 kA (A - A0) area_unit, 2 kP (P - P0) length_unit)."""
+    state = SURFACE_STATES[surface]()
+    con = state.constraint
+    geom = con.cell_geometry(state)
+    _, _, units = harness.cells(surface, state)
+    rng = np.random.default_rng(7)
+    for d_area, d_perimeter in ((rng.normal(size=state.n_cells), rng.normal(size=state.n_cells)),
+                                (np.eye(state.n_cells)[5], np.zeros(state.n_cells)),
+                                (np.zeros(state.n_cells), np.eye(state.n_cells)[9])):
+        coef = np.stack([d_area * units[:, 0], d_perimeter * units[:, 1]], axis=1)
+        host, ref = harness.forces(surface, state, coef), -con.shape_gradient(state, geom, d_area, d_perimeter)
+        if surface == "plane":
+            assert_bitwise(host, ref, "vertex_force")
+        assert_close_global(host, ref, rtol=RTOL, what="vertex_force")
+    model = VertexModel.dimensionless(kr=1.0, p0=3.7)
+    kA, kP, A0, P0 = model.parameters(state)
+    area, perimeter, units = harness.cells(surface, state)
+    coef = np.stack([2.0 * kA * (area - A0) * units[:, 0], 2.0 * kP * (perimeter - P0) * units[:, 1]], axis=1)
+    ref = model.compute(state).forces
+    assert_close_global(harness.forces(surface, state, coef), ref, rtol=1e-13, what="vertex-model forces")
+    if surface == "plane":
+        assert np.all(ref[:, 2] == 0)
+
+
+@pytest.mark.parametrize("surface", ["plane", "sphere"])
+def test_header_t1_edges_projection_and_normals(harness, surface):
+    """Surface::chord2 and edge_length (T1's short-edge test) against T1.short_edges' chords and the
+    constraint's edge_lengths; normal and place (P_N) against the constraint; cell_normal against
+    cell_normals (the plane's are (0, 0, 1), bitwise)."""
+    state = SURFACE_STATES[surface]()
+    con = state.constraint
+    u = np.repeat(np.arange(state.n_vertices), 3)
+    v = state.vertex_neighbors.reshape(-1)
+    chord2, length = harness.edges(surface, state, u, v)
+    if surface == "plane":
+        dd = con.displacement(state, u, v)
+        assert_bitwise(chord2, (dd * dd).sum(axis=1), "chord2")
+    else:
+        dd = state.positions[u] - state.positions[v]
+        assert_close(chord2, np.einsum("ij,ij->i", dd, dd), rtol=RTOL, what="chord2")
+    assert_close(length, con.edge_lengths(state, u, v), rtol=RTOL, what="edge_length")
+
+    rng = np.random.default_rng(3)
+    rep = rng.integers(0, state.n_replicas, 500)
+    size = con.size_np(state)
+    y = state.positions[rng.integers(0, state.n_vertices, 500)] + rng.normal(scale=0.3, size=(500, 3))
+    if surface == "plane":
+        y[:50, :2] -= size[rep[:50]] * 1.5            # far outside the box
+    normal, placed = harness.project(surface, y, rep, size)
+    ref = con.project_normal(y, size[rep])
+    assert_close(placed, ref, rtol=RTOL, what="place")
+    assert_close(normal, con.normal(ref), rtol=RTOL, what="normal")
+    normals = harness.cell_normals(surface, state)
+    if surface == "plane":
+        assert_bitwise(normals, con.cell_normals(state), "cell_normal")
+    else:
+        assert_close(normals, con.cell_normals(state), rtol=RTOL, what="cell_normal")
+
+
+@pytest.mark.parametrize("surface", ["plane", "sphere"])
+def test_header_t1_positions_match_t1_flip(harness, surface):
+    """Surface::t1_positions (t1_apply's geometry) against topology.t1_flip, one flip at a time: edges
+    across the periodic boundary, ordinary ones, and a zero-length edge (its direction comes from
+    the neighbouring cells)."""
+    state = SURFACE_STATES[surface]()
+    con = state.constraint
+    vn = state.vertex_neighbors
+    d = con.displacement(state, np.arange(state.n_vertices).repeat(3), vn.reshape(-1)) if surface == "plane" else None
+    corners = np.flatnonzero(np.arange(state.n_vertices).repeat(3) < vn.reshape(-1))
+    if surface == "plane":
+        raw = (state.positions[vn.reshape(-1), :2] - state.positions[np.arange(state.n_vertices).repeat(3), :2])
+        across = corners[np.abs(raw[corners] - d[corners]).max(axis=1) > 0][:10]
+        assert len(across) == 10
+        corners = np.concatenate([across, corners[::37][:10]])
+    else:
+        corners = corners[::29][:20]
+    zero = corners[-1]
+    state.positions[vn.reshape(-1)[zero]] = state.positions[zero // 3]    # a zero-length edge
+    scale = np.sqrt(state.mean_cell_area)
+    for corner in corners:
+        u, slot = np.array([corner // 3]), np.array([corner % 3])
+        v, a, b, c, dd, *_ = svm.topology.t1_cells(vn, state.vertex_cells, u, slot)
+        full = 0.37 * scale[state.vertex_replica[u]]
+        x, y = harness.t1(surface, state, np.stack([u, v, a, b, c, dd], axis=1), full)
+        flipped = state.copy()
+        svm.topology.t1_flip(flipped, u, slot, full)
+        ref = flipped.positions[np.concatenate([v, u])]
+        got = np.concatenate([x, y])
+        if surface == "plane":
+            assert_bitwise(got, ref, f"t1_positions of corner {corner}")
+        else:
+            assert_close_global(got, ref, rtol=RTOL, what=f"t1_positions of corner {corner}")
 
 
 # ------------------------------------------------------------------------------------- on the GPU

@@ -14,11 +14,6 @@ import pytest
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 FILES = [ROOT / "README.md"] + sorted((ROOT / "docs").glob("*.md"))
 BLOCK = re.compile(r"(?:(<!--[^\n]*-->)\s*\n)?```python\n(.*?)```", re.S)
-# pages whose examples run for a minute or more (ensembles of 64 x 256 cells, sweeps, long dynamics)
-SLOW = {"analysis.md", "rigidity.md", "dynamics.md", "README.md", "index.md"}
-# pages not run in the default suite yet (run by hand with `-m docs_long`): analysis.md's examples
-# run past 10 minutes and rigidity.md's sweep block fails; both are open work (docs/testing.md)
-HAND = {"analysis.md", "rigidity.md"}
 # pages that need an optional package: page -> module (skipped, with the reason, where it is missing)
 NEEDS = {"visualisation.md": "ovito"}
 RUNNER = """
@@ -47,10 +42,7 @@ def pages():
     for path in FILES:
         if not page_blocks(path):
             continue
-        marks = [pytest.mark.slow] if path.name in SLOW else []
-        if path.name in HAND:
-            marks.append(pytest.mark.docs_long)
-        yield pytest.param(path, id=str(path.relative_to(ROOT)), marks=marks)
+        yield pytest.param(path, id=str(path.relative_to(ROOT)))
 
 
 @pytest.mark.parametrize("path", list(pages()))

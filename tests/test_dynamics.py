@@ -133,7 +133,7 @@ def test_exploding_step_and_nan_stop_the_run_with_names(tmp_path, device):
     with pytest.raises(FloatingPointError, match=r"timestep 0: replica 0, vertex \d+"):
         sim.run(5)      # on the GPU the check (default every 100 steps) comes at the run's end
     sim = _free(svm.init.random_tiling(32, seed=8), Brownian(dt=1e-3, T=0.0), device=device)
-    sim.operations.writers.append(svm.plugins.writers.GSD(tmp_path / "t.gsd", trigger=1))
+    sim.operations.writers.append(svm.plugins.writers.GSD(1, tmp_path / "t.gsd"))
     sim.run(3)
     sim.state.positions[4] = np.nan
     # every step checked (the CPU's default), so the run stops before the writer sees the NaN

@@ -363,7 +363,7 @@ def test_recorder_on_live_simulation(tmp_path, monkeypatch):
     wanted = log_spaced_times(300, points_per_decade=5)
     rec = Recorder(OnTimesteps(wanted), csv=tmp_path / "cells.csv")
     sim.operations.writers.append(rec)
-    writer = svm.plugins.writers.GSD(tmp_path / "run.gsd", trigger=OnTimesteps(wanted), mode="wb")
+    writer = svm.plugins.writers.GSD(OnTimesteps(wanted), tmp_path / "run.gsd", mode="wb")
     sim.operations.writers.append(writer)
     sim.run(300)
     writer.close()

@@ -16,7 +16,7 @@ def gsd_file(tmp_path_factory):
     sim.state = svm.init.random_tiling(30, replicas=2, seed=3)
     sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=3.8))
     sim.operations.integrator = svm.plugins.integrators.FIRE(dt=0.02)
-    sim.operations.writers.append(svm.plugins.writers.GSD(str(path), trigger=50))
+    sim.operations.writers.append(svm.plugins.writers.GSD(50, str(path)))
     sim.run(100)
     sim.operations.writers[0].close()
     return path
@@ -83,7 +83,7 @@ def test_render_png(tmp_path, gsd_file, plane):
         sim = svm.Simulation(device="cpu")
         sim.state = svm.init_plane.random_planar_tiling(30, seed=2)
         sim.operations.integrator = svm.plugins.integrators.FIRE(dt=0.02)
-        sim.operations.writers.append(svm.plugins.writers.GSD(str(path)))
+        sim.operations.writers.append(svm.plugins.writers.GSD(filename=str(path)))
         sim.run(0)
         sim.operations.writers[0].close()
     else:

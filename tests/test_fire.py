@@ -92,9 +92,15 @@ def test_fire_bad_parameters(kw, match):
 
 
 def test_fire_defaults_and_boundary_parameters():
-    # the defaults are Bitzek et al. (2006)'s, with dt_max = 10 dt and the documented tolerances
+    # the defaults are Bitzek et al. (2006)'s, with dt_max = 10 dt and the documented tolerances;
+    # dt is the one the docs, the CLI and the sweeps use (issue 14.7: it was 0.01 against their 0.02)
     f = FIRE()
-    assert (f.dt, f.dt_max, f.n_min, f.f_inc, f.f_dec, f.alpha_start, f.f_alpha) == (0.01, 0.1, 5, 1.1, 0.5, 0.1, 0.99)
+    assert (f.dt, f.dt_max, f.n_min, f.f_inc, f.f_dec, f.alpha_start, f.f_alpha) == (0.02, 0.2, 5, 1.1, 0.5, 0.1, 0.99)
+    from spherevm.cli import build_parser
+    from spherevm.sweeps import RigiditySweep
+    cli = build_parser()
+    assert cli.parse_args(["minimize"]).dt == cli.parse_args(["rigidity"]).dt == f.dt
+    assert RigiditySweep(cells=[16], p0=[3.8], replicas=1).dt == f.dt
     assert (f.force_tol, f.energy_tol, f.check_every) == (1e-10, 1e-20, 10)
     assert FIRE(dt=0.03).dt_max == pytest.approx(0.3, rel=1e-15)
     # the closed ends of the ranges are allowed

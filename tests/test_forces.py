@@ -103,14 +103,32 @@ def test_bad_parameters(kw):
 
 def test_threaded_blocks_give_the_same_forces(monkeypatch):
     # CPU only: large NumPy states are split into per-core vertex blocks: the result must not change
-    import spherevm.constraints.sphere as sphere
+    import spherevm.constraints.corners as corners
     s = svm.init.random_tiling(500, replicas=2, seed=21)
     model = VertexModel.dimensionless(kr=0.7, p0=3.7)
     one = model.compute(s)
-    monkeypatch.setattr(sphere, "PARALLEL_MIN_VERTICES", 10)
-    monkeypatch.setattr(sphere.os, "cpu_count", lambda: 3)
+    monkeypatch.setattr(corners, "PARALLEL_MIN_VERTICES", 10)
+    monkeypatch.setattr(corners.os, "cpu_count", lambda: 3)
     s.topology_changed()
     many = model.compute(s)
-    assert len(sphere._vertex_blocks(s)) == 3
+    assert len(corners.blocks(s, s.n_vertices)) == 3
     assert np.allclose(many.forces, one.forces, rtol=0, atol=1e-13 * np.abs(one.forces).max())
     assert np.allclose(many.energy, one.energy, rtol=1e-14)
+
+
+def test_allocator_thresholds_are_fixed_unless_asked_not_to():
+    # spherevm.device.tune_allocator: on glibc the NumPy path keeps freed memory for reuse
+    import ctypes
+    import os
+    import subprocess
+    import sys
+    try:
+        ctypes.CDLL("libc.so.6").mallopt
+    except (OSError, AttributeError):
+        pytest.skip("not glibc")
+    assert svm.device.ALLOCATOR_TUNED
+    code = "import spherevm; print(spherevm.device.ALLOCATOR_TUNED)"
+    package_root = os.path.dirname(os.path.dirname(svm.__file__))      # this spherevm, not an installed one
+    env = dict(os.environ, SPHEREVM_MALLOC="system", PYTHONPATH=package_root)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"

@@ -178,7 +178,7 @@ def test_active_matches_numpy(directors):
 
 def test_gsd_written_on_gpu_restores_on_cpu(tmp_path):
     sim = _dyn_sim(svm.init.random_tiling(64, replicas=2, seed=14), "gpu", Brownian(dt=0.01, T=1e-3))
-    sim.operations.writers.append(svm.plugins.writers.GSD(tmp_path / "g.gsd", trigger=50))
+    sim.operations.writers.append(svm.plugins.writers.GSD(50, tmp_path / "g.gsd"))
     sim.run(200)
     back = svm.init.from_gsd(tmp_path / "g.gsd", device="cpu")
     assert np.array_equal(back.positions, sim.state.positions.get())

@@ -69,7 +69,7 @@ def written(tmp_path, device):
     path = tmp_path / "run.gsd"
     sim = make_sim(device=device)
     snaps = Snapshots(trigger=3)
-    writer = GSD(path, trigger=3)
+    writer = GSD(3, path)
     sim.operations.writers.extend([snaps, writer])
     sim.run(9)                            # frames at timesteps 0, 3, 6, 9
     assert snaps.steps == [0, 3, 6, 9]
@@ -157,7 +157,7 @@ def test_hoomd_layout_lengths_box_and_log(written, device):
 def test_readable_after_flush_without_close_and_append(tmp_path, device):
     path = tmp_path / "open.gsd"
     sim = make_sim(svm.init.random_tiling(16, replicas=2, seed=3), device)
-    writer = GSD(str(path), trigger=2, log=("energy_per_cell", "timestep"))
+    writer = GSD(2, str(path), log=("energy_per_cell", "timestep"))
     sim.operations.writers.append(writer)
     assert not path.exists()            # opened lazily
     sim.run(4)                          # frames at 0, 2, 4; not closed
@@ -168,16 +168,16 @@ def test_readable_after_flush_without_close_and_append(tmp_path, device):
     writer.close()
     sim.run(2)                          # a write after close appends
     assert svm.gsdio.n_frames(path) == 4
-    appender = GSD(path, trigger=1, mode="ab")
+    appender = GSD(1, path, mode="ab")
     appender.write(sim, sim.timestep)
     appender.close()
     assert svm.gsdio.n_frames(path) == 5
-    overwriter = GSD(path, mode="wb")
+    overwriter = GSD(filename=path, mode="wb")
     overwriter.write(sim, sim.timestep)
     overwriter.close()
     assert svm.gsdio.n_frames(path) == 1
     with pytest.raises(FileExistsError, match="xb"):
-        GSD(path, mode="xb").write(sim, 0)
+        GSD(filename=path, mode="xb").write(sim, 0)
 
 
 def test_crash_leaves_readable_file(tmp_path):
@@ -189,7 +189,7 @@ def test_crash_leaves_readable_file(tmp_path):
         "sim.state = svm.init.random_tiling(16, seed=2)\n"
         "sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1, p0=3.8))\n"
         "sim.operations.integrator = svm.plugins.integrators.FIRE(dt=0.02)\n"
-        f"sim.operations.writers.append(svm.plugins.writers.GSD({str(path)!r}, trigger=1))\n"
+        f"sim.operations.writers.append(svm.plugins.writers.GSD(1, {str(path)!r}))\n"
         "class Crash(svm.plugins.Writer):\n"
         "    def write(self, simulation, timestep):\n"
         "        os._exit(3)\n"
@@ -235,23 +235,23 @@ def test_bad_input(tmp_path, written):
         read_state(path, frame=1.5)
     # writer arguments
     with pytest.raises(ValueError, match="mode must be"):
-        GSD(tmp_path / "x.gsd", mode="r")
+        GSD(filename=tmp_path / "x.gsd", mode="r")
     with pytest.raises(ValueError, match="unknown loggable"):
-        GSD(tmp_path / "x.gsd", log=("energy", "nope")).write(make_sim(), 0)
+        GSD(filename=tmp_path / "x.gsd", log=("energy", "nope")).write(make_sim(), 0)
     with pytest.raises(ValueError, match="cannot append"):
-        GSD(text, mode="ab").write(make_sim(), 0)
+        GSD(filename=text, mode="ab").write(make_sim(), 0)
     sim = make_sim(svm.init.random_tiling(16, seed=2))
     sim.state.positions[3, 1] = np.nan
     target = tmp_path / "nan.gsd"
     with pytest.raises(FloatingPointError, match="vertex 3 of replica 0.*timestep 7"):
-        GSD(target).write(sim, 7)
+        GSD(filename=target).write(sim, 7)
     assert not target.exists()
 
 
 def test_writer_without_forces(tmp_path, device):
     sim = svm.Simulation(device=device)
     sim.state = svm.init.random_tiling(12, seed=1)
-    w = GSD(tmp_path / "init.gsd")
+    w = GSD(filename=tmp_path / "init.gsd")
     w.write(sim, 0)
     w.close()
     with gsd.hoomd.open(tmp_path / "init.gsd") as t:
@@ -263,7 +263,7 @@ def test_writer_without_forces(tmp_path, device):
 def test_box_grows_for_long_edges(tmp_path, device):
     """In a 4-cell tiling edges are longer than 1.1 R: the box grows so that none reaches half of it."""
     sim = make_sim(svm.init.random_tiling(4, seed=0), device)
-    with GSD(tmp_path / "tiny.gsd") as w:
+    with GSD(filename=tmp_path / "tiny.gsd") as w:
         w.write(sim, 0)
     with gsd.hoomd.open(tmp_path / "tiny.gsd") as t:
         f = t[0]
@@ -278,7 +278,7 @@ def test_per_item_keys_persist_with_right_lengths(tmp_path, device):
     topology change): the writer keeps writing every key it has written, NaN when unknown."""
     path = tmp_path / "keys.gsd"
     sim = make_sim(svm.init.random_tiling(16, seed=1), device)
-    w = GSD(path, log=("mean_shape_index",))
+    w = GSD(filename=path, log=("mean_shape_index",))
     w.write(sim, 0)
     sim.operations.forces.remove(sim.operations.forces[0])
     sim.state = svm.init.random_tiling(24, replicas=2, seed=2)

@@ -72,7 +72,7 @@ def test_write_then_append_across_topology_changes(tmp_path):
     rng = np.random.default_rng(1)
     sim = _sim(svm.init.random_tiling(24, replicas=2, seed=3))
     refs = []
-    writer = GSD(path, trigger=1, mode="wb")
+    writer = GSD(1, path, mode="wb")
     A = sim.state.copy()
     _write(writer, sim, refs)                          # A
     flip_somewhere(sim.state, rng)
@@ -88,7 +88,7 @@ def test_write_then_append_across_topology_changes(tmp_path):
     _check_all_frames(path, refs)
 
     # append to the closed file from a new writer: the last frame's topology first (C != A)
-    writer2 = GSD(path, trigger=1, mode="ab")
+    writer2 = GSD(1, path, mode="ab")
     for s in (C, A, B):
         sim.state.positions = s.positions.copy()
         for k in STATE_TOPOLOGY:
@@ -100,7 +100,7 @@ def test_write_then_append_across_topology_changes(tmp_path):
     _check_all_frames(path, refs)
 
     # and once more: append B after a file that ends with B
-    writer3 = GSD(path, trigger=1, mode="ab")
+    writer3 = GSD(1, path, mode="ab")
     _write(writer3, sim, refs)
     writer3.close()
     _check_all_frames(path, refs)
@@ -115,7 +115,7 @@ def test_same_writer_closed_and_reopened_appends(tmp_path):
     path = tmp_path / "reopen.gsd"
     rng = np.random.default_rng(2)
     sim = _sim(svm.init.random_tiling(20, seed=6))
-    writer = GSD(path, trigger=1, mode="wb")
+    writer = GSD(1, path, mode="wb")
     refs = []
     _write(writer, sim, refs)
     flip_somewhere(sim.state, rng)
@@ -145,7 +145,7 @@ def test_restart_appends_after_t1s(tmp_path, device):
     the same file while flipping more; every frame reads back as written."""
     path = tmp_path / "restart.gsd"
     rec1 = Snapshots(trigger=5)
-    sim, t1 = _t1_sim(svm.init.random_tiling(50, replicas=2, seed=7), device, [rec1, GSD(path, trigger=5)])
+    sim, t1 = _t1_sim(svm.init.random_tiling(50, replicas=2, seed=7), device, [rec1, GSD(5, path)])
     sim.run(30)
     sim.operations.writers[1].close()
     assert rec1.steps == [0, 5, 10, 15, 20, 25, 30]
@@ -159,7 +159,7 @@ def test_restart_appends_after_t1s(tmp_path, device):
         sim2.timestep = r.step(-1)
     assert sim2.timestep == 30
     rec2 = Snapshots(trigger=5)
-    writer2 = GSD(path, trigger=5, mode="ab")
+    writer2 = GSD(5, path, mode="ab")
     sim2, t1b = _t1_sim(sim2.state, device, [rec2, writer2])
     sim2.timestep = 30
     sim2.run(30)

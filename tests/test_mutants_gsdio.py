@@ -28,7 +28,7 @@ class SphereWithoutAreas(Sphere):
 def _three_frames(path, log=("timestep",)):
     sim = svm.Simulation(device="cpu", seed=1)
     sim.state = svm.init.random_tiling(16, replicas=2, seed=3)
-    w = GSD(path, trigger=1, log=log)
+    w = GSD(1, path, log=log)
     for step in (5, 6, 7):
         sim.state.positions[:] = svm.geometry.normalize(sim.state.positions + 0.001 * step) * \
             sim.state.radius_np()[sim.state.vertex_replica_np()][:, None]
@@ -82,7 +82,7 @@ def test_step_defaults_to_zero_when_no_frame_stores_it(tmp_path):
     path = tmp_path / "nostep.gsd"
     sim = svm.Simulation(device="cpu")
     sim.state = svm.init.random_tiling(12, seed=1)
-    with GSD(path) as w:
+    with GSD(filename=path) as w:
         w.write(sim, 0)                  # gsd leaves out a step equal to the default 0
     with gsdio.Reader(path) as r:
         assert r.step(0) == 0
@@ -93,7 +93,7 @@ def test_box_and_diameters_known_values(tmp_path):
     sim = svm.Simulation(device="cpu")
     sim.state = svm.State.concatenate([svm.init.random_tiling(64, seed=1, radius=2.0),
                                        svm.init.random_tiling(32, seed=2, radius=1.0)])
-    with GSD(path) as w:
+    with GSD(filename=path) as w:
         w.write(sim, 0)
     s = sim.state
     pos = s.positions
@@ -114,7 +114,7 @@ def test_box_and_diameters_known_values(tmp_path):
 def test_box_never_shrinks(tmp_path):
     path = tmp_path / "grow.gsd"
     sim = svm.Simulation(device="cpu")
-    with GSD(path) as w:
+    with GSD(filename=path) as w:
         sim.state = svm.init.random_tiling(16, seed=1, radius=3.0)
         w.write(sim, 0)
         sim.state = svm.init.random_tiling(16, seed=1, radius=1.0)
@@ -187,7 +187,7 @@ def test_box_of_a_small_sphere(tmp_path):
     path = tmp_path / "small.gsd"
     sim = svm.Simulation(device="cpu")
     sim.state = svm.init.random_tiling(32, seed=1, radius=0.3)
-    with GSD(path) as w:
+    with GSD(filename=path) as w:
         w.write(sim, 0)
     s = sim.state
     bonds = topology.edges(s.vertex_neighbors)

@@ -91,7 +91,7 @@ def test_no_narrowing_with_an_operation_that_cannot(monkeypatch, device):
 def test_no_narrowing_with_a_writer(tmp_path, monkeypatch, device):
     calls = counting_narrowings(monkeypatch)
     sim = mixed_ensemble(device, replicas=4)
-    sim.operations.writers.append(svm.plugins.writers.GSD(str(tmp_path / "run.gsd"), trigger=100))
+    sim.operations.writers.append(svm.plugins.writers.GSD(100, str(tmp_path / "run.gsd")))
     sim.minimize(force_tol=1e-12, max_steps=1000)
     assert calls == []
 

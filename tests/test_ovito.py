@@ -14,7 +14,7 @@ def test_pipeline_cell_mesh(tmp_path):
     sim.state = svm.init.random_tiling(24, replicas=2, seed=5)
     sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=3.8))
     sim.operations.integrator = svm.plugins.integrators.FIRE(dt=0.02)
-    sim.operations.writers.append(svm.plugins.writers.GSD(str(path), trigger=20))
+    sim.operations.writers.append(svm.plugins.writers.GSD(20, str(path)))
     sim.run(40)
     sim.operations.writers[0].close()
     pipeline = so.pipeline(path)
@@ -34,3 +34,42 @@ def test_pipeline_cell_mesh(tmp_path):
         assert np.allclose(np.sort(np.unique(np.round(r, 9))), np.unique(np.round(state.radius_np(), 9)))
         assert mesh.vis.color_mapping_property == "shape_index"
         assert data.particles.bonds.vis.width == pytest.approx(so.BOND_WIDTH)
+
+
+def test_ovito_reads_a_growing_tissue(tmp_path):
+    """A GSD file whose particle count changes from frame to frame (divisions and T2s on a sphere
+    that grows with N): OVITO's own GSD reader gives each frame's vertices and edges, and the cell
+    mesh of spherevm.ovito each frame's cells."""
+    import spherevm.ovito as so
+    from ovito.io import import_file
+    path = tmp_path / "grow.gsd"
+    sim = svm.Simulation(device="cpu", seed=5)
+    sim.state = svm.init.random_tiling(16, replicas=2, seed=2)
+    sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=3.8))
+    sim.operations.updaters += [svm.plugins.updaters.T1(), svm.plugins.updaters.Division(rule="rate", rate=0.1, dt=1.0),
+                                svm.plugins.updaters.Extrusion(area_threshold=0.4),
+                                svm.plugins.updaters.RadiusSchedule("constant_area")]
+    sim.operations.integrator = svm.plugins.integrators.FIRE(dt=0.05)
+    sim.operations.writers.append(svm.plugins.writers.GSD(str(path), trigger=2))
+    states = [sim.state.copy()]
+    for _ in range(6):
+        sim.run(2)
+        states.append(sim.state.copy())
+    sim.operations.writers[0].close()
+    assert len({s.n_vertices for s in states}) >= 4              # the count changes along the file
+    plain, cells = import_file(str(path)), so.pipeline(path)
+    assert plain.source.num_frames == cells.source.num_frames == len(states)
+    for frame, state in enumerate(states):
+        data = plain.compute(frame)
+        assert data.attributes["Timestep"] == 2 * frame
+        assert data.particles.count == state.n_vertices
+        np.testing.assert_array_equal(data.particles["replica"], state.vertex_replica_np())
+        np.testing.assert_array_equal(data.particles.positions, state.positions.astype(np.float32))
+        bonds = np.sort(np.asarray(data.particles.bonds.topology), axis=1)
+        expected = svm.topology.edges(state.vertex_neighbors)
+        assert data.particles.bonds.count == 3 * state.n_vertices // 2
+        np.testing.assert_array_equal(bonds, expected)
+        mesh = cells.compute(frame).surfaces["cells"]
+        assert mesh.faces.count == state.n_cells and mesh.regions.count == state.n_cells
+        assert np.array_equal(mesh.faces["replica"], state.cell_replica_np())
+        assert mesh.vertices.count == so.SEGMENTS * state.cell_sides.sum()

@@ -8,7 +8,7 @@ import spherevm as svm
 from spherevm.constraints import PeriodicPlane, Sphere
 from spherevm.device import Device
 from spherevm.plugins.forces import VertexModel
-from spherevm.plugins.integrators import FIRE, Brownian
+from spherevm.plugins.integrators import FIRE, Active, Brownian
 from spherevm.plugins.updaters import T1
 
 HEX_PERIMETER = np.sqrt(8 * np.sqrt(3))
@@ -82,6 +82,28 @@ def test_every_tiling_is_a_torus_covering_the_box(n, seed):
     assert np.all(s.constraint.cell_areas_np(s) > 0)
 
 
+def test_large_tilings_triangulate_a_margin_and_give_the_same_tessellation(monkeypatch):
+    """From MARGIN_MIN_CELLS on only the images near the box are triangulated: the same cells and
+    vertices as the full 3 x 3 images (numbered in another order); a margin too thin for some empty
+    circle falls back to the full images, bit for bit."""
+    from spherevm import init_plane
+    full = svm.init.random_planar_tiling(400, seed=9, box=(16.0, 25.0))
+    monkeypatch.setattr(init_plane, "MARGIN_MIN_CELLS", 100)
+    near = svm.init.random_planar_tiling(400, seed=9, box=(16.0, 25.0))
+    near.validate()
+
+    def canonical(s):
+        return s.positions[np.lexsort(s.positions[:, :2].T)]
+    np.testing.assert_allclose(canonical(near), canonical(full), atol=1e-12)
+    np.testing.assert_allclose(np.sort(near.constraint.cell_areas_np(near)), np.sort(full.constraint.cell_areas_np(full)),
+                               atol=1e-12)
+    assert not np.array_equal(near.positions, full.positions)     # the margin path did run
+    monkeypatch.setattr(init_plane, "MARGIN_CELL_SIDES", 0.3)      # no empty circle fits: the full images
+    again = svm.init.random_planar_tiling(400, seed=9, box=(16.0, 25.0))
+    np.testing.assert_array_equal(again.positions, full.positions)
+    np.testing.assert_array_equal(again.cell_vertices, full.cell_vertices)
+
+
 def test_replicas_are_reproducible_and_may_differ_in_box():
     a = svm.init.random_planar_tiling(20, replicas=3, seed=4)
     b = svm.init.random_planar_tiling(20, replicas=1, seed=4)
@@ -131,6 +153,20 @@ def test_energy_is_invariant_under_translation_and_choice_of_image():
     np.testing.assert_allclose(_energy(_moved(s, p), vm), e0, rtol=1e-11)
 
 
+def test_a_new_box_is_seen_by_the_cached_tables():
+    s = svm.init.random_planar_tiling(30, seed=2)
+    vm = VertexModel.dimensionless(kr=1.0, p0=3.8)
+    vm.compute(s)                                                   # fills the cache
+    scaled = s.copy()
+    scaled.positions = s.positions * 2.0
+    scaled.box = s.box * 2.0
+    np.testing.assert_allclose(scaled.constraint.cell_areas_np(scaled), 4.0 * s.constraint.cell_areas_np(s),
+                               rtol=1e-13)
+    s.positions = s.positions * 2.0
+    s.box = s.box * 2.0                                             # the same State, a new box array
+    np.testing.assert_allclose(s.constraint.cell_areas_np(s), scaled.constraint.cell_areas_np(scaled), rtol=1e-15)
+
+
 def test_projections_and_lengths():
     con = PeriodicPlane()
     box = np.array([[2.0, 3.0]])
@@ -147,7 +183,7 @@ def test_projections_and_lengths():
 
 # ------------------------------------------------------------------ operations
 def _sim(state, p0, kr=0.0, seed=1):
-    sim = svm.Simulation(device="cpu", seed=seed)   # the GPU kernels refuse the plane for now
+    sim = svm.Simulation(device="cpu", seed=seed)   # the GPU's agreement: tests/test_plane_gpu.py
     sim.state = state
     sim.operations.forces.append(VertexModel.dimensionless(kr=kr, p0=p0))
     return sim
@@ -187,6 +223,26 @@ def test_brownian_with_hot_t1_keeps_a_valid_torus():
     assert np.all(s.positions[:, 2] == 0)
 
 
+@pytest.mark.parametrize("directors", ["cell", "vertex"])
+def test_active_directors_stay_in_the_plane_and_diffuse_by_angle(directors):
+    """Directors start as unit vectors in the plane, stay there, and turn about z by Gaussian angles
+    of variance 2 Dr dt per step: <cos(dtheta)> = exp(-Dr t) after time t."""
+    state = svm.init.random_planar_tiling(400, seed=4)
+    sim = _sim(state, 3.9, kr=1.0, seed=8)
+    dr, dt, steps = 1.0, 0.01, 50
+    sim.operations.integrator = Active(dt=dt, v0=0.05, Dr=dr, directors=directors)
+    sim.run(1)
+    d0 = sim.operations.integrator.directors.copy()
+    sim.run(steps)
+    d = sim.operations.integrator.directors
+    assert np.all(d[:, 2] == 0) and np.all(d0[:, 2] == 0)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, rtol=1e-14)
+    cos = (d * d0).sum(axis=1)
+    expected = np.exp(-dr * dt * steps)
+    assert abs(cos.mean() - expected) < 4 * cos.std() / np.sqrt(len(cos))
+    assert np.all(sim.state.positions[:, 2] == 0)
+
+
 def test_t1_flip_across_the_boundary_rotates_about_the_midpoint():
     s = svm.init.hexagonal_tiling(3, 4)
     con = s.constraint
@@ -205,12 +261,17 @@ def test_t1_flip_across_the_boundary_rotates_about_the_midpoint():
     assert abs(np.dot(b - a, before - pu)) < 1e-12
 
 
-def test_gpu_paths_refuse_the_plane():
-    fake = SimpleNamespace(device=Device("gpu", np), constraint=PeriodicPlane())
+def test_gpu_paths_serve_the_plane_and_refuse_other_surfaces():
+    """The CUDA paths are compiled per surface (geometry/surface.cuh): the plane binds them, a
+    surface without kernels is refused naming the ones that have them."""
+    from spherevm.constraints.torus import Torus
+    plane = SimpleNamespace(device=Device("gpu", np), constraint=PeriodicPlane())
+    torus = SimpleNamespace(device=Device("gpu", np), constraint=Torus(3.0, 1.0))
     for op, name in ((VertexModel(), "compute"), (FIRE(), "move"), (Brownian(dt=0.01, T=0.1), "step"),
                      (T1(), "update")):
-        with pytest.raises(ValueError, match="PeriodicPlane"):
-            op.implementation(name, fake)
+        assert op.implementation(name, plane).__name__ == f"_{name}_gpu"
+        with pytest.raises(ValueError, match="Sphere, PeriodicPlane surfaces only.*Torus"):
+            op.implementation(name, torus)
 
 
 # ------------------------------------------------------------------ GSD
@@ -219,7 +280,7 @@ def test_gsd_round_trip_of_a_planar_state(tmp_path):
     s = svm.init.random_planar_tiling(25, replicas=2, seed=1, box=(4.0, 6.25))
     sim = _sim(s, 3.8, kr=1.0)
     path = tmp_path / "plane.gsd"
-    sim.operations.writers.append(svm.plugins.writers.GSD(path, trigger=1))
+    sim.operations.writers.append(svm.plugins.writers.GSD(1, path))
     sim.operations.integrator = Brownian(dt=0.01, T=0.1)
     sim.run(3)
     back = svm.init.from_gsd(path, validate=True)

@@ -124,7 +124,7 @@ def _brownian_planar(tmp_path=None, steps=400, T=0.05):
     gsd_path = None
     if tmp_path is not None:
         gsd_path = str(tmp_path / "plane.gsd")
-        sim.operations.writers.append(svm.plugins.writers.GSD(gsd_path, trigger=rec.trigger))
+        sim.operations.writers.append(svm.plugins.writers.GSD(rec.trigger, gsd_path))
     sim.run(steps)
     for w in sim.operations.writers:
         w.close()

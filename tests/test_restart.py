@@ -65,7 +65,7 @@ def test_run_restart_is_bitwise(kind, device, tiling, tmp_path):
     path = tmp_path / "ck.gsd"
     first = make(kind, device)
     first.state = tiling
-    first.operations.writers.append(GSD(path, trigger=150))
+    first.operations.writers.append(GSD(150, path))
     first.run(150)
     second = make(kind, device)
     second.create_state_from_gsd(path)
@@ -149,7 +149,7 @@ def test_minimize_resume_from_a_checkpoint(device, tiling, tmp_path):
     whole = minimizer(tiling, device)
     whole.minimize(force_tol=1e-12, max_steps=400, narrow=False)
     first = minimizer(tiling, device)
-    first.operations.writers.append(GSD(tmp_path / "ck.gsd", trigger=10_000))
+    first.operations.writers.append(GSD(10_000, tmp_path / "ck.gsd"))
     first.minimize(force_tol=1e-12, max_steps=200)
     second = minimizer(tiling, device)
     second.create_state_from_gsd(tmp_path / "ck.gsd")
@@ -161,7 +161,7 @@ def test_minimize_resume_from_a_checkpoint(device, tiling, tmp_path):
 def test_final_frame_is_written(tiling, tmp_path):
     sim = minimizer(tiling)
     path = tmp_path / "m.gsd"
-    sim.operations.writers.append(GSD(path, trigger=svm.trigger.Periodic(200)))
+    sim.operations.writers.append(GSD(svm.trigger.Periodic(200), path))
     result = sim.minimize(force_tol=1e-6, max_steps=5000)
     with svm.gsdio.Reader(path) as r:
         assert r.step(-1) == sim.timestep
@@ -169,7 +169,7 @@ def test_final_frame_is_written(tiling, tmp_path):
     assert int(result.steps.max()) % 200 != 0 or True
     # a writer that does not want it
     sim2 = minimizer(tiling)
-    sim2.operations.writers.append(GSD(tmp_path / "n.gsd", trigger=svm.trigger.Periodic(200), final=False))
+    sim2.operations.writers.append(GSD(svm.trigger.Periodic(200), tmp_path / "n.gsd", final=False))
     sim2.run(250)
     with svm.gsdio.Reader(tmp_path / "n.gsd") as r:
         assert r.step(-1) == 200

@@ -366,6 +366,26 @@ def test_p0_star_increases_with_n(tmp_path):
     assert np.all(np.abs(p0star["p0_star"] - p0star["pentagon_perimeter"]) < 0.1)
 
 
+@pytest.mark.parametrize("surface", ["sphere", "plane"])
+def test_prefetched_tilings_are_the_chunk_states(surface):
+    """TilingPrefetch (GPU sweeps build tilings in a process pool, cut into parts per worker) gives
+    each chunk exactly the State that build_chunk_state builds alone, in the order asked."""
+    from spherevm.sweeps.execution import TilingPrefetch
+    sweep = sweeps.RigiditySweep(cells=[16, 24], p0=[3.7, 3.9], replicas=5, seed=4, surface=surface)
+    chunks = sweeps.plan_chunks(sweep, batch_cells=100)
+    assert len(chunks) > 2
+    prefetch = TilingPrefetch(sweep, chunks, workers=2, ahead=1)
+    try:
+        for c in chunks:
+            got = prefetch.get(c)._arrays_np()
+            ref = sweeps.build_chunk_state(sweep, c)[0]._arrays_np()
+            assert got.keys() == ref.keys()
+            for key in ref:
+                assert np.array_equal(got[key], ref[key]), (c.id, key)
+    finally:
+        prefetch.close()
+
+
 @pytest.mark.gpu
 def test_gpu_sweep_matches_cpu(tiny_run, tmp_path):
     """Same classification and steps on the GPU; energies agree to round-off (not run here: no GPU)."""

@@ -258,3 +258,32 @@ def test_flipping_back_and_forth_is_detected_and_reported(device):
 def test_bad_t1_parameters(kw, match):
     with pytest.raises(ValueError, match=match):
         T1(**kw)
+
+
+def test_flip_back_bookkeeping_only_where_something_halts_on_it(device):
+    """Under Brownian dynamics T1 keeps no flip-back record by default (nothing halts on it and it
+    grows with every flip), with ``count_flip_backs=True`` it does; the flips are the same."""
+    from spherevm.plugins.integrators import Brownian
+    runs = {}
+    for count in (None, True):
+        sim = svm.Simulation(device=device, seed=4)
+        sim.state = svm.init.random_tiling(60, replicas=2, seed=8)
+        sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.9))
+        t1 = T1(threshold=0.2, new_length=0.3, count_flip_backs=count)
+        sim.operations.updaters.append(t1)
+        sim.operations.integrator = Brownian(dt=0.005, T=0.5)
+        sim.run(300)
+        runs[count] = (sim, t1)
+    (quiet, t_quiet), (counted, t_counted) = runs[None], runs[True]
+    assert not t_quiet.counting(quiet) and t_counted.counting(counted)
+    flips = counted.log("t1_total_flips")
+    assert flips.sum() > 20 and np.array_equal(quiet.log("t1_total_flips"), flips)
+    assert np.array_equal(to_numpy(quiet.state.positions), to_numpy(counted.state.positions))
+    t_counted._sync_counters(), t_quiet._sync_counters()
+    assert len(t_counted._separated) > 0 and len(t_quiet._separated) == 0
+    assert quiet.log("t1_flip_backs").sum() == 0 and counted.log("t1_flip_backs").sum() > 0
+    # under FIRE (a Minimizer) or with no integrator the record is kept
+    quiet.operations.integrator = FIRE()
+    assert t_quiet.counting(quiet)
+    with pytest.raises(ValueError, match="count_flip_backs"):
+        T1(count_flip_backs="yes")

@@ -134,47 +134,61 @@ def test_ordinary_minimisations_refuse_nothing_that_does_not_fold():
 # ------------------------------------------------------------------ the CUDA header on the CPU
 @pytest.fixture(scope="module")
 def fold_header(tmp_path_factory):
+    """The header built for the sphere and for the plane: {"sphere": lib, "plane": lib}."""
     if find_compiler() is None:
         pytest.skip("no C++ compiler (g++ or c++) on PATH: the CUDA header cannot be built for the CPU")
-    return ctypes.CDLL(str(build_harness(tmp_path_factory.mktemp("t1_fold"), source=HERE / "t1_fold_harness.cpp")))
+    return {name: ctypes.CDLL(str(build_harness(tmp_path_factory.mktemp(f"t1_fold_{name}"), source=HERE / source)))
+            for name, source in (("sphere", "t1_fold_harness.cpp"), ("plane", "t1_fold_harness_plane.cpp"))}
 
 
 def _p(a):
     return a.ctypes.data_as(ctypes.c_void_p)
 
 
-@pytest.mark.parametrize("n_cells, seed, kick, threshold", [(40, 1, 0.05, 0.3), (24, 2, 0.12, 0.5), (12, 3, 0.1, 0.9),
-                                                             (200, 4, 0.02, 0.25)])
-def test_cuda_header_agrees_with_numpy(fold_header, n_cells, seed, kick, threshold):
-    state = kicked(n_cells, seed, kick, replicas=3)
+def kicked_plane(n_cells, seed, kick, replicas=3):
+    state = svm.init_plane.random_planar_tiling(n_cells, replicas=replicas, seed=seed)
+    rng = np.random.default_rng(seed)
+    con = state.constraint
+    step = con.project_tangent(state.positions, rng.normal(scale=kick, size=state.positions.shape))
+    state.positions = con.project_normal(state.positions + step, state.box[state.vertex_replica])
+    return state
+
+
+@pytest.mark.parametrize("surface, n_cells, seed, kick, threshold", [
+    ("sphere", 40, 1, 0.05, 0.3), ("sphere", 24, 2, 0.12, 0.5), ("sphere", 12, 3, 0.1, 0.9),
+    ("sphere", 200, 4, 0.02, 0.25), ("plane", 40, 1, 0.05, 0.4), ("plane", 60, 2, 0.12, 0.5)])
+def test_cuda_header_agrees_with_numpy(fold_header, surface, n_cells, seed, kick, threshold):
+    """Surface::t1_positions and t1_would_fold, built for the host, against topology.t1_new_positions
+    and folding.t1_folds on every candidate of kicked tilings (a few hundred, folding or not)."""
+    state = kicked(n_cells, seed, kick, replicas=3) if surface == "sphere" else kicked_plane(n_cells, seed, kick)
+    lib = fold_header[surface]
     u, slot, new = candidates(state, threshold)
     vn, vc, pos = state.vertex_neighbors, state.vertex_cells, state.positions
     v, a, b, c, d, C1, C2, C3, C4 = topology.t1_cells(vn, vc, u, slot)
     px, py = topology.t1_new_positions(state, pos, u, v, a, b, c, d, new)
     n = len(u)
-    radius = state.radius_np()[state.vertex_replica_np()[u]]
-    hx, hy = np.empty((n, 3)), np.empty((n, 3))
-    vecs = [np.ascontiguousarray(pos[w]) for w in (u, v, a, b, c, d)]
-    fold_header.h_t1_new_positions(ctypes.c_long(n), *[_p(x) for x in vecs], _p(np.ascontiguousarray(radius)),
-                                   _p(np.ascontiguousarray(new, dtype=np.float64)), _p(hx), _p(hy))
-    scale = radius[:, None]
-    assert np.max(np.abs(hx - px) / scale) < 1e-14 and np.max(np.abs(hy - py) / scale) < 1e-14
     cand = np.ascontiguousarray(np.stack([u, v, a, b, c, d, C1, C2, C3, C4], axis=1), dtype=np.int32)
+    size = np.ascontiguousarray(state.constraint.size_np(state)[state.vertex_replica_np()[u]], dtype=np.float64)
+    hx, hy = np.empty((n, 3)), np.empty((n, 3))
+    lib.h_t1_positions(ctypes.c_long(n), _p(np.ascontiguousarray(pos)), _p(cand), _p(size),
+                       _p(np.ascontiguousarray(new, dtype=np.float64)), _p(hx), _p(hy))
+    scale = state.constraint.length_scale(size)[:, None]
+    assert np.max(np.abs(hx - px) / scale) < 1e-14 and np.max(np.abs(hy - py) / scale) < 1e-14
     table = np.ascontiguousarray(state.cell_vertices, dtype=np.int32)
     host = np.empty(n, dtype=np.int32)
-    fold_header.h_t1_would_fold(ctypes.c_long(n), _p(np.ascontiguousarray(pos)), _p(np.ascontiguousarray(vn, np.int32)),
-                                _p(table), _p(np.ascontiguousarray(state.cell_sides, np.int32)),
-                                ctypes.c_int(table.shape[1]), _p(cand), _p(np.ascontiguousarray(px)),
-                                _p(np.ascontiguousarray(py)), _p(host))
+    lib.h_t1_would_fold(ctypes.c_long(n), _p(np.ascontiguousarray(pos)), _p(np.ascontiguousarray(vn, np.int32)),
+                        _p(table), _p(np.ascontiguousarray(state.cell_sides, np.int32)), ctypes.c_int(table.shape[1]),
+                        _p(cand), _p(size), _p(np.ascontiguousarray(px)), _p(np.ascontiguousarray(py)), _p(host))
     rule = folding.t1_folds(state, u, slot, new)
-    assert n > 20 and rule.any()
+    assert n > 20 and rule.any() and (~rule).any(), (n, rule.sum())
     assert np.array_equal(host.astype(bool), rule), np.flatnonzero(host.astype(bool) != rule)
 
 
 @pytest.mark.skipif(shutil.which("nvcc") is None, reason="no nvcc: the T1 kernels are compiled at run time by CuPy")
-def test_t1_kernels_compile(tmp_path):
+@pytest.mark.parametrize("flags", [[], ["-DSVM_SURFACE_PLANE"]], ids=["sphere", "plane"])
+def test_t1_kernels_compile(tmp_path, flags):
     kernel = PACKAGE / "plugins" / "updaters" / "t1.cu"
-    done = subprocess.run(["nvcc", "-ptx", "-std=c++17", f"-I{PACKAGE}", str(kernel), "-o", str(tmp_path / "t1.ptx")],
-                          capture_output=True, text=True)
+    done = subprocess.run(["nvcc", "-ptx", "-std=c++17", *flags, f"-I{PACKAGE}", str(kernel), "-o",
+                           str(tmp_path / "t1.ptx")], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert pathlib.Path(tmp_path / "t1.ptx").stat().st_size > 0

@@ -86,6 +86,21 @@ def check_in_path(path, flag):
         raise CLIError(f"argument {flag}: cannot read {path!r} (permission denied)")
 
 
+# ---------------------------------------------------------------------------------------- frames
+CELL_QUANTITIES = ("shape_index", "area", "perimeter", "energy")
+
+
+def add_frame_arguments(parser, replica_default, replica_help):
+    """What ``export`` and ``render`` share: the GSD file, ``--frame``, ``--quantity``, ``--cmap``
+    and ``--replica`` (its default and help differ: all replicas or one)."""
+    parser.add_argument("file", help="a GSD trajectory written by spherevm")
+    parser.add_argument("--frame", type=int, default=-1, help="frame index, negative from the end (default -1)")
+    parser.add_argument("--quantity", default="shape_index", choices=CELL_QUANTITIES,
+                        help="per-cell quantity that colours the cells (default shape_index)")
+    parser.add_argument("--cmap", default="viridis", help="matplotlib colour map (default viridis)")
+    parser.add_argument("--replica", type=integer(0), default=replica_default, help=replica_help)
+
+
 # ---------------------------------------------------------------------------------------- surface
 SURFACES = ("sphere", "plane")
 
@@ -95,17 +110,7 @@ def add_surface(group, what="tilings"):
     periodic plane (square box of side sqrt(N)); <A> = 1 on both."""
     group.add_argument("--surface", choices=SURFACES, default="sphere",
                        help=f"{what} on the sphere (radius sqrt(N/4 pi)) or the periodic plane (square box of side "
-                            "sqrt(N), N >= 8; CPU only for now) (default: %(default)s)")
-
-
-def surface_device(surface, device):
-    """The device for ``surface``: the plane runs on the CPU only for now (``auto`` picks it)."""
-    if surface != "plane":
-        return device
-    if device == "gpu":
-        raise CLIError("argument --device: the periodic plane runs on the CPU only for now (the CUDA kernels do "
-                       "not support it yet); use --device cpu or auto")
-    return "cpu"
+                            "sqrt(N), N >= 8) (default: %(default)s)")
 
 
 def force_spec(text):

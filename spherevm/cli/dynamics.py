@@ -7,8 +7,9 @@ import time
 
 import numpy as np
 
+from ..progress import StageBars
 from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_surface, build_forces,
-                        check_in_path, check_out_path, extra_forces, integer, one_line, real, surface_device)
+                        check_in_path, check_out_path, extra_forces, integer, one_line, real)
 
 
 def add_parser(subparsers):
@@ -48,23 +49,6 @@ def add_parser(subparsers):
     return d
 
 
-class _StageProgress:
-    """``progress(stage, done, total)`` for long runs: a line every few seconds on standard error."""
-
-    def __init__(self, stream, enabled=True):
-        self.stream, self.enabled = stream, enabled
-        self.start = self.last = time.monotonic()
-        self.stage = None
-
-    def __call__(self, stage, done, total):
-        now = time.monotonic()
-        if not self.enabled or (stage == self.stage and done < total and now - self.last < 5.0):
-            return
-        self.stage, self.last = stage, now
-        self.stream.write(f"dynamics: {stage:<11} {done:>8d}/{total}  {now - self.start:7.1f} s\n")
-        self.stream.flush()
-
-
 def run(args) -> int:
     """The handler of ``spherevm dynamics``."""
     from ..protocols import glassy_dynamics
@@ -81,12 +65,12 @@ def run(args) -> int:
                   f"T={args.T:g} dt={args.dt:g}, {args.steps} steps\n")
     t0 = time.perf_counter()
     try:
-        res = glassy_dynamics(args.cells, args.p0, args.kr, args.T, dt=args.dt, steps=args.steps,
-                              replicas=args.replicas, seed=args.seed, device=surface_device(args.surface, args.device),
-                              relax_steps=args.relax, surface=args.surface, restart=args.restart,
-                              equilibrate_steps=args.equilibrate, b=args.b, out=args.out,
-                              extra_forces=build_forces(specs),
-                              progress=_StageProgress(err, enabled=not args.quiet))
+        with StageBars(stream=err, enabled=not args.quiet) as bars:
+            res = glassy_dynamics(args.cells, args.p0, args.kr, args.T, dt=args.dt, steps=args.steps,
+                                  replicas=args.replicas, seed=args.seed, device=args.device,
+                                  relax_steps=args.relax, surface=args.surface, restart=args.restart,
+                                  equilibrate_steps=args.equilibrate, b=args.b, out=args.out,
+                                  extra_forces=build_forces(specs), progress=bars)
     except (ValueError, TypeError) as exc:
         raise CLIError(one_line(exc), USAGE_ERROR) from exc
     except Exception as exc:
@@ -101,4 +85,7 @@ def run(args) -> int:
     if not args.quiet:
         err.write(f"spherevm: done in {time.perf_counter() - t0:.1f} s"
                   f"{'' if csv_path is None else f'; wrote {csv_path}'}{'' if args.out is None else f' and {args.out}'}\n")
+        if args.out is not None:
+            err.write(f"spherevm: {args.out}'s first frame is step {res.production_start}, the start of production "
+                      "(after relaxation and equilibration); lags count from it\n")
     return 0

@@ -1,7 +1,7 @@
 """``spherevm export``: a frame of a GSD trajectory as a coloured cell mesh (.ply, .obj, .glb)."""
 from __future__ import annotations
 
-from .arguments import integer
+from .arguments import add_frame_arguments, integer
 
 
 def add_parser(subparsers):
@@ -10,14 +10,8 @@ def add_parser(subparsers):
                               description="Triangulate the cells of one frame of a spherevm GSD file (fans from "
                                           "each cell's centre, edges drawn curved on the surface) and write a "
                                           "mesh coloured by a per-cell quantity. See docs/visualisation.md.")
-    p.add_argument("file", help="a GSD trajectory written by spherevm")
-    p.add_argument("--frame", type=int, default=-1, help="frame index, negative from the end (default -1)")
+    add_frame_arguments(p, None, "one replica only (default: all, side by side)")
     p.add_argument("--to", required=True, metavar="OUT", help="output mesh: .ply, .obj or .glb")
-    p.add_argument("--quantity", default="shape_index", choices=("shape_index", "area", "perimeter", "energy"),
-                   help="per-cell quantity that colours the cells (default shape_index)")
-    p.add_argument("--cmap", default="viridis", help="matplotlib colour map (default viridis)")
-    p.add_argument("--replica", type=integer(0), default=None,
-                   help="one replica only (default: all, side by side)")
     p.add_argument("--subdivisions", type=integer(1), default=3,
                    help="each fan triangle cut into n^2 on the surface (default 3)")
     p.set_defaults(func=run)

@@ -4,9 +4,9 @@ from __future__ import annotations
 import sys
 import time
 
-from ..progress import StatusLine
+from ..progress import MinimizeBar
 from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_surface, build_forces,
-                        check_in_path, check_out_path, extra_forces, integer, one_line, real, surface_device)
+                        check_in_path, check_out_path, extra_forces, integer, one_line, real)
 
 
 def add_parser(subparsers):
@@ -60,45 +60,6 @@ def add_parser(subparsers):
     return m
 
 
-class _Progress:
-    """The ``progress`` callback of Simulation.minimize, drawn on standard error.
-
-    On a terminal one line is redrawn in place (at most ten times a second); otherwise a line is
-    printed at the first check, when a replica finishes, every 5 seconds in the first minute and
-    every 30 seconds after that, and at the end.
-    """
-
-    def __init__(self, sim, max_steps, stream, enabled=True):
-        self.sim, self.max_steps, self.enabled = sim, max_steps, enabled
-        self.status = StatusLine(stream)
-        self.tty = enabled and self.status.tty
-        self.start = self.last = time.monotonic()
-        self.last_done = None
-        self.drawn = False
-
-    def __call__(self, step, n_done, n_replicas):
-        if not self.enabled:
-            return
-        now = time.monotonic()
-        final = n_done == n_replicas or step >= self.max_steps
-        if self.tty:
-            show = final or now - self.last >= 0.1 or not self.drawn
-        else:
-            heartbeat = 5.0 if now - self.start < 60.0 else 30.0
-            show = final or n_done != self.last_done or now - self.last >= heartbeat
-        if not show:
-            return
-        self.last, self.last_done = now, n_done
-        fmax = float(self.sim.device.to_numpy(self.sim.max_force()).max())  # forces are cached: cheap
-        line = (f"minimize: step {step:>{len(str(self.max_steps))}d}/{self.max_steps}  "
-                f"done {n_done}/{n_replicas}  max|F| {fmax:.2e}  {now - self.start:6.1f} s")
-        self.status.show(line)
-        self.drawn = True
-
-    def close(self):
-        self.status.close()
-
-
 def _format_table(result) -> str:
     cols = ("replica", "energy/cell", "<P/sqrt(A)>", "max|F|", "converged", "reason", "steps")
     rows = []
@@ -138,7 +99,7 @@ def run(args) -> int:
     err = sys.stderr
     # set-up: anything the library refuses here is bad input (status 2)
     try:
-        device = svm.device.resolve(surface_device(args.surface, args.device))
+        device = svm.device.resolve(args.device)
         sim = svm.Simulation(device=device, seed=args.seed)
         if args.restart is None:
             svm.validation.check_run_memory(f"minimize --cells {args.cells} --replicas {args.replicas}",
@@ -156,7 +117,7 @@ def run(args) -> int:
         writer = None
         if args.out is not None:
             trigger = Periodic(args.write_every) if args.write_every > 0 else On(0)
-            writer = svm.plugins.writers.GSD(args.out, trigger=trigger)
+            writer = svm.plugins.writers.GSD(trigger, args.out)
             sim.operations.writers.append(writer)
     except (ValueError, TypeError, RuntimeError, OSError) as exc:
         raise CLIError(one_line(exc), USAGE_ERROR) from exc
@@ -166,7 +127,7 @@ def run(args) -> int:
                   f"kr={args.kr:g}{'' if args.t1 is None else f' t1={args.t1:g}'} on {device.name}"
                   f"{'' if args.out is None else f', writing {args.out}'}\n")
         err.flush()
-    progress = _Progress(sim, args.max_steps, err, enabled=not args.quiet)
+    progress = MinimizeBar(sim, stream=err, enabled=not args.quiet)
     t0 = time.perf_counter()
     # the run: a failure here is a runtime failure (status 1)
     try:

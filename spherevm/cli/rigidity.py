@@ -5,10 +5,10 @@ from __future__ import annotations
 import os
 import sys
 
-from ..sweeps import (CPU_BATCH_CELLS, GPU_BATCH_CELLS, RigiditySweep, TextProgress, format_p0star_table,
+from ..sweeps import (CPU_BATCH_CELLS, GPU_BATCH_CELLS, STATE_DIR, RigiditySweep, TextProgress, format_p0star_table,
                       open_sweep_folder, parse_p0_grid, run_sweep, write_tables)
 from ..sweeps import cluster
-from .arguments import add_force_arguments, add_surface, extra_forces, integer, real, surface_device
+from .arguments import add_force_arguments, add_surface, extra_forces, integer, real
 
 DEFAULT_CELLS = (16, 32)
 DEFAULT_P0 = "3.5:4.0:0.025"
@@ -76,6 +76,9 @@ def add_parser(subparsers):
     g.add_argument("--gpus", type=integer(1), default=None, metavar="N",
                    help="one Dask worker per GPU of this host, GPUs 0..N-1 (needs spherevm[cluster-cuda])")
     g.add_argument("--no-plots", action="store_true", help="write the CSV tables only")
+    g.add_argument("--save-states", action="store_true",
+                   help="also keep every chunk's minimised states (the inherent states) as GSD files in "
+                        "OUT/states/; open one with spherevm.sweeps.load_state (docs/rigidity.md)")
     g.add_argument("--quiet", "-q", action="store_true", help="no progress bar or notes on standard error")
     r.set_defaults(func=run)
     return r
@@ -111,10 +114,10 @@ def run(args) -> int:
             err.flush()
         bar = TextProgress(err) if not args.quiet else None
         try:
-            device = "gpu" if args.gpus else surface_device(sweep.surface, args.device)
+            device = "gpu" if args.gpus else args.device
             result = run_sweep(sweep, args.out, executor=client, device=device,
                                workers=args.workers,
-                               batch_cells=args.batch_cells, progress=bar)
+                               batch_cells=args.batch_cells, progress=bar, save_states=args.save_states)
         finally:
             if bar is not None:
                 bar.close()
@@ -138,4 +141,7 @@ def run(args) -> int:
         if tables["plot_note"]:
             err.write(f"spherevm: note: {tables['plot_note']}\n")
         err.write(f"spherevm: wrote {', '.join(os.path.basename(f) for f in tables['files'])} to {args.out}\n")
+        if args.save_states:
+            err.write(f"spherevm: the inherent states are in {os.path.join(args.out, STATE_DIR)} (one GSD file per "
+                      "chunk; spherevm.sweeps.load_state opens one)\n")
     return 0

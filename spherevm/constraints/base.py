@@ -66,12 +66,15 @@ class Constraint:
     def total_area_np(self, radius):
         raise NotImplementedError(f"{type(self).__name__}.total_area is not implemented yet")
 
-    def cell_geometry(self, state):
+    def cell_geometry(self, state, area_vectors: bool = False, metric: bool = True):
+        """Per-cell areas and perimeters (``metric``) and area vectors (``area_vectors``,
+        ``(n_cells, 3)``), with what :meth:`shape_gradient` reuses."""
         raise NotImplementedError(f"{type(self).__name__} does not yet provide cell areas and perimeters "
                                   "(only Sphere does); vertex-model forces need them")
 
-    def shape_gradient(self, state, geometry, d_area, d_perimeter):
-        """Surface gradient (V, 3) of ``sum_c d_area[c] A_c + d_perimeter[c] P_c``."""
+    def shape_gradient(self, state, geometry, d_area, d_perimeter, d_area_vector=None):
+        """Surface gradient (V, 3) of ``sum_c d_area[c] A_c + d_perimeter[c] P_c + d_area_vector[c] . a_c``
+        (a term whose coefficients are None is left out)."""
         raise NotImplementedError(f"{type(self).__name__} does not yet provide area and perimeter gradients "
                                   "(only Sphere does); vertex-model forces need them")
 
@@ -80,6 +83,11 @@ class Constraint:
         positive when counter-clockwise seen from outside (T1 refuses flips that fold a cell)."""
         raise NotImplementedError(f"{type(self).__name__} does not yet provide triangle areas (Sphere and "
                                   "PeriodicPlane do)")
+
+    def cell_normals(self, state):
+        """The unit surface normal at each cell's centre, ``(n_cells, 3)`` (active cell directors
+        live in the tangent plane there)."""
+        raise NotImplementedError(f"{type(self).__name__} does not yet provide cell normals")
 
     def edge_lengths(self, state, u, v):
         raise NotImplementedError(f"{type(self).__name__} does not yet provide geodesic lengths (only Sphere does)")

@@ -22,13 +22,21 @@ def minimum_image(d, box):
 class PlaneGeometry:
     """Per-cell area and perimeter, and the per-corner edge vectors that the gradient reuses.
 
-    ``edge`` (V, 3 slots, 2) is the minimum image of ``x[vertex_neighbors[v, k]] - x[v]``, ``length``
-    its length. ``center`` (the vertex centroid of each cell, unwrapped about the cell's first vertex
+    ``edge`` (2 components, 3 slots, V) is the minimum image of ``x[vertex_neighbors[v, k]] - x[v]``,
+    ``length`` (3, V) its length (component- and slot-major: every NumPy call runs on contiguous rows). ``center`` (the vertex centroid of each cell, unwrapped about the cell's first vertex
     and wrapped back into the box, ``(n_cells, 3)``) is computed on first use."""
 
     def __init__(self, area, perimeter, edge, length, center):
         self.area, self.perimeter, self.edge, self.length = area, perimeter, edge, length
         self._center = center
+
+    @property
+    def area_vector(self):
+        """``(0, 0, A_c)`` per cell, ``(n_cells, 3)``: the vector area of a polygon in the plane."""
+        xp = array_module(self.area)
+        out = xp.zeros((len(self.area), 3))
+        out[:, 2] = self.area
+        return out
 
     @property
     def center(self):
@@ -116,40 +124,87 @@ class PeriodicPlane(Constraint):
     # Corner (v, k) lies in cell vertex_cells[v, k], whose boundary runs counter-clockwise from v to
     # n_k = vertex_neighbors[v, k] (and arrives at v from n_{k+1}): it owns that cell's edge v -> n_k.
     @staticmethod
-    def unwrapped_cells(state):
+    def _tables(state):
+        """Per State and topology, a dict: ``box`` the boxes as ``(2, 1, 1)`` when all replicas share
+        one (a cheaper broadcast, the same numbers) or per vertex ``(2, 1, V)``; ``neighbors``,
+        ``cells`` and ``cells_before`` (the cell before slot k, ``vertex_cells[v, k - 1]``) slot-major
+        ``(3, V)``; ``slot`` ``(W, C)``: for slot j of cell c the corner ``k V + v`` (slot-major) owning
+        the edge from vertex j to vertex j + 1, ``3 V`` (a zero edge) in padding; ``valid`` ``(C, W)``
+        the real slots; ``first`` ``(C, 1)`` the cells' first vertices. Rebuilt when ``state.box`` is
+        replaced (after editing it in place, call ``state.clear_cache()``)."""
+        def build():
+            xp = state.device.xp
+            cv, sides, vc, nv = state.cell_vertices, state.cell_sides, state.vertex_cells, state.n_vertices
+            valid = xp.arange(cv.shape[1])[None, :] < sides[:, None]
+            v = xp.where(valid, cv, 0)
+            k = xp.argmax(vc[v] == xp.arange(state.n_cells)[:, None, None], axis=2)
+            one = bool((state.box == state.box[:1]).all())
+            box = state.box[0][:, None, None] if one else state.box[state.vertex_replica].T[:, None, :]
+            cells = xp.ascontiguousarray(vc.T)
+            return dict(box=xp.ascontiguousarray(box), neighbors=xp.ascontiguousarray(state.vertex_neighbors.T),
+                        cells=cells, cells_before=cells[[2, 0, 1]],
+                        slot=xp.ascontiguousarray(xp.where(valid, k * nv + v, 3 * nv).T), valid=valid,
+                        first=cv[:, :1], source=state.box)
+        tables = state.cached(("plane", "tables"), build, topology=True)
+        if tables["source"] is not state.box:
+            state.clear_cache()
+            tables = state.cached(("plane", "tables"), build, topology=True)
+        return tables
+
+    def corner_edges(self, state):
+        """The minimum image of ``x[vertex_neighbors[v, k]] - x[v]`` per corner, ``(2, 3, V)``."""
+        xp = state.device.xp
+        t = self._tables(state)
+        pos, vn = state.positions, t["neighbors"]
+        d = xp.empty((2,) + vn.shape)
+        for axis in (0, 1):
+            x = pos[:, axis]
+            xp.subtract(x[vn], x, out=d[axis])
+        return d - t["box"] * xp.rint(d / t["box"])
+
+    def _slot_edges(self, state, edge):
+        """The cells' edges and unwrapped vertices ``(2, W, C)``: ``e[:, j, c]`` the edge from vertex j
+        to j + 1 of cell c (zero in padding), read from the corner edges ``edge``, and
+        ``r[:, j, c] = sum_{i<j} e[:, i, c]``, formed as the running sum minus ``e[:, j]`` (one
+        vectorised step per slot, in the slot order the CUDA kernel sums in)."""
+        xp = state.device.xp
+        flat = xp.concatenate([edge.reshape(2, -1), xp.zeros((2, 1))], axis=1)
+        e = xp.take(flat, self._tables(state)["slot"], axis=1)
+        running = e.copy()
+        for j in range(1, e.shape[1]):
+            xp.add(running[:, j - 1], e[:, j], out=running[:, j])
+        return e, running - e
+
+    def unwrapped_cells(self, state, edge=None):
         """Each polygon unwrapped edge by edge from its first vertex: ``(first, valid, e, r)`` with
         ``first`` (C, 1) the first vertices, ``valid`` (C, W) the real slots of the padded table,
-        ``e`` (C, W, 2) the minimum-image edges along the cell (zero in padding) and ``r`` (C, W, 2)
-        vertex j about vertex 0 (``sum_{i<j} e_i``)."""
-        xp = state.device.xp
-        pos = state.positions[:, :2]
-        cv, sides = state.cell_vertices, state.cell_sides
-        col = xp.arange(cv.shape[1])[None, :]
-        valid = col < sides[:, None]
-        first = cv[:, :1]
-        cur = xp.where(valid, cv, first)                                   # padding -> the first vertex
-        nxt = xp.where(valid, xp.take_along_axis(cv, (col + 1) % sides[:, None], axis=1), first)
-        e = minimum_image(pos[nxt] - pos[cur], state.box[state.cell_replica][:, None, :])   # (C, W, 2)
-        return first, valid, e, xp.cumsum(e, axis=1) - e
+        ``e`` (C, W, 2) the minimum-image edges along the cell (zero in padding; from the corner
+        edges ``edge``, computed if not given) and ``r`` (C, W, 2) vertex j about vertex 0
+        (``sum_{i<j} e_i``). ``e`` and ``r`` are views of component- and slot-major arrays."""
+        t = self._tables(state)
+        e, r = self._slot_edges(state, self.corner_edges(state) if edge is None else edge)
+        return t["first"], t["valid"], e.transpose(2, 1, 0), r.transpose(2, 1, 0)
 
-    def cell_geometry(self, state) -> PlaneGeometry:
+    def cell_geometry(self, state, area_vectors: bool = False, metric: bool = True) -> PlaneGeometry:
         """Areas (shoelace) and perimeters, each polygon unwrapped edge by edge from its first vertex:
         vertex j sits at ``sum_{i<j} e_i`` with ``e_i`` the minimum-image edges along the cell, so only
-        edges, not whole cells, need to be shorter than half the box."""
+        edges, not whole cells, need to be shorter than half the box. Every edge's minimum image is
+        taken once, per corner, and read by the cells' slots; sums run in slot order (as in
+        geometry/plane.cuh). Area vectors (``(0, 0, A_c)``) come with the areas: the two flags of
+        :meth:`Sphere.cell_geometry` change nothing here."""
         xp = state.device.xp
-        pos = state.positions[:, :2]
-        sides = state.cell_sides
-        first, valid, e, r = self.unwrapped_cells(state)
-        area = 0.5 * (r[..., 0] * e[..., 1] - r[..., 1] * e[..., 0]).sum(axis=1)
-        perimeter = xp.sqrt((e * e).sum(axis=-1)).sum(axis=1)
-        box_v = state.box[state.vertex_replica][:, None, :]
-        edge = minimum_image(pos[state.vertex_neighbors] - pos[:, None, :], box_v)   # (V, 3, 2) per corner
-        length = xp.sqrt((edge * edge).sum(axis=-1))
+        t = self._tables(state)
+        edge = self.corner_edges(state)                                     # (2, 3, V)
+        e, r = self._slot_edges(state, edge)                                # (2, W, C)
+        area = 0.5 * (r[0] * e[1] - r[1] * e[0]).sum(axis=0)
+        length = xp.sqrt(edge[0] * edge[0] + edge[1] * edge[1])
+        perimeter = xp.concatenate([length.reshape(-1), xp.zeros(1)])[t["slot"]].sum(axis=0)
 
-        def center():
-            mean = xp.where(valid[..., None], r, 0.0).sum(axis=1) / sides[:, None].astype(xp.float64)
+        def center():       # the expression of shapes.planar_cell_centroids(method="vertex"), bit for bit
+            mean = (xp.where(t["valid"][..., None], r.transpose(2, 1, 0), 0.0).sum(axis=1)
+                    / state.cell_sides[:, None].astype(xp.float64))
             out = xp.zeros((state.n_cells, 3))
-            out[:, :2] = _wrap(xp, pos[first[:, 0]] + mean, state.box[state.cell_replica])
+            out[:, :2] = _wrap(xp, state.positions[t["first"][:, 0], :2] + mean, state.box[state.cell_replica])
             return out
 
         return PlaneGeometry(area=area, perimeter=perimeter, edge=edge, length=length, center=center)
@@ -158,8 +213,15 @@ class PeriodicPlane(Constraint):
         """Vertex centroid of each cell (unwrapped, then wrapped into the box), ``(n_cells, 3)``."""
         return self.cell_geometry(state).center
 
-    def shape_gradient(self, state, geometry: PlaneGeometry, d_area, d_perimeter):
-        """Gradient (V, 3), z = 0, of ``sum_c d_area[c] A_c + d_perimeter[c] P_c``.
+    def cell_normals(self, state):
+        """``(0, 0, 1)`` for every cell."""
+        return self.normal(state.device.xp.zeros((state.n_cells, 3)))
+
+    def shape_gradient(self, state, geometry: PlaneGeometry, d_area, d_perimeter, d_area_vector=None):
+        """Gradient (V, 3), z = 0, of ``sum_c d_area[c] A_c + d_perimeter[c] P_c + d_area_vector[c] . a_c``.
+
+        The area vector is ``(0, 0, A_c)``: its term adds the z component of ``d_area_vector`` to
+        ``d_area`` (either of ``d_area``, ``d_perimeter`` may be None when the energy lacks it).
 
         At vertex v, with edges ``e_k`` to its neighbours and cells ``C_k`` between ``e_k`` and
         ``e_{k+1}``: ``dA(C_k)/dx_v = rot(e_k - e_{k+1}) / 2`` with ``rot(x, y) = (y, -x)`` (the
@@ -167,15 +229,21 @@ class PeriodicPlane(Constraint):
         edge: ``sum_k (a[C_k] - a[C_{k-1}]) rot(e_k) / 2 - (p[C_k] + p[C_{k-1}]) e_k / |e_k|``.
         """
         xp = state.device.xp
-        vc = state.vertex_cells
-        a, p = d_area[vc], d_perimeter[vc]                                  # (V, 3)
-        a_before, p_before = xp.roll(a, 1, axis=1), xp.roll(p, 1, axis=1)
-        e = geometry.edge
+        t = self._tables(state)
+        zero = xp.zeros(state.n_cells)
+        d_area = zero if d_area is None else d_area
+        d_area = d_area if d_area_vector is None else d_area + d_area_vector[:, 2]
+        d_perimeter = zero if d_perimeter is None else d_perimeter
+        a, a_before = d_area[t["cells"]], d_area[t["cells_before"]]        # (3, V)
+        p, p_before = d_perimeter[t["cells"]], d_perimeter[t["cells_before"]]
+        ex, ey = geometry.edge
         alpha = 0.5 * (a - a_before)
         beta = (p + p_before) / xp.maximum(geometry.length, 1e-300)
+        gx = alpha * ey - beta * ex
+        gy = -alpha * ex - beta * ey
         out = xp.zeros((state.n_vertices, 3))
-        out[:, 0] = (alpha * e[..., 1] - beta * e[..., 0]).sum(axis=1)
-        out[:, 1] = (-alpha * e[..., 0] - beta * e[..., 1]).sum(axis=1)
+        out[:, 0] = gx[0] + gx[1] + gx[2]
+        out[:, 1] = gy[0] + gy[1] + gy[2]
         return out
 
     def __repr__(self):

@@ -1,12 +1,12 @@
 """The sphere centred at the origin: geodesic perimeters and spherical-polygon areas."""
 from __future__ import annotations
 
-import os
 import numpy as np
 
 from ..device import array_module
 from ..geometry import sphere as geo
 from .base import Constraint
+from .corners import corner_index, in_parallel
 
 
 class CellGeometry:
@@ -14,8 +14,9 @@ class CellGeometry:
     gradients reuse. ``center`` (the normalised vertex centroid of each cell, ``(n_cells, 3)``) is
     computed on first use: the forces do not need it."""
 
-    def __init__(self, area, perimeter, unit, radius, corners=None, center=None):
+    def __init__(self, area, perimeter, unit, radius, corners=None, center=None, area_vector=None):
         self.area, self.perimeter, self.unit, self.radius = area, perimeter, unit, radius
+        self.area_vector = area_vector
         self.corners = corners
         self._center = center
 
@@ -29,43 +30,22 @@ class CellGeometry:
 # Vectors are (3, n) arrays, one contiguous row per Cartesian component: elementwise vector
 # arithmetic is one NumPy call over all components; dot and cross products work on row views.
 def _cross(a, b):
+    # into one output with one scratch row: large temporaries are costly (each a fresh allocation
+    # the kernel maps and faults in; measured 1.6 ms with nine of them and a stack, 0.18 ms so,
+    # for (3, 3, 16384)); the same products and differences, so the same numbers
     xp = array_module(a, b)
-    return xp.stack((a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]))
+    shape = np.broadcast_shapes(a.shape, b.shape)
+    out, scratch = xp.empty(shape), xp.empty(shape[1:])
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        xp.multiply(a[j], b[k], out=out[i])
+        xp.multiply(a[k], b[j], out=scratch)
+        out[i] -= scratch
+    return out
 
 
 def _dot(a, b):
     # one fused pass (einsum), 1.7x to 2.6x faster than three products and two sums
     return array_module(a, b).einsum("ij,ij->j", a, b)
-
-
-_POOL = None
-PARALLEL_MIN_VERTICES = 16384   # below this, one thread; blocks hold at least half as many vertices
-BLOCK_VERTICES = 16384          # per block: its per-corner vectors (3 x 3 x 16384 doubles, 1.2 MB) stay in cache
-
-
-def _vertex_blocks(state):
-    """Contiguous vertex ranges for large NumPy states: at least one per CPU core (NumPy releases
-    the GIL inside its loops, so blocks run on all cores at once) and small enough that a block's
-    temporaries stay in cache (measured, 65,536 cells on 2 cores: 28-30 ms in blocks of 16,384
-    vertices, 32-35 ms in blocks of 32,768 or 65,536)."""
-    nv = state.n_vertices
-    workers = os.cpu_count() or 1
-    if state.device.is_gpu or nv < PARALLEL_MIN_VERTICES:
-        return [(0, nv)]
-    count = max(min(workers, nv // (PARALLEL_MIN_VERTICES // 2)), -(-nv // BLOCK_VERTICES))
-    edges = np.linspace(0, nv, count + 1).astype(int)
-    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
-
-
-def _in_parallel(fn, items):
-    """``[fn(item) for item in items]``, on a thread pool when there are several items."""
-    global _POOL
-    if len(items) == 1:
-        return [fn(items[0])]
-    if _POOL is None:
-        from concurrent.futures import ThreadPoolExecutor
-        _POOL = ThreadPoolExecutor(max_workers=os.cpu_count(), thread_name_prefix="spherevm")
-    return [f.result() for f in [_POOL.submit(fn, item) for item in items]]
 
 
 class Sphere(Constraint):
@@ -116,84 +96,93 @@ class Sphere(Constraint):
         return 4.0 * np.pi * np.asarray(radius, dtype=np.float64) ** 2
 
     # -------------------------------------------------------------- per-corner metric
-    # Corner (v, k) lies in cell vertex_cells[v, k], where the boundary runs counter-clockwise from
-    # v to n_k = vertex_neighbors[v, k]; the edge (v, n_k) borders cells k and k-1. Corner arrays
-    # are slot-major, shape (3 components, 3 slots, vertices of the block): a vertex quantity
-    # broadcasts over the slot axis and the sum over a vertex's corners adds three contiguous rows.
+    # Corner tables and vertex blocks: spherevm.constraints.corners.
 
-    def _corner_index(self, state):
-        """Per vertex block, the slot-major corner tables: next vertex, the corner's cell, the cell
-        before it (k - 1) and the cell's first vertex (its fan apex). Cached per State and topology
-        version (T1 flips bump it)."""
-        return state.cached((self, "corner_index"), lambda: self._build_corner_index(state), topology=True)
-
-    @staticmethod
-    def _build_corner_index(state):
-        xp = state.device.xp
-        vn, vc = state.vertex_neighbors.astype(np.intp), state.vertex_cells.astype(np.intp)
-        first = state.cell_vertices[:, 0].astype(np.intp)
-        result = []
-        for lo, hi in _vertex_blocks(state):
-            cells = xp.ascontiguousarray(vc[lo:hi].T).reshape(-1)
-            before = xp.ascontiguousarray(xp.roll(vc[lo:hi], 1, axis=1).T).reshape(-1)
-            result.append(dict(lo=lo, hi=hi, next=xp.ascontiguousarray(vn[lo:hi].T).reshape(-1),
-                               cells=cells, apex=first[cells], both=xp.concatenate((cells, before))))
-        return result
-
-    def cell_geometry(self, state) -> CellGeometry:
-        """Areas and perimeters, and the per-corner terms the gradients reuse.
+    def cell_geometry(self, state, area_vectors: bool = False, metric: bool = True) -> CellGeometry:
+        """Areas and perimeters (``metric``), area vectors (``area_vectors``), and the per-corner
+        terms the gradients reuse.
 
         Perimeter: half-angles ``atan2(|b - d|, |b + d|)`` of the edges ``b -> d``. Area: the fan
         of signed triangles ``(a, b, d)`` about the cell's first vertex ``a``, each
-        ``2 atan2(a.(b x d), 1 + a.b + a.d + b.d)`` (the area does not depend on the apex).
+        ``2 atan2(a.(b x d), 1 + a.b + a.d + b.d)`` (the area does not depend on the apex). Area
+        vector, ``(n_cells, 3)``: ``1/2 sum over the corners (x_b - x_a) x (x_d - x_b)`` of the vertex
+        positions (the vector area ``1/2 sum x_b x x_d``), from differences of the positions
+        themselves: small cells keep full relative accuracy, also in differences of nearby normals
+        (unit directions would add their rounding, about eps R/l relative).
         """
         xp = state.device.xp
         n = state.n_cells
-        u, rv = self._unit_components(state)
-        index = self._corner_index(state)
+        comp, u, rv = self._unit_components(state)
+        index = corner_index(state)
 
         def corners(block):
-            ub = u[:, None, block["lo"]:block["hi"]]                    # (3, 1, nb): b, for every slot
-            d = xp.take(u, block["next"], axis=1).reshape(3, 3, -1)     # the next vertex
+            lo, hi = block["lo"], block["hi"]
+            part, sums = {}, {}
+            if area_vectors:
+                xb = comp[:, None, lo:hi]
+                xd = xp.take(comp, block["next"], axis=1).reshape(3, 3, -1)
+                xa = xp.take(comp, block["apex"], axis=1).reshape(3, 3, -1)
+                if metric:                                              # the same numbers as take(u, ...)
+                    d = xd / xp.take(rv, block["next"]).reshape(3, -1)
+                    a = xa / xp.take(rv, block["apex"]).reshape(3, -1)
+                e = xp.subtract(xd, xb, out=xd)                         # x_d - x_b
+                r = xp.subtract(xb, xa, out=xa)                         # x_b - x_a
+                sums["area_vector"] = xp.bincount(block["components"], weights=_cross(r, e).reshape(-1),
+                                                  minlength=3 * n)
+                part["e"] = e
+            elif metric:
+                d = xp.take(u, block["next"], axis=1).reshape(3, 3, -1)  # the next vertex
+                a = xp.take(u, block["apex"], axis=1).reshape(3, 3, -1)
+            if not metric:
+                return part, sums
+            ub = u[:, None, lo:hi]                                      # (3, 1, nb): b, for every slot
             m = ub - d
             m2 = _dot(m.reshape(3, -1), m.reshape(3, -1))
             q = xp.maximum(4.0 - m2, 0.0)                               # |b + d|^2 = 4 - |b - d|^2
             sm, sp = xp.sqrt(m2), xp.sqrt(q)
             half = xp.arctan2(sm, sp)                                   # theta / 2
             x = _cross(m, ub).reshape(3, -1)                            # b x d, from b - d
-            a = xp.take(u, block["apex"], axis=1).reshape(3, 3, -1)
             num = _dot((a - ub).reshape(3, -1), x)                      # a.(b x d) = (a - b).(b x d)
             den = 0.5 * q + _dot(a.reshape(3, -1), (ub + d).reshape(3, -1))   # (1 + b.d) + a.(b + d)
             cells = block["cells"]
-            sums = (xp.bincount(cells, weights=half, minlength=n),
-                    xp.bincount(cells, weights=xp.arctan2(num, den), minlength=n))
-            return dict(m=m.reshape(3, -1), x=x, q=q, two_sin=sm * sp), sums
+            sums.update(perimeter=xp.bincount(cells, weights=half, minlength=n),
+                        area=xp.bincount(cells, weights=xp.arctan2(num, den), minlength=n))
+            part.update(m=m.reshape(3, -1), x=x, q=q, two_sin=sm * sp)
+            return part, sums
 
-        parts = _in_parallel(corners, index)
+        parts = in_parallel(corners, index)
         R = state.radius[state.cell_replica]
-        perimeter = (2.0 * R) * sum(p[1][0] for p in parts)
-        area = (2.0 * R * R) * sum(p[1][1] for p in parts)
-        return CellGeometry(area=area, perimeter=perimeter, unit=u.T,
-                            radius=state.radius[state.vertex_replica],
-                            corners=dict(index=index, parts=[p[0] for p in parts], u=u, rv=rv),
-                            center=lambda: self.cell_centers(state, u))
+        geometry = CellGeometry(area=None, perimeter=None, unit=u.T, radius=state.radius[state.vertex_replica],
+                                corners=dict(index=index, parts=[p[0] for p in parts], u=u, rv=rv),
+                                center=lambda: self.cell_centers(state, u))
+        if metric:
+            geometry.perimeter = (2.0 * R) * sum(p[1]["perimeter"] for p in parts)
+            geometry.area = (2.0 * R * R) * sum(p[1]["area"] for p in parts)
+        if area_vectors:
+            geometry.area_vector = (0.5 * sum(p[1]["area_vector"] for p in parts).reshape(3, n)).T
+        return geometry
 
     @staticmethod
     def _unit_components(state):
-        """Unit vertex directions as a (3, V) component array, and the distances ``|x|`` (V,)."""
+        """The positions and the unit vertex directions as (3, V) component arrays, and the
+        distances ``|x|`` (V,)."""
         comp = state.device.xp.ascontiguousarray(state.positions.T)
         rv = state.device.xp.sqrt(_dot(comp, comp))
-        return comp / rv, rv
+        return comp, comp / rv, rv
 
     def cell_centers(self, state, unit=None):
         """Normalised vertex centroid of each cell, ``(n_cells, 3)`` on the state's device."""
         xp = state.device.xp
         if unit is None:
-            unit = self._unit_components(state)[0]
+            unit = self._unit_components(state)[1]
         cells = state.vertex_cells.reshape(-1)
         corner_unit = xp.repeat(unit, 3, axis=1)
         summed = xp.stack([xp.bincount(cells, weights=c, minlength=state.n_cells) for c in corner_unit])
         return (summed / xp.sqrt(_dot(summed, summed))).T
+
+    def cell_normals(self, state):
+        """The cell centres: unit vectors, so their own normals."""
+        return self.cell_centers(state)
 
     @staticmethod
     def _edge_factors(part):
@@ -211,38 +200,52 @@ class Sphere(Constraint):
         xp = array_module(part["q"])
         return 2.0 / xp.maximum(part["q"], 1e-300), 2.0 / xp.maximum(part["two_sin"], 1e-150)
 
-    def shape_gradient(self, state, geometry: CellGeometry, d_area, d_perimeter):
-        """Surface gradient (V, 3) of ``sum_c d_area[c] A_c + d_perimeter[c] P_c``.
+    def shape_gradient(self, state, geometry: CellGeometry, d_area, d_perimeter, d_area_vector=None):
+        """Surface gradient (V, 3) of ``sum_c d_area[c] A_c + d_perimeter[c] P_c + d_area_vector[c] . a_c``.
 
-        With ``d_area = dE/dA`` and ``d_perimeter = dE/dP`` this is the gradient of any energy of the
-        cell areas and perimeters (chain rule); the vertex model's forces are minus it.
+        With ``d_area = dE/dA``, ``d_perimeter = dE/dP`` and ``d_area_vector = dE/da`` (``(n_cells,
+        3)``) this is the gradient of any energy of the cell areas, perimeters and area vectors
+        (chain rule); the vertex model's forces are minus it (``d_area_vector`` None), the bending
+        force's too (``d_area`` and ``d_perimeter`` None; ``geometry`` with ``area_vectors``).
 
         Per vertex v with edges to n_k: ``sum_k (dA[k-1] - dA[k]) w(v, n_k) + (dP[k] + dP[k-1])
         dtheta(v, n_k)/dv`` on the unit sphere (see :meth:`_edge_factors`), with ``dA`` scaled by
-        R^2 and ``dP`` by R, projected on the tangent plane and divided by ``|x_v|`` (positions
-        ``x = |x| u``).
+        R^2 and ``dP`` by R; the area vector of cell k moves with x_v by ``(x_{n_k} - x_{n_{k+1}}) x /
+        2``, which adds ``sum_k e_k x (da[k] - da[k-1]) / 2`` with ``e_k = x_{n_k} - x_v``. Projected
+        on the tangent plane (and the unit-sphere terms divided by ``|x_v|``: ``x = |x| u``).
         """
         xp = state.device.xp
         g = geometry.corners
         R = state.radius[state.cell_replica]
-        weights = xp.stack((d_area * (R * R), d_perimeter * R))
+        weights = None if d_area is None else xp.stack((d_area * (R * R), d_perimeter * R))
+        vectors = None if d_area_vector is None else 0.5 * d_area_vector.T
         out = xp.empty((state.n_vertices, 3))
 
         def block(pair):
             index, part = pair
             lo, hi = index["lo"], index["hi"]
             nc = 3 * (hi - lo)
-            w = xp.take(weights, index["both"], axis=1)             # (2, 6nb): cell k, then cell k-1
-            area, length = self._edge_factors(part)
-            alpha = (w[0, nc:] - w[0, :nc]) * area
-            beta = (w[1, :nc] + w[1, nc:]) * length
-            s = (alpha * part["x"] + beta * part["m"]).reshape(3, 3, -1)
-            s = s[:, 0] + s[:, 1] + s[:, 2]
+            rv = g["rv"][lo:hi]
+            s = 0.0
+            if weights is not None:
+                w = xp.take(weights, index["both"], axis=1)         # (2, 6nb): cell k, then cell k-1
+                area, length = self._edge_factors(part)
+                alpha = (w[0, nc:] - w[0, :nc]) * area
+                beta = (w[1, :nc] + w[1, nc:]) * length
+                s = (alpha * part["x"] + beta * part["m"]).reshape(3, 3, -1)
+                s = s[:, 0] + s[:, 1] + s[:, 2]
+            if vectors is not None:
+                w = xp.take(vectors, index["cells"], axis=1).reshape(3, 3, -1)
+                dw = xp.empty_like(w)                               # da[k] - da[k-1]
+                xp.subtract(w[:, 1:], w[:, :2], out=dw[:, 1:])
+                xp.subtract(w[:, :1], w[:, 2:], out=dw[:, :1])
+                t = _cross(part["e"], dw)
+                s = s + rv * (t[:, 0] + t[:, 1] + t[:, 2])          # in units of the unit sphere's terms
             u = g["u"][:, lo:hi]
             s -= _dot(s, u) * u                                      # onto the tangent plane
-            out[lo:hi] = (s / g["rv"][lo:hi]).T
+            out[lo:hi] = (s / rv).T
 
-        _in_parallel(block, list(zip(g["index"], g["parts"])))
+        in_parallel(block, list(zip(g["index"], g["parts"])))
         return out
 
     def corner_gradients(self, state, geometry: CellGeometry):

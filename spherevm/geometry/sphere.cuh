@@ -2,23 +2,7 @@
 // Unit vectors in, angles and solid angles out; multiply by R and R^2 for a sphere of radius R.
 #pragma once
 
-struct vec3 { double x, y, z; };
-
-__device__ __forceinline__ vec3 v3(double x, double y, double z) { vec3 r = {x, y, z}; return r; }
-__device__ __forceinline__ vec3 operator+(vec3 a, vec3 b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
-__device__ __forceinline__ vec3 operator-(vec3 a, vec3 b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
-__device__ __forceinline__ vec3 operator-(vec3 a) { return v3(-a.x, -a.y, -a.z); }
-__device__ __forceinline__ vec3 operator*(double s, vec3 a) { return v3(s * a.x, s * a.y, s * a.z); }
-// Same formulas as the NumPy path; the compiler may fuse multiply-adds and normalisation uses
-// rsqrt (about 1 ulp), so results agree with NumPy to rounding (the tests ask 1e-12 relative).
-__device__ __forceinline__ double dot3(vec3 a, vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-__device__ __forceinline__ vec3 cross3(vec3 a, vec3 b) {
-    return v3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
-}
-__device__ __forceinline__ double norm3(vec3 a) { return sqrt(dot3(a, a)); }
-__device__ __forceinline__ vec3 normalize3(vec3 a) { double s = rsqrt(dot3(a, a)); return s * a; }
-__device__ __forceinline__ vec3 load3(const double* p, long i) { return v3(p[3 * i], p[3 * i + 1], p[3 * i + 2]); }
-__device__ __forceinline__ void store3(double* p, long i, vec3 a) { p[3 * i] = a.x; p[3 * i + 1] = a.y; p[3 * i + 2] = a.z; }
+#include "geometry/vec3.cuh"
 
 // geodesic angle, half-angle form: 2 atan2(|a - b|, |a + b|)
 __device__ __forceinline__ double geodesic_length(vec3 a, vec3 b) {

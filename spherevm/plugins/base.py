@@ -5,8 +5,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..constraints import PeriodicPlane, Sphere
+from ..device import load_module
 from ..trigger import Always, as_trigger
 from ..validation import integer, non_negative
+
+#: The surfaces with CUDA kernels and the macros that compile geometry/surface.cuh for each: one
+#: kernel source per operation serves them all (``gpu_surfaces`` of the built-in operations).
+SURFACE_DEFINES = {Sphere: (), PeriodicPlane: ("SVM_SURFACE_PLANE",)}
+KERNEL_SURFACES = tuple(SURFACE_DEFINES)
+
+
+def surface_kernels(cu_file, state):
+    """``(module, size)``: the kernels of ``cu_file`` compiled for ``state``'s surface and the State's
+    per-replica size array they take (``radius`` on the sphere, ``box`` on the plane)."""
+    defines = next(d for cls, d in SURFACE_DEFINES.items() if isinstance(state.constraint, cls))
+    return load_module(cu_file, defines), getattr(state, state.constraint.size_name)
 
 
 class Operation:
@@ -205,9 +219,15 @@ class Force(Operation):
         raise NotImplementedError
 
     def energy_scale(self, state):
-        """This force's natural energy per cell, one value per replica (NumPy ``(n_replicas,)``), or
-        None if it defines none (the default). A :class:`Minimizer` measures its tolerances in the
-        largest scale its forces declare, so that a state is minimised alike at any size."""
+        """This force's natural energy per cell per replica (NumPy), or None (the default): a
+        :class:`Minimizer` measures its tolerances in the largest scale its forces declare."""
+        return None
+
+    def combined(self, other, state):
+        """A :class:`ForceResult` of this force and ``other`` together (forces, energies and cell
+        energies summed), where this force computes the pair in fewer passes than the two apart;
+        None (the default) otherwise. :func:`compute_all` asks each pair of attached forces, both
+        ways round."""
         return None
 
     def energy(self, state):
@@ -217,6 +237,24 @@ class Force(Operation):
     def forces(self, state):
         """Forces ``(n_vertices, 3)``, as a NumPy array."""
         return state.device.to_numpy(self.compute(state).forces)
+
+
+def compute_all(forces, state):
+    """The :class:`ForceResult` of each of ``forces`` on ``state``, in order, except that a pair one
+    of which computes both together (:meth:`Force.combined`) gives one result for the two."""
+    left, results = list(forces), []
+    while left:
+        force = left.pop(0)
+        for i, other in enumerate(left):
+            result = force.combined(other, state)
+            result = other.combined(force, state) if result is None else result
+            if result is not None:
+                del left[i]
+                break
+        else:
+            result = force.compute(state)
+        results.append(result)
+    return results
 
 
 class Integrator(Operation):
@@ -292,15 +330,9 @@ class Minimizer(Integrator):
 
     Every ``check_every`` steps (one small read-back) :meth:`check_convergence` stops, per replica,
     the replicas whose largest vertex force is below ``force_tol`` or whose energy per cell is
-    below ``energy_tol``, and those that an operation halts (:meth:`Operation.halted`); the others
-    go on. HOOMD-style use: ``while not fire.done: sim.run(100)``, or ``sim.minimize()``.
-
-    The tolerances are relative to each replica's natural units (:meth:`tolerance_units`): energy
-    per cell in ``e = `` the largest :meth:`Force.energy_scale` of the forces (the vertex model's
-    is the paper's ``kP <A>``, or ``kA <A>^2`` without perimeter stiffness), force in
-    ``e / sqrt(<A>)`` (``kP sqrt(<A>)``). So the same tiling at radius 1e-9 or 1e6 stops in the same
-    shape, and at <A> = 1 with kP = 1 the tolerances are the absolute numbers they always were.
-    Without a force declaring a scale they are absolute.
+    below ``energy_tol`` (in the replica's natural units, :meth:`tolerance_units`: the same shape
+    at any size), and those that an operation halts (:meth:`Operation.halted`); the others go on.
+    HOOMD-style use: ``while not fire.done: sim.run(100)``, or ``sim.minimize()``.
 
     Per replica (NumPy): ``replica_converged``, ``reason`` ("force", "energy", an operation's
     ``halt_reason``, or "running"), ``steps`` (the iteration at which it stopped, -1 while running).
@@ -383,9 +415,8 @@ class Minimizer(Integrator):
 
     @staticmethod
     def tolerance_units(simulation):
-        """``(energy per cell, force)`` per replica (NumPy): the units of ``energy_tol`` and
-        ``force_tol``. Energy: the largest :meth:`Force.energy_scale` of the simulation's forces
-        (1 where none declares one, or where it is 0); force: that over sqrt(<A>)."""
+        """The units of ``energy_tol`` and ``force_tol`` per replica (NumPy): the largest
+        :meth:`Force.energy_scale` of the forces (1 if none, or 0) and that over sqrt(<A>)."""
         state = simulation.state
         scales = [s for s in (f.energy_scale(state) for f in simulation.operations.forces) if s is not None]
         energy = np.max(scales, axis=0) if scales else np.ones(state.n_replicas)
@@ -433,10 +464,21 @@ class Minimizer(Integrator):
 
 
 class Updater(Operation):
-    """Changes the state between steps (for example the topology): ``update(simulation, timestep)``."""
+    """Changes the state between steps (for example the topology): ``update(simulation, timestep)``.
+
+    ``in_minimize``: whether ``Simulation.minimize`` runs it (T1: yes). The growth updaters
+    (Division, Extrusion, RadiusSchedule) sit minimisations out: a quench finds the inherent state
+    of the tissue as it is (its N and R); a later ``run`` goes on with them, and
+    :meth:`after_minimize` tells them a minimisation passed.
+    """
+
+    in_minimize = True
 
     def update(self, simulation, timestep):
         raise NotImplementedError
+
+    def after_minimize(self, simulation):
+        """A ``Simulation.minimize`` that this updater sat out (``in_minimize`` False) has ended."""
 
 
 class Writer(Operation):
@@ -454,3 +496,4 @@ class Writer(Operation):
 
     def close(self):
         pass
+

@@ -24,7 +24,8 @@ the chunking: every (N, p0, replica) tiling has its own seed and every replica i
 independently. See docs/rigidity.md.
 
 Modules: :mod:`.spec` (the parameters, seeds and chunks), :mod:`.store` (the folder on disk),
-:mod:`.execution` (running chunks and sweeps), :mod:`.tables` (summaries and plots). The command
+:mod:`.execution` (running chunks and sweeps), :mod:`.states` (the inherent states, kept with
+``save_states=True``), :mod:`.tables` (summaries and plots). The command
 ``spherevm rigidity`` (:mod:`spherevm.cli.rigidity`) runs a sweep from the shell.
 """
 from . import cluster
@@ -33,10 +34,11 @@ from .execution import (CPU_BATCH_CELLS, GPU_BATCH_CELLS, InProcessExecutor, Swe
 from .spec import Chunk, RigiditySweep, parse_p0_grid, plan_chunks, tiling_seed
 from .store import (CHUNK_DIR, FORMAT, FORMAT_VERSION, MANIFEST, RECORD_COLUMNS, open_sweep_folder, read_records,
                     scan_chunks, write_columns)
+from .states import STATE_DIR, load_state
 from .tables import format_p0star_table, summarize_records, write_tables
 
 __all__ = ["CHUNK_DIR", "CPU_BATCH_CELLS", "Chunk", "FORMAT", "FORMAT_VERSION", "GPU_BATCH_CELLS",
-           "InProcessExecutor", "MANIFEST", "RECORD_COLUMNS", "RigiditySweep", "SweepProgress", "SweepResult",
-           "TextProgress", "build_chunk_state", "default_executor", "format_p0star_table", "open_sweep_folder",
+           "InProcessExecutor", "MANIFEST", "RECORD_COLUMNS", "RigiditySweep", "STATE_DIR", "SweepProgress", "SweepResult",
+           "TextProgress", "build_chunk_state", "default_executor", "format_p0star_table", "load_state", "open_sweep_folder",
            "parse_p0_grid", "plan_chunks", "read_records", "run_chunk", "run_sweep", "scan_chunks",
            "summarize_records", "tiling_seed", "write_columns", "write_tables"]

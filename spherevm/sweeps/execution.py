@@ -11,9 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..progress import StatusLine
+from ..progress import bar as progress_bar
 from ..validation import check_run_memory, integer
 from .spec import Chunk, RigiditySweep, plan_chunks, tiling_seed
+from .states import chunk_state_gsd, save_chunk_state, state_path
 from .store import (CHUNK_DIR, RECORD_COLUMNS, merge_records, open_sweep_folder, scan_chunks, sorted_records,
                     write_columns)
 from .tables import summarize_records
@@ -26,24 +27,82 @@ CPU_BATCH_CELLS = 512
 GPU_BATCH_CELLS = 1 << 18
 
 
+#: a GPU sweep with at least this many cells to compute builds its tilings in a process pool, ahead
+#: of the GPU (one tiling per replica on the host is otherwise the bottleneck: 0.02-0.06 s each at
+#: N = 1024, against ~1 ms of GPU time per replica)
+PREFETCH_MIN_CELLS = 100_000
+
+
 # ---------------------------------------------------------------------------------------- one chunk
-def build_chunk_state(sweep: RigiditySweep, chunk: Chunk):
-    """The batched State of a chunk and its per-replica (p0, p0_index, replica, tiling_seed)."""
-    from ..init import random_planar_tilings, random_tilings
+def chunk_seeds(sweep: RigiditySweep, chunk: Chunk):
+    """The chunk's units ``(p0 index, replica)`` and their tiling seeds."""
     units = [sweep.unit(u) for u in range(chunk.start, chunk.stop)]
-    seeds = [tiling_seed(sweep.seed, chunk.n_cells, sweep.p0[k], r, sweep.shared_tilings) for k, r in units]
-    tilings = random_planar_tilings if sweep.surface == "plane" else random_tilings
-    state = tilings(chunk.n_cells, seeds)   # shared tilings: a repeated seed gives the same tiling
+    return units, [tiling_seed(sweep.seed, chunk.n_cells, sweep.p0[k], r, sweep.shared_tilings) for k, r in units]
+
+
+def build_tilings(surface: str, n_cells: int, seeds):
+    """The random tilings of ``seeds`` on ``surface`` as one State."""
+    from ..init import random_planar_tilings, random_tilings
+    return (random_planar_tilings if surface == "plane" else random_tilings)(n_cells, seeds)
+
+
+def _tiling_arrays(surface: str, n_cells: int, seeds):
+    """:func:`build_tilings` as plain arrays and the constraint (what a process pool can send back)."""
+    state = build_tilings(surface, n_cells, seeds)
+    return state._arrays_np(), state.constraint
+
+
+def build_chunk_state(sweep: RigiditySweep, chunk: Chunk, state=None):
+    """The batched State of a chunk (``state`` if it was built elsewhere, as :class:`TilingPrefetch`
+    does) and its per-replica (p0, p0_index, replica, tiling_seed)."""
+    units, seeds = chunk_seeds(sweep, chunk)
+    if state is None:   # shared tilings: a repeated seed gives the same tiling
+        state = build_tilings(sweep.surface, chunk.n_cells, seeds)
     p0 = np.array([sweep.p0[k] for k, _ in units])
     return state, p0, [k for k, _ in units], [r for _, r in units], seeds
 
 
-def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu") -> dict:
-    """Minimise one chunk; returns its per-replica records (a dict of lists, :data:`RECORD_COLUMNS`).
+class TilingPrefetch:
+    """Builds the tilings of the next ``ahead`` chunks in a process pool while the GPU minimises the
+    current one: each chunk's seeds are cut into one part per worker and the parts concatenated in
+    order, which is the State that :func:`build_chunk_state` builds alone (tested)."""
+
+    def __init__(self, sweep: RigiditySweep, chunks, workers: int, ahead: int = 2):
+        import multiprocessing
+        self.sweep, self.chunks, self.workers, self.ahead = sweep, list(chunks), workers, ahead
+        self.pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+        self.futures = {}
+        self._submit_until(0)
+
+    def _submit_until(self, index):
+        for c in self.chunks[index:index + self.ahead + 1]:
+            if c.id not in self.futures:
+                seeds = chunk_seeds(self.sweep, c)[1]
+                parts = np.array_split(np.array(seeds, dtype=np.int64), min(self.workers, len(seeds)))
+                self.futures[c.id] = [self.pool.submit(_tiling_arrays, self.sweep.surface, c.n_cells, part.tolist())
+                                      for part in parts if len(part)]
+
+    def get(self, chunk):
+        """The chunk's State (waits for its parts), and the next chunks submitted."""
+        from ..state import State
+        self._submit_until(self.chunks.index(chunk))
+        parts = [State(**arrays, constraint=constraint, validate=False)       # validated by the worker
+                 for arrays, constraint in (f.result() for f in self.futures.pop(chunk.id))]
+        return parts[0] if len(parts) == 1 else State.concatenate(parts)
+
+    def close(self):
+        self.pool.shutdown(wait=False, cancel_futures=True)
+
+
+def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu", state=None,
+              save_states=False) -> dict:
+    """Minimise one chunk; returns its per-replica records (a dict of lists, :data:`RECORD_COLUMNS`),
+    with ``save_states`` also its minimised State as the bytes of a GSD file (key ``"state_gsd"``,
+    :func:`spherevm.sweeps.states.chunk_state_gsd`).
 
     A plain module-level function of plain arguments, so any executor (process pool, Dask) can run
-    it. The vertex model is given per cell: ``kA = kr kP / <A>``, ``kP = 1``, ``A0 = <A>``,
-    ``P0 = p0 sqrt(<A>)``, with each replica's own p0.
+    it (``state``: the chunk's tilings when built elsewhere). The vertex model is given per cell:
+    ``kA = kr kP / <A>``, ``kP = 1``, ``A0 = <A>``, ``P0 = p0 sqrt(<A>)``, with each replica's own p0.
     """
     from ..plugins import build_force
     from ..plugins.forces import VertexModel
@@ -54,7 +113,7 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     t0 = time.perf_counter()
     sweep = RigiditySweep.from_parameters(parameters)
     chunk = Chunk(int(n_cells), int(start), int(stop))
-    state, p0, p0_index, replica, seeds = build_chunk_state(sweep, chunk)
+    state, p0, p0_index, replica, seeds = build_chunk_state(sweep, chunk, state)
     mean_area = state.mean_cell_area                     # per replica (1 at the default radius)
     cell_rep = state.cell_replica_np()
     area = mean_area[cell_rep]
@@ -72,7 +131,8 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     flips = np.asarray(sim.log("t1_total_flips"))          # the loggable syncs the GPU counters
     elapsed = time.perf_counter() - t0
     n = chunk.size
-    return {"n_cells": [chunk.n_cells] * n, "p0": p0.tolist(), "p0_index": list(p0_index), "replica": list(replica),
+    extra = {"state_gsd": chunk_state_gsd(sim, p0, p0_index, replica)} if save_states else {}
+    return {**extra, "n_cells": [chunk.n_cells] * n, "p0": p0.tolist(), "p0_index": list(p0_index), "replica": list(replica),
             "tiling_seed": list(seeds), "energy_per_cell": [float(e) for e in res.energy_per_cell],
             "max_force": [float(f) for f in res.max_force],
             "mean_shape_index": [float(q) for q in res.mean_shape_index],
@@ -173,32 +233,30 @@ class SweepProgress:
 
 
 class TextProgress:
-    """A plain-text progress bar on a stream (standard error): redrawn in place on a terminal,
-    otherwise one line per finished chunk at most every 5 seconds (and the last)."""
+    """The sweep's progress bar (tqdm) on a stream (standard error by default): the share of the
+    work done (cells, since a minimisation's cost grows with N), chunks and minimisations done,
+    those found on disk, elapsed time and ETA. Drawn on a terminal only; silent in a log or a pipe."""
 
-    def __init__(self, stream=None, width=28, label="rigidity"):
-        self.status = StatusLine(stream)
-        self.tty = self.status.tty
-        self.width, self.label = width, label
-        self.last = -math.inf
+    def __init__(self, stream=None, label="rigidity"):
+        self.stream, self.label = stream, label
+        self.bar = None
 
     def __call__(self, p: SweepProgress):
-        now = time.monotonic()
-        final = p.chunks_done == p.chunks_total
-        if not self.tty and not final and p.chunks_done and now - self.last < 5.0:
-            return
-        self.last = now
-        frac = p.cells_done / p.cells_total if p.cells_total else 1.0
-        fill = int(round(self.width * frac))
-        eta = "" if not math.isfinite(p.eta) or final else f"  eta {p.eta:5.0f} s"
+        if self.bar is None:
+            self.bar = progress_bar(p.cells_total, self.label, " cells", self.stream, initial=p.cells_done,
+                                    smoothing=0,
+                                    bar_format="{desc}: {percentage:5.1f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
         reused = f" ({p.units_reused} on disk)" if p.units_reused else ""
-        line = (f"{self.label}: [{'#' * fill}{'.' * (self.width - fill)}] {100 * frac:5.1f}%  "
-                f"chunks {p.chunks_done}/{p.chunks_total}  minimisations {p.units_done}/{p.units_total}{reused}  "
-                f"{p.elapsed:6.1f} s{eta}")
-        self.status.show(line)
+        self.bar.set_postfix_str(f"chunks {p.chunks_done}/{p.chunks_total}  "
+                                 f"minimisations {p.units_done}/{p.units_total}{reused}", refresh=False)
+        self.bar.update(p.cells_done - self.bar.n)
+        if p.chunks_done == p.chunks_total:
+            self.bar.refresh()
 
     def close(self):
-        self.status.close()
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
 
 
 # ---------------------------------------------------------------------------------------- the sweep
@@ -219,17 +277,38 @@ class SweepResult:
         return summarize_records(self.records, zero_tol=zero_tol, **{"surface": self.sweep.surface, **kwargs})
 
 
+def _drop_chunks_without_states(sweep, path, done, parts):
+    """Mark the units of finished chunks that have no state file as missing (and remove those
+    chunk files, which the new chunks replace); return the records kept."""
+    kept = []
+    for rec in parts:
+        cid = rec["chunk"][0]
+        if os.path.isfile(state_path(path, cid)):
+            kept.append(rec)
+            continue
+        n = rec["n_cells"][0]
+        done[n][np.asarray(rec["p0_index"]) * sweep.replicas + np.asarray(rec["replica"])] = False
+        os.remove(os.path.join(path, CHUNK_DIR, cid + ".csv"))
+    return kept
+
+
 def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=None, batch_cells=None,
-              progress=None) -> SweepResult:
+              progress=None, save_states=False) -> SweepResult:
     """Run (or resume) a rigidity sweep, writing each chunk to ``<out>/chunks/`` as it finishes.
 
     ``executor``: any :class:`concurrent.futures.Executor` (or a ``distributed.Client``, whose
     ``get_executor()`` is used); None picks :func:`default_executor` (in-process on a GPU, a
     process pool of ``workers`` processes on the CPU). ``device``: where each chunk is minimised
     (``"cpu"``, ``"gpu"`` or ``"auto"``; with your own executor it is resolved on the worker).
+    On a GPU with the default executor, a sweep of at least :data:`PREFETCH_MIN_CELLS` cells builds
+    its tilings in a process pool of ``workers`` processes (default: the CPU count less one) ahead of
+    the GPU (:class:`TilingPrefetch`); the results are the same.
     ``batch_cells``: cells per chunk (default :data:`CPU_BATCH_CELLS` or :data:`GPU_BATCH_CELLS`);
     it changes how the work is cut, never the results. ``progress``: called with a
-    :class:`SweepProgress` after every chunk.
+    :class:`SweepProgress` after every chunk. ``save_states``: also keep each chunk's minimised
+    State (the inherent states) in ``<out>/states/<chunk id>.gsd``, opened with
+    :func:`spherevm.sweeps.load_state`; a chunk finished earlier without its state file is
+    computed again (on the CPU with bitwise the same records).
 
     Everything is validated before the folder is created; a folder holding a sweep with other
     parameters raises ValueError. A chunk that fails stops the sweep (RuntimeError naming the
@@ -240,12 +319,6 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
     from ..device import DEVICE_NAMES, Device
     if not isinstance(device, Device) and (not isinstance(device, str) or device.lower() not in DEVICE_NAMES):
         raise ValueError(f"device must be one of {DEVICE_NAMES}, got {device!r}")
-    if sweep.surface == "plane":       # the CUDA kernels refuse the periodic plane for now
-        if not isinstance(device, Device) and device.lower() == "auto":
-            device = "cpu"
-        elif getattr(device, "is_gpu", False) or (isinstance(device, str) and device.lower() == "gpu"):
-            raise ValueError("a sweep on the periodic plane runs on the CPU only for now (the CUDA kernels do not "
-                             "support it yet); use device='cpu'")
     if workers is not None:
         integer("workers", workers, 1)
     if batch_cells is not None:
@@ -271,9 +344,12 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         except BaseException:
             executor.shutdown(wait=False, cancel_futures=True)
             raise
+    prefetch = None
     try:
         path = open_sweep_folder(sweep, out, create=True)
         done, parts, bad = scan_chunks(sweep, path, clean=True)
+        if save_states:
+            parts = _drop_chunks_without_states(sweep, path, done, parts)
         chunks = plan_chunks(sweep, batch_cells, done)
         reused_units = int(sum(d.sum() for d in done.values()))
         reused_cells = int(sum(n * d.sum() for n, d in done.items()))
@@ -285,18 +361,25 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         if progress is not None:
             progress(state)
         params = sweep.parameters()
+        states = {"save_states": True} if save_states else {}     # the call stays the same without them
         in_process = isinstance(executor, InProcessExecutor)
         # bounded submission for the in-process executor (it runs at submit time, so each chunk is
         # written before the next starts); everything at once otherwise, largest N first
         todo = sorted(chunks, key=lambda c: -c.n_cells * c.size)
         limit = 1 if in_process else len(todo)
+        cpus = os.cpu_count() or 1
+        if (in_process and device_name == "gpu" and cpus > 2 and len(todo) > 1
+                and sum(c.n_cells * c.size for c in todo) >= PREFETCH_MIN_CELLS):
+            prefetch = TilingPrefetch(sweep, todo, cpus - 1 if workers is None else workers)
         pending = {}
         computed = []
         folder = os.path.join(path, CHUNK_DIR)
         while todo or pending:
             while todo and len(pending) < limit:
                 c = todo.pop(0)
-                pending[executor.submit(run_chunk, params, c.n_cells, c.start, c.stop, device_name)] = c
+                built = () if prefetch is None else (prefetch.get(c),)
+                pending[executor.submit(run_chunk, params, c.n_cells, c.start, c.stop, device_name, *built,
+                                        **states)] = c
             finished, _ = cf.wait(list(pending), return_when=cf.FIRST_COMPLETED)
             for fut in finished:
                 c = pending.pop(fut)
@@ -308,6 +391,8 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
                                        f"{type(exc).__name__}: {exc}; finished chunks are kept in {folder}, "
                                        "rerun to resume") from exc
                 rec = fut.result()
+                if save_states:                 # the state first: a chunk file then implies its state
+                    save_chunk_state(path, c.id, rec.pop("state_gsd"))
                 write_columns(os.path.join(folder, c.id + ".csv"), rec, RECORD_COLUMNS)
                 parts.append(rec)
                 computed.append(c.id)
@@ -325,6 +410,8 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
             _stop_now(executor)
         raise
     finally:
+        if prefetch is not None:
+            prefetch.close()
         if owned:
             executor.shutdown(wait=True)
     return SweepResult(sweep=sweep, out=path, records=sorted_records(merge_records(parts)), computed=computed,

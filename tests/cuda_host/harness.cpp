@@ -7,7 +7,7 @@
 #include "cuda_host.h"
 
 #include "random_philox.cuh"
-#include "geometry/sphere.cuh"
+#include "geometry/surface.cuh"   // geometry/sphere.cuh, geometry/plane.cuh and the two Surface structs
 
 typedef unsigned int u32;
 typedef unsigned long long u64;
@@ -122,4 +122,107 @@ void h_edge(long n, const double* b, const double* d, double* m, double* x, doub
     }
 }
 
+// ------------------------------------------------------------------------------ plane geometry
+// minimum_image(d) and wrap_into_box(x) of (n, 3) points, each with its own box (n, 2)
+void h_plane_image_wrap(long n, const double* d, const double* x, const double* box, double* image, double* wrapped)
+{
+    for (long i = 0; i < n; ++i) {
+        const box2 b = load_box(box, i);
+        store3(image, i, minimum_image(load3(d, i), b));
+        store3(wrapped, i, wrap_into_box(load3(x, i), b));
+    }
+}
+
 }  // extern "C"
+
+// ------------------------------------------------------------------------------ through Surface
+// What the kernels do per cell, vertex or flip, for either surface S; size is the State's radius or
+// box. The extern "C" names below are h_<surface>_<what>.
+template <class S>
+static void surface_cells(long n_cells, const double* pos, const int* cell_vertices, const int* cell_sides,
+                          const int* cell_replica, const double* size, int max_sides, double* area,
+                          double* perimeter, double* units)
+{
+    for (long c = 0; c < n_cells; ++c) {
+        const typename S::Size s = S::size(size, cell_replica[c]);
+        S::cell_measures(pos, cell_vertices + c * max_sides, cell_sides[c], s, area + c, perimeter + c);
+        units[2 * c] = S::area_unit(s);
+        units[2 * c + 1] = S::length_unit(s);
+    }
+}
+
+template <class S>
+static void surface_forces(long n_vertices, const double* pos, const int* vn, const int* vc, const int* vertex_replica,
+                           const double* size, const double* coef, double* forces)
+{
+    for (long v = 0; v < n_vertices; ++v)
+        store3(forces, v, S::vertex_force(pos, vn, vc, v, S::size(size, vertex_replica[v]), coef));
+}
+
+// per pair (u[i], v[i]) of replica rep[i]: chord2 and edge_length
+template <class S>
+static void surface_edges(long n, const double* pos, const int* u, const int* v, const int* rep, const double* size,
+                          double* chord2, double* length)
+{
+    for (long i = 0; i < n; ++i) {
+        const typename S::Size s = S::size(size, rep[i]);
+        chord2[i] = S::chord2(load3(pos, u[i]), load3(pos, v[i]), s);
+        length[i] = S::edge_length(load3(pos, u[i]), load3(pos, v[i]), s);
+    }
+}
+
+// per point y (n, 3) of replica rep[i]: normal(y) and place(y, normal(y)) (P_N)
+template <class S>
+static void surface_project(long n, const double* y, const int* rep, const double* size, double* normal, double* placed)
+{
+    for (long i = 0; i < n; ++i) {
+        const vec3 m = S::normal(load3(y, i));
+        store3(normal, i, m);
+        store3(placed, i, S::place(load3(y, i), m, S::size(size, rep[i])));
+    }
+}
+
+// per flip, quad (n, 6) = (u, v, a, b, c, d) of replica rep[i], new length full[i]: the new
+// positions of X = v and Y = u
+template <class S>
+static void surface_t1(long n, const double* pos, const int* quad, const int* rep, const double* size,
+                       const double* full, double* x_pos, double* y_pos)
+{
+    for (long i = 0; i < n; ++i) {
+        const int* q = quad + 6 * i;
+        vec3 x, y;
+        S::t1_positions(pos, q[0], q[1], q[2], q[3], q[4], q[5], S::size(size, rep[i]), full[i], &x, &y);
+        store3(x_pos, i, x);
+        store3(y_pos, i, y);
+    }
+}
+
+// per cell: cell_normal
+template <class S>
+static void surface_cell_normals(long n_cells, const double* pos, const int* cell_vertices, const int* cell_sides,
+                                 int max_sides, double* out)
+{
+    for (long c = 0; c < n_cells; ++c) store3(out, c, S::cell_normal(pos, cell_vertices + c * max_sides, cell_sides[c]));
+}
+
+#define EXPORT_SURFACE(NAME, S)                                                                                     \
+    extern "C" void h_##NAME##_cells(long n, const double* p, const int* cv, const int* cs, const int* cr,              \
+                                     const double* sz, int ms, double* a, double* per, double* u)                     \
+    { surface_cells<S>(n, p, cv, cs, cr, sz, ms, a, per, u); }                                                      \
+    extern "C" void h_##NAME##_forces(long n, const double* p, const int* vn, const int* vc, const int* vr,             \
+                                      const double* sz, const double* coef, double* f)                                \
+    { surface_forces<S>(n, p, vn, vc, vr, sz, coef, f); }                                                           \
+    extern "C" void h_##NAME##_edges(long n, const double* p, const int* u, const int* v, const int* r,               \
+                                     const double* sz, double* c2, double* len)                                       \
+    { surface_edges<S>(n, p, u, v, r, sz, c2, len); }                                                               \
+    extern "C" void h_##NAME##_project(long n, const double* y, const int* r, const double* sz, double* nrm,          \
+                                       double* placed)                                                                \
+    { surface_project<S>(n, y, r, sz, nrm, placed); }                                                               \
+    extern "C" void h_##NAME##_t1(long n, const double* p, const int* q, const int* r, const double* sz,              \
+                                  const double* full, double* x, double* y)                                           \
+    { surface_t1<S>(n, p, q, r, sz, full, x, y); }                                                                  \
+    extern "C" void h_##NAME##_cell_normals(long n, const double* p, const int* cv, const int* cs, int ms, double* o) \
+    { surface_cell_normals<S>(n, p, cv, cs, ms, o); }
+
+EXPORT_SURFACE(sphere, SphereSurface)
+EXPORT_SURFACE(plane, PlaneSurface)

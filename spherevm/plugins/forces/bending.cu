@@ -1,38 +1,80 @@
 // Bending between neighbouring cells on the sphere: the CUDA path of bending.py.
 // E_b = B_r sum over neighbouring cell pairs (i, j) of (1 - n_i.n_j) = B_r |n_i - n_j|^2 / 2.
-#include "geometry/sphere.cuh"
-#include "device_common.cuh"
+// Alone: three kernels (normals per cell; energy and dE/da per cell over its neighbours; forces per
+// vertex). With the vertex model (Bending.combined): its two kernels with the terms below fused in
+// (vertex_model.cuh), and the per-cell kernel between them adding to its energies.
+#include "plugins/forces/vertex_model.cuh"
 
-// One thread per cell: the area vector a = 1/2 sum_k r_k x r_{k+1}, r_k = x_k - x_0 relative to the
-// cell's first vertex (the same terms as bending.py's corners), its unit normal and 1/|a|.
+// What bending adds to the vertex model's kernels (vertex_model.cuh), and what its own kernels run.
+// cell: the doubled area vector A = 2 a = sum over the corners (x_b - x_0) x (x_d - x_b), x_0 the
+// cell's first vertex (the same terms as Sphere.cell_geometry's corners; the closing corner adds
+// (x_{n-1} - x_0) x (x_0 - x_{n-1}) = 0), its unit normal and 1/|A|.
+// add_gradient: the gradient of the energy through the area vectors of the vertex's three cells. a_c
+// moves with x_v by (x_next - x_prev) x / 2 per corner; with w_c = (dE/da_c) / 2 and e_j =
+// x_{n_j} - x_v the sum over the corners is G = sum_j e_j x (w[slot j] - w[slot j-1]) (as
+// Sphere.shape_gradient), added as |x| G to the vertex model's unit-sphere terms (which are
+// multiplied by 1/|x| at the end).
+struct BendingTerms {
+    double* normal;
+    double* inv_area;          // 1 / |2 a|
+    const double* w;
+    __device__ __forceinline__ void cell(const double* __restrict__ pos, const int* __restrict__ row, int n,
+                                         long c) const {
+        vec3 x0 = load3(pos, row[0]);
+        vec3 xb = x0, A = v3(0.0, 0.0, 0.0);
+        for (int i = 1; i < n; ++i) {
+            vec3 xd = load3(pos, row[i]);
+            A = A + cross3(xb - x0, xd - xb);
+            xb = xd;
+        }
+        double s = rsqrt(dot3(A, A));
+        store3(normal, c, s * A);
+        inv_area[c] = s;
+    }
+    __device__ __forceinline__ void add_gradient(vec3& g, const double* __restrict__ pos,
+                                                 const int* __restrict__ vertex_neighbors,
+                                                 const int* __restrict__ vertex_cells, long v, vec3 x) const {
+        vec3 G = v3(0.0, 0.0, 0.0);
+#pragma unroll 1
+        for (int j = 0; j < 3; ++j) {    // not unrolled: 84 registers fused (92 unrolled; the vertex model alone 68)
+            vec3 e = load3(pos, vertex_neighbors[3 * v + j]) - x;
+            G = G + cross3(e, load3(w, vertex_cells[3 * v + j]) - load3(w, vertex_cells[3 * v + (j + 2) % 3]));
+        }
+        g = g + norm3(x) * G;
+    }
+};
+
+// One thread per cell: its normal and 1/|2a| (bending alone).
 extern "C" __global__ void bending_cell_normals(
     const double* __restrict__ pos, const int* __restrict__ cell_vertices, const int* __restrict__ cell_sides,
     int n_cells, int max_sides, double* __restrict__ normal, double* __restrict__ inv_area)
 {
     long c = (long)blockIdx.x * blockDim.x + threadIdx.x;
     if (c >= n_cells) return;
-    const int* row = cell_vertices + c * (long)max_sides;
-    int n = cell_sides[c];
-    vec3 x0 = load3(pos, row[0]);
-    vec3 a = v3(0.0, 0.0, 0.0);
-    vec3 b = load3(pos, row[1]) - x0;
-    for (int i = 1; i + 1 < n; ++i) {
-        vec3 d = load3(pos, row[i + 1]) - x0;
-        a = a + cross3(b, d);
-        b = d;
-    }
-    double s = rsqrt(dot3(a, a));            // 1 / |2 a|
-    store3(normal, c, s * a);
-    inv_area[c] = 2.0 * s;
+    BendingTerms terms = {normal, inv_area, nullptr};
+    terms.cell(pos, cell_vertices + c * (long)max_sides, cell_sides[c], c);
 }
 
-// One thread per cell, over its neighbours (CSR start/neighbors, each pair listed from both ends):
-// the cell's energy (half of each pair, B/4 |n_i - n_j|^2), the per-replica sum, and
-// g_i = dE/da_i = B (s - (s.n_i) n_i) / |a_i| with s = sum_j (n_i - n_j).
-extern "C" __global__ void bending_cell_terms(
-    const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ start,
-    const int* __restrict__ neighbors, const int* __restrict__ cell_replica, const double* __restrict__ B,
-    int n_cells, double* __restrict__ g, double* __restrict__ cell_energy, double* __restrict__ replica_energy)
+// The cell across the edge that leaves vertex v of cell c (counter-clockwise): corner (v, s) with
+// vertex_cells[v, s] == c runs along that edge, which borders vertex_cells[v, s - 1].
+__device__ __forceinline__ int cell_across(const int* __restrict__ vertex_cells, int v, long c)
+{
+    const int* vc = vertex_cells + 3 * (long)v;
+    int s = vc[0] == c ? 0 : (vc[1] == c ? 1 : 2);
+    return vc[(s + 2) % 3];
+}
+
+// One thread per cell, over its neighbours, found by walking its edges (from the State's arrays, so
+// nothing to rebuild after T1 flips; a neighbour across two edges counts once, as in bending.py's
+// pair list): the cell's energy (half of each pair, B/4 |n_i - n_j|^2), the per-replica sum, and
+// w_i = (dE/da_i) / 2 = B (s - (s.n_i) n_i) / |2 a_i| with s = sum_j (n_i - n_j). ADD: the energies
+// are added to what the vertex model's cell kernel wrote (fused), else they are stored.
+template <bool ADD>
+__device__ __forceinline__ void bending_cell_terms_body(
+    const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ cell_vertices,
+    const int* __restrict__ cell_sides, const int* __restrict__ vertex_cells, int n_cells, int max_sides,
+    const int* __restrict__ cell_replica, const double* __restrict__ B, double* __restrict__ w,
+    double* __restrict__ cell_energy, double* __restrict__ replica_energy)
 {
     long c = (long)blockIdx.x * blockDim.x + threadIdx.x;
     int rep = -1;
@@ -40,41 +82,85 @@ extern "C" __global__ void bending_cell_terms(
     if (c < n_cells) {
         rep = cell_replica[c];
         double Br = B[rep];
+        const int* row = cell_vertices + c * (long)max_sides;
+        int n = cell_sides[c];
         vec3 ni = load3(normal, c);
         vec3 s = v3(0.0, 0.0, 0.0);
         double sq = 0.0;
-        for (int k = start[c]; k < start[c + 1]; ++k) {
-            vec3 d = ni - load3(normal, neighbors[k]);
+        for (int k = 0; k < n; ++k) {
+            int j = cell_across(vertex_cells, row[k], c);
+            bool counted = j == c;
+            for (int i = 0; i < k && !counted; ++i) counted = cell_across(vertex_cells, row[i], c) == j;
+            if (counted) continue;
+            vec3 d = ni - load3(normal, j);
             sq += dot3(d, d);
             s = s + d;
         }
         e = 0.25 * Br * sq;
-        cell_energy[c] = e;
+        cell_energy[c] = ADD ? cell_energy[c] + e : e;
         vec3 t = s - dot3(s, ni) * ni;
-        store3(g, c, (Br * inv_area[c]) * t);
+        store3(w, c, (Br * inv_area[c]) * t);
     }
     segmented_block_add(e, rep, replica_energy);
 }
 
-// One thread per vertex, no atomics: corner (v, k) lies in cell vertex_cells[v, k], whose boundary
-// runs from the previous vertex vertex_neighbors[v, k + 1] through v to vertex_neighbors[v, k], so
-// da_c/dx_v applied to g_c is (x_next - x_prev) x g_c / 2; minus the sum, projected on the tangent
-// plane at v.
+extern "C" __global__ void bending_cell_terms(
+    const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ cell_vertices,
+    const int* __restrict__ cell_sides, const int* __restrict__ vertex_cells, int n_cells, int max_sides,
+    const int* __restrict__ cell_replica, const double* __restrict__ B, double* __restrict__ w,
+    double* __restrict__ cell_energy, double* __restrict__ replica_energy)
+{
+    bending_cell_terms_body<false>(normal, inv_area, cell_vertices, cell_sides, vertex_cells, n_cells, max_sides,
+                                   cell_replica, B, w, cell_energy, replica_energy);
+}
+
+extern "C" __global__ void bending_cell_terms_add(
+    const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ cell_vertices,
+    const int* __restrict__ cell_sides, const int* __restrict__ vertex_cells, int n_cells, int max_sides,
+    const int* __restrict__ cell_replica, const double* __restrict__ B, double* __restrict__ w,
+    double* __restrict__ cell_energy, double* __restrict__ replica_energy)
+{
+    bending_cell_terms_body<true>(normal, inv_area, cell_vertices, cell_sides, vertex_cells, n_cells, max_sides,
+                                  cell_replica, B, w, cell_energy, replica_energy);
+}
+
+// One thread per vertex, no atomics: minus the gradient through its three cells, projected on the
+// tangent plane at v (bending alone).
 extern "C" __global__ void bending_vertex_forces(
     const double* __restrict__ pos, const int* __restrict__ vertex_neighbors, const int* __restrict__ vertex_cells,
-    int n_vertices, const double* __restrict__ g, double* __restrict__ forces)
+    int n_vertices, const double* __restrict__ w, double* __restrict__ forces)
 {
     long v = (long)blockIdx.x * blockDim.x + threadIdx.x;
     if (v >= n_vertices) return;
     vec3 x = load3(pos, v);
-    vec3 r[3];
-    for (int k = 0; k < 3; ++k) r[k] = load3(pos, vertex_neighbors[3 * v + k]) - x;
-    vec3 grad = v3(0.0, 0.0, 0.0);
-    for (int k = 0; k < 3; ++k) {
-        vec3 gc = load3(g, vertex_cells[3 * v + k]);
-        grad = grad + cross3(r[k] - r[(k + 1) % 3], gc);
-    }
-    grad = 0.5 * grad;
-    grad = grad - (dot3(grad, x) / dot3(x, x)) * x;
-    store3(forces, v, -grad);
+    double inv_rn = rsqrt(dot3(x, x));
+    vec3 u = inv_rn * x;
+    vec3 g = v3(0.0, 0.0, 0.0);
+    BendingTerms terms = {nullptr, nullptr, w};
+    terms.add_gradient(g, pos, vertex_neighbors, vertex_cells, v, x);
+    g = g - dot3(g, u) * u;
+    store3(forces, v, -(inv_rn * g));
+}
+
+// The vertex model's kernels with the bending terms fused in (Bending.combined).
+extern "C" __global__ void vm_bending_cell_geometry(
+    const double* __restrict__ pos, const int* __restrict__ cell_vertices, const int* __restrict__ cell_sides,
+    const int* __restrict__ cell_replica, const double* __restrict__ radius, int n_cells, int max_sides,
+    const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
+    const double* __restrict__ P0, double* __restrict__ coef, double* __restrict__ cell_energy,
+    double* __restrict__ replica_energy, double* __restrict__ normal, double* __restrict__ inv_area)
+{
+    BendingTerms terms = {normal, inv_area, nullptr};
+    vm_cell_geometry_body(pos, cell_vertices, cell_sides, cell_replica, radius, n_cells, max_sides, kA, kP, A0, P0,
+                          coef, cell_energy, replica_energy, terms);
+}
+
+extern "C" __global__ void vm_bending_vertex_forces(
+    const double* __restrict__ pos, const int* __restrict__ vertex_neighbors, const int* __restrict__ vertex_cells,
+    const int* __restrict__ vertex_replica, const double* __restrict__ radius, int n_vertices,
+    const double* __restrict__ coef, const double* __restrict__ w, double* __restrict__ forces)
+{
+    BendingTerms terms = {nullptr, nullptr, w};
+    vm_vertex_forces_body(pos, vertex_neighbors, vertex_cells, vertex_replica, radius, n_vertices, coef, forces,
+                          terms);
 }

@@ -3,6 +3,11 @@
 The discrete bending energy of the paper's Discussion (eq. ``eq:bending``, after Seung and Nelson).
 ``n_i`` is the unit area vector of cell ``i`` (:func:`cell_normals`), the pairs are the cells that
 share an edge of the trivalent network, each pair counted once.
+
+The energy is a function of the cells' area vectors, which the surface measures
+(``constraint.cell_geometry(state, area_vectors=True)``) and differentiates
+(``constraint.shape_gradient(..., d_area_vector=...)``) as it does areas and perimeters: with the
+vertex model attached as well, one pass over the corners serves both (:meth:`Bending.combined`).
 """
 from __future__ import annotations
 
@@ -11,66 +16,31 @@ from pathlib import Path
 import numpy as np
 
 from ...constraints import Sphere
-from ...constraints.base import Constraint
+from ...constraints.corners import blocks, in_parallel
 from ...device import array_module, launch, load_module
 from ..base import Force, ForceResult
+from .vertex_model import VertexModel
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
 
-def _cross(a, b):
-    """Cross products of component-major vectors: ``a``, ``b`` of shape (3, ...)."""
-    xp = array_module(a, b)
-    return xp.stack((a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]))
-
-
 def _dot(a, b):
-    return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
-
-
-def _difference(state, xb, xa, index):
-    """``xb - xa`` for component-major points (3, ...): through the surface's ``unwrap`` (minimum
-    images on a periodic plane) where it has one; ``index`` gives each point's replica."""
-    d = xb - xa
-    constraint = state.constraint
-    if type(constraint).unwrap is Constraint.unwrap:
-        return d
-    xp = state.device.xp
-    size = constraint.size(state, index.reshape(-1)).reshape(index.shape + (-1,))
-    b, a = xp.moveaxis(xb + 0 * xa, 0, -1), xp.moveaxis(xa + 0 * xb, 0, -1)
-    return xp.moveaxis(constraint.unwrap(b, a, size) - a, -1, 0)
-
-
-def _area_vectors(state, P, topo):
-    """Component-major area vectors (3, n_cells) from component-major positions P (3, V)."""
-    xp = state.device.xp
-    nv = state.n_vertices
-    apex = xp.take(P, topo["corner_apex"], axis=1).reshape(3, 3, nv)      # slot-major corners
-    nxt = xp.take(P, topo["corner_next"], axis=1).reshape(3, 3, nv)
-    rep = topo["corner_replica"]
-    rv = _difference(state, P[:, None, :], apex, rep)
-    rn = _difference(state, nxt, apex, rep)
-    c = _cross(rv, rn).reshape(3, -1)
-    cells = topo["corner_cell"]
-    return 0.5 * xp.stack([xp.bincount(cells, weights=c[k], minlength=state.n_cells) for k in range(3)])
-
-
-def _positions(state):
-    return state.device.xp.ascontiguousarray(state.positions.T)
+    """Dot products of component-major vectors (3, n): one fused pass."""
+    return array_module(a, b).einsum("ij,ij->j", a, b)
 
 
 def cell_area_vectors(state):
-    """The area vector of every cell, ``(n_cells, 3)`` on the state's device.
+    """The area vector of every cell, ``(n_cells, 3)`` on the state's device, as the surface
+    measures it (``constraint.cell_geometry(state, area_vectors=True)``).
 
     ``a_c = 1/2 sum over the edges (x_a -> x_b) of cell c of x_a x x_b``, counter-clockwise seen from
-    outside, so ``a_c`` points outwards. It is computed per corner with positions taken relative
-    to the cell's first vertex (``x_a x x_b`` summed over a closed polygon does not depend on the
-    origin), so small cells keep full relative accuracy, and through the surface's ``unwrap`` so
-    that on a periodic plane the polygon is built from minimum images. For a flat polygon ``|a_c|``
-    is its area; on the sphere it is the area of the polygon's projection on the plane normal to
-    ``a_c`` (the vector area).
+    outside, so ``a_c`` points outwards. On the sphere the vertices are taken on the sphere
+    (``R x/|x|``, as for the vertex model's areas and perimeters), per corner relative to the cell's
+    first vertex (the sum does not depend on the origin for a closed polygon), so small cells keep
+    full relative accuracy; ``|a_c|`` is the area of the polygon's projection on the plane normal to
+    ``a_c`` (the vector area). On a periodic plane it is ``(0, 0, A_c)``.
     """
-    return _area_vectors(state, _positions(state), _topology(state)).T
+    return state.constraint.cell_geometry(state, area_vectors=True, metric=False).area_vector
 
 
 def cell_normals(state):
@@ -83,7 +53,7 @@ def cell_normals(state):
     centroid, the two differing at second order in the cell size over R for an irregular cell. On
     a periodic plane it is ``(0, 0, 1)`` for every (counter-clockwise) cell.
     """
-    a = _area_vectors(state, _positions(state), _topology(state))
+    a = cell_area_vectors(state).T
     return (a / state.device.xp.sqrt(_dot(a, a))).T
 
 
@@ -95,7 +65,6 @@ def neighbor_pairs(state):
 
 def _build_topology(state):
     xp = state.device.xp
-    vn = state.vertex_neighbors.astype(xp.int64)
     vc = state.vertex_cells.astype(xp.int64)
     n = state.n_cells
     # the edge v -> vn[v, k] borders cells vc[v, k] and vc[v, k - 1]
@@ -104,23 +73,51 @@ def _build_topology(state):
     keep = lo != hi
     keys = xp.unique(lo[keep] * n + hi[keep])
     pairs = xp.stack((keys // n, keys % n), axis=1)
-    # per cell, its neighbours (CSR, both directions), for the GPU's per-cell kernel
-    both_i = xp.concatenate((pairs[:, 0], pairs[:, 1]))
-    both_j = xp.concatenate((pairs[:, 1], pairs[:, 0]))
-    order = xp.argsort(both_i * n + both_j)
-    start = xp.zeros(n + 1, dtype=xp.int64)
-    start[1:] = xp.cumsum(xp.bincount(both_i, minlength=n))
-    corner_cell = xp.ascontiguousarray(vc.T).reshape(-1)                  # slot-major corners
-    return dict(pairs=pairs, pair_replica=state.cell_replica[pairs[:, 0]],
-                start=start.astype(xp.int32), neighbors=both_j[order].astype(xp.int32),
-                both_i=both_i[order], both_j=both_j[order], corner_cell=corner_cell,
-                corner_next=xp.ascontiguousarray(vn.T).reshape(-1),
-                corner_apex=state.cell_vertices[:, 0].astype(xp.int64)[corner_cell],
-                corner_replica=xp.tile(state.vertex_replica, 3).reshape(3, -1))
+    # the NumPy path's pass over the pairs, one block per core: each block sums into whole-length arrays
+    offsets = n * xp.arange(3)[:, None]
+    pair_blocks = []
+    for k0, k1 in blocks(state, len(pairs), size=len(pairs)):
+        first, second = pairs[k0:k1, 0], pairs[k0:k1, 1]
+        pair_blocks.append(dict(both=xp.concatenate((first, second)), first=first, second=second,
+                                first_components=(first[None] + offsets).reshape(-1),
+                                second_components=(second[None] + offsets).reshape(-1)))
+    return dict(pairs=pairs, pair_blocks=pair_blocks)
 
 
 def _topology(state):
     return state.cached((Bending, "topology"), lambda: _build_topology(state), topology=True)
+
+
+def _cell_terms(state, B_cell, area_vector):
+    """Per cell, from the area vectors ``(n_cells, 3)``: the energy (half of each of its pairs) and
+    ``dE/da_c`` ``(3, n_cells)``, over the neighbour pairs, in blocks on all cores.
+
+    Each pair once: ``d = n_i - n_j``, ``E = B sum_pairs |d|^2 / 2``; ``dE/dn_i = B s_i`` with
+    ``s_i = sum_j (n_i - n_j)`` (``d`` added for i, subtracted for j), and through ``n = a/|a|``,
+    ``dE/da_i = B (I - n n^T) s_i / |a_i|``.
+    """
+    xp = state.device.xp
+    nc = state.n_cells
+    a = area_vector.T
+    norm = xp.sqrt(_dot(a, a))
+    n = a / norm
+
+    def pairs(b):
+        m = len(b["first"])
+        ends = xp.take(n, b["both"], axis=1)
+        d = ends[:, :m] - ends[:, m:]
+        squares = _dot(d, d)
+        return (xp.bincount(b["first"], weights=squares, minlength=nc) +
+                xp.bincount(b["second"], weights=squares, minlength=nc),
+                xp.bincount(b["first_components"], weights=d.reshape(-1), minlength=3 * nc) -
+                xp.bincount(b["second_components"], weights=d.reshape(-1), minlength=3 * nc))
+
+    parts = in_parallel(pairs, _topology(state)["pair_blocks"])
+    squares, s = parts[0]
+    for more in parts[1:]:
+        squares, s = squares + more[0], s + more[1]
+    s = s.reshape(3, nc)
+    return (0.25 * B_cell) * squares, (B_cell / norm) * (s - _dot(s, n) * n)
 
 
 class Bending(Force):
@@ -131,16 +128,16 @@ class Bending(Force):
     ``kP <A>``): a scalar, or one value per replica (length ``n_replicas``), finite and ``>= 0``.
 
     ``1 - n_i . n_j`` is evaluated as ``|n_i - n_j|^2 / 2`` (no cancellation for nearly parallel
-    normals). Forces are minus the gradient with respect to the vertex positions, projected on the
-    tangent plane of the surface. ``cell_energy`` gives each cell half of each of its pairs. On the
-    sphere, for small cells, ``1 - n_i . n_j ~ r_ij^2 / 2R^2`` with ``r_ij`` the geodesic distance
-    between the cells' centres. On a periodic plane every normal is ``(0, 0, 1)``: energy and forces
-    are zero.
+    normals). Forces are minus the surface gradient with respect to the vertex positions (the
+    surface's ``shape_gradient`` of ``dE/da_c``), tangent to the surface. ``cell_energy`` gives each
+    cell half of each of its pairs. On the sphere, for small cells, ``1 - n_i . n_j ~ r_ij^2 / 2R^2``
+    with ``r_ij`` the geodesic distance between the cells' centres. On a periodic plane every normal
+    is ``(0, 0, 1)``: energy and forces are zero.
     """
 
     narrowable = True
     gpu_surfaces = (Sphere,)
-    surface_needs = ("project_tangent",)
+    surface_needs = ("cell_geometry", "shape_gradient")
 
     def __init__(self, B=0.0, trigger=None):
         super().__init__(trigger)
@@ -169,8 +166,11 @@ class Bending(Force):
         self.B = saved
 
     def _device_B(self, state):
-        key = (self, "B", self.B.tobytes(), self.B.shape)
-        return state.cached(key, lambda: state.device.asarray(self.per_replica_B(state)))
+        """``B`` per replica and per cell on the state's device, cached for the State."""
+        def build():
+            B = state.device.asarray(self.per_replica_B(state))
+            return B, B[state.cell_replica]
+        return state.cached((self, "B", self.B.tobytes(), self.B.shape), build)
 
     def attach(self, simulation):
         super().attach(simulation)
@@ -180,56 +180,81 @@ class Bending(Force):
     def compute(self, state) -> ForceResult:
         return self.implementation("compute", state)(state)
 
+    def combined(self, other, state):
+        """With a :class:`VertexModel`: both forces from one pass over the corners (NumPy: one
+        ``cell_geometry`` with area vectors, one ``shape_gradient`` of both forces' terms; CUDA: the
+        vertex model's kernels with the bending terms fused in, bending.cu). None for other forces,
+        subclasses of VertexModel included (they may compute something else)."""
+        if type(other) is not VertexModel:
+            return None
+        return self.implementation("combined", state)(other, state)
+
     def _compute_cpu(self, state) -> ForceResult:
         xp = state.device.xp
-        B = self._device_B(state)
-        topo = _topology(state)
-        nc, nv = state.n_cells, state.n_vertices
-        P = _positions(state)
-        a = _area_vectors(state, P, topo)                                # (3, C)
-        norm = xp.sqrt(_dot(a, a))
-        n = a / norm
-        # every pair from both ends (CSR order): d = n_i - n_j
-        i, j = topo["both_i"], topo["both_j"]
-        d = xp.take(n, i, axis=1) - xp.take(n, j, axis=1)
-        Bc = B[state.cell_replica]
-        # E = B sum_pairs |n_i - n_j|^2 / 2; each cell takes half of each of its pairs
-        cell_energy = 0.25 * Bc * xp.bincount(i, weights=_dot(d, d), minlength=nc)
+        geometry = state.constraint.cell_geometry(state, area_vectors=True, metric=False)
+        cell_energy, d_area_vector = _cell_terms(state, self._device_B(state)[1], geometry.area_vector)
         energy = xp.bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)
-        # dE/dn_i = B sum_j (n_i - n_j); through n = a/|a|: g_i = (I - n n^T) dE/dn_i / |a_i|
-        sm = xp.stack([xp.bincount(i, weights=d[k], minlength=nc) for k in range(3)])
-        g = (Bc / norm) * (sm - _dot(sm, n) * n)
-        # a_c depends on its vertex v through (x_next - x_prev) x g_c / 2 per corner:
-        # in cell vc[v, k] the next vertex is vn[v, k], the previous vn[v, k + 1]
-        nxt = xp.take(P, topo["corner_next"], axis=1).reshape(3, 3, nv)
-        rel = _difference(state, nxt, P[:, None, :], topo["corner_replica"])
-        chord = rel - xp.roll(rel, -1, axis=1)
-        gc = xp.take(g, topo["corner_cell"], axis=1).reshape(3, 3, nv)
-        grad = 0.5 * _cross(chord, gc).sum(axis=1)                      # (3, V)
-        forces = -state.constraint.project_tangent(state.positions, xp.ascontiguousarray(grad.T))
+        forces = -state.constraint.shape_gradient(state, geometry, None, None, d_area_vector.T)
+        return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
+
+    def _combined_cpu(self, model, state) -> ForceResult:
+        xp = state.device.xp
+        geometry = state.constraint.cell_geometry(state, area_vectors=True)
+        cell_energy, d_area, d_perimeter = model.cell_terms(state, geometry)
+        bending_energy, d_area_vector = _cell_terms(state, self._device_B(state)[1], geometry.area_vector)
+        cell_energy = cell_energy + bending_energy
+        energy = xp.bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)
+        forces = -state.constraint.shape_gradient(state, geometry, d_area, d_perimeter, d_area_vector.T)
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
 
     def _compute_gpu(self, state) -> ForceResult:
         """Three kernels (bending.cu): area vectors and normals per cell; energy and dE/da per cell
         over its neighbours; forces per vertex over its three corners."""
         import cupy as cp
-        B = self._device_B(state)
-        topo = _topology(state)
         module = load_module(_KERNELS)
         nc, nv = state.n_cells, state.n_vertices
         normal, inv_area = cp.empty((nc, 3)), cp.empty(nc)
         launch(module.get_function("bending_cell_normals"), nc,
                (state.positions, state.cell_vertices, state.cell_sides, np.int32(nc), np.int32(state.max_sides),
                 normal, inv_area))
-        g, cell_energy = cp.empty((nc, 3)), cp.empty(nc)
-        energy = cp.zeros(state.n_replicas)
-        launch(module.get_function("bending_cell_terms"), nc,
-               (normal, inv_area, topo["start"], topo["neighbors"], state.cell_replica, B, np.int32(nc),
-                g, cell_energy, energy))
+        cell_energy, energy = cp.empty(nc), cp.zeros(state.n_replicas)
+        w = self._cell_terms_gpu(state, module, normal, inv_area, cell_energy, energy, "bending_cell_terms")
         forces = cp.empty_like(state.positions)
         launch(module.get_function("bending_vertex_forces"), nv,
-               (state.positions, state.vertex_neighbors, state.vertex_cells, np.int32(nv), g, forces))
+               (state.positions, state.vertex_neighbors, state.vertex_cells, np.int32(nv), w, forces))
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
+
+    def _combined_gpu(self, model, state) -> ForceResult:
+        """Three kernels where the vertex model alone has two: its cell kernel also writes the
+        normals, the bending cell kernel adds its energies to the vertex model's, and the vertex
+        model's vertex kernel adds the bending gradient before its tangent projection."""
+        import cupy as cp
+        kA, kP, A0, P0 = model.device_parameters(state)
+        module = load_module(_KERNELS)
+        nc, nv = state.n_cells, state.n_vertices
+        coef, cell_energy, energy = cp.empty((nc, 2)), cp.empty(nc), cp.zeros(state.n_replicas)
+        normal, inv_area = cp.empty((nc, 3)), cp.empty(nc)
+        launch(module.get_function("vm_bending_cell_geometry"), nc,
+               (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, state.radius,
+                np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, cell_energy, energy, normal, inv_area))
+        w = self._cell_terms_gpu(state, module, normal, inv_area, cell_energy, energy, "bending_cell_terms_add")
+        forces = cp.empty_like(state.positions)
+        launch(module.get_function("vm_bending_vertex_forces"), nv,
+               (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, state.radius,
+                np.int32(nv), coef, w, forces))
+        return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
+
+    def _cell_terms_gpu(self, state, module, normal, inv_area, cell_energy, energy, kernel):
+        """The per-cell kernel over the neighbours (found from the State's arrays: no table to rebuild
+        after T1 flips): energies into ``cell_energy`` and ``energy``; returns the per-cell vectors
+        the vertex kernels take (``dE/da / 2``, (n_cells, 3))."""
+        import cupy as cp
+        nc = state.n_cells
+        w = cp.empty((nc, 3))
+        launch(module.get_function(kernel), nc,
+               (normal, inv_area, state.cell_vertices, state.cell_sides, state.vertex_cells, np.int32(nc),
+                np.int32(state.max_sides), state.cell_replica, self._device_B(state)[0], w, cell_energy, energy))
+        return w
 
     @property
     def loggables(self):

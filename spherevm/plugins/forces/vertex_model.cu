@@ -1,72 +1,24 @@
-// Vertex-model energy and forces on the sphere: the CUDA path of vertex_model.py.
-#include "geometry/sphere.cuh"
-#include "device_common.cuh"
+// Vertex-model energy and forces: the CUDA path of vertex_model.py, compiled once per surface
+// (geometry/surface.cuh: the sphere, or the periodic plane with -DSVM_SURFACE_PLANE). The kernel
+// bodies are in vertex_model.cuh (bending.cu fuses its terms into the same bodies on the sphere).
+#include "plugins/forces/vertex_model.cuh"
 
-// One thread per cell: area (fan about the cell's first vertex a, each triangle (a, b, d) as
-// den + i num with num = (a - b).(b x d), den = 1 + b.d + a.(b + d), the area 2 arg of their
-// product: one atan2 per cell, valid below a hemisphere), perimeter, the cell's energy, the
-// per-replica energy sum, and the two coefficients the vertex kernel needs:
-// coef = (2 kA (A - A0) R^2, 2 kP (P - P0) R).
 extern "C" __global__ void vm_cell_geometry(
     const double* __restrict__ pos, const int* __restrict__ cell_vertices, const int* __restrict__ cell_sides,
-    const int* __restrict__ cell_replica, const double* __restrict__ radius, int n_cells, int max_sides,
+    const int* __restrict__ cell_replica, const double* __restrict__ size, int n_cells, int max_sides,
     const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
     const double* __restrict__ P0, double* __restrict__ coef, double* __restrict__ cell_energy,
     double* __restrict__ replica_energy)
 {
-    long c = (long)blockIdx.x * blockDim.x + threadIdx.x;
-    int rep = -1;
-    double e = 0.0;
-    if (c < n_cells) {
-        rep = cell_replica[c];
-        const int* row = cell_vertices + c * max_sides;
-        int n = cell_sides[c];
-        vec3 a = normalize3(load3(pos, row[0]));
-        vec3 b = a;
-        double P = 0.0, re = 1.0, im = 0.0;
-        for (int i = 0; i < n; ++i) {
-            vec3 d = i + 1 < n ? normalize3(load3(pos, row[i + 1])) : a;
-            edge_terms t = make_edge(b, d);
-            P += half_angle(t);
-            double num = dot3(a - b, t.x);
-            double den = 0.5 * t.q + dot3(a, b + d);
-            double r = re * den - im * num;
-            im = re * num + im * den;
-            re = r;
-            b = d;
-        }
-        double R = radius[rep];
-        double A = 2.0 * atan2(im, re) * (R * R);
-        P *= 2.0 * R;
-        double dA = A - A0[c], dP = P - P0[c];
-        e = kA[c] * dA * dA + kP[c] * dP * dP;
-        coef[2 * c] = 2.0 * kA[c] * dA * (R * R);
-        coef[2 * c + 1] = 2.0 * kP[c] * dP * R;
-        cell_energy[c] = e;
-    }
-    segmented_block_add(e, rep, replica_energy);
+    vm_cell_geometry_body(pos, cell_vertices, cell_sides, cell_replica, size, n_cells, max_sides, kA, kP, A0, P0,
+                          coef, cell_energy, replica_energy, NoExtra());
 }
 
-// One thread per vertex, no atomics: each of its three edges v -> n_j lies in cell j (slot j) and,
-// as n_j -> v, in cell j-1 (slot j+2 mod 3); minus the surface gradient of the energy,
-// sum_j (coefA[j-1] - coefA[j]) w(v, n_j) + (coefP[j] + coefP[j-1]) d theta_j / dv, as in
-// Sphere.shape_gradient.
 extern "C" __global__ void vm_vertex_forces(
     const double* __restrict__ pos, const int* __restrict__ vertex_neighbors, const int* __restrict__ vertex_cells,
-    int n_vertices, const double* __restrict__ coef, double* __restrict__ forces)
+    const int* __restrict__ vertex_replica, const double* __restrict__ size, int n_vertices,
+    const double* __restrict__ coef, double* __restrict__ forces)
 {
-    long v = (long)blockIdx.x * blockDim.x + threadIdx.x;
-    if (v >= n_vertices) return;
-    vec3 r = load3(pos, v);
-    double inv_rn = rsqrt(dot3(r, r));
-    vec3 u = inv_rn * r;
-    vec3 g = v3(0.0, 0.0, 0.0);
-    for (int j = 0; j < 3; ++j) {
-        int c_next = vertex_cells[3 * v + j], c_prev = vertex_cells[3 * v + (j + 2) % 3];
-        edge_terms t = make_edge(u, normalize3(load3(pos, vertex_neighbors[3 * v + j])));
-        g = g + (coef[2 * c_prev] - coef[2 * c_next]) * edge_area_term(t)
-              + (coef[2 * c_next + 1] + coef[2 * c_prev + 1]) * edge_length_term(t);
-    }
-    g = g - dot3(g, u) * u;
-    store3(forces, v, -(inv_rn * g));
+    vm_vertex_forces_body(pos, vertex_neighbors, vertex_cells, vertex_replica, size, n_vertices, coef, forces,
+                          NoExtra());
 }

@@ -5,9 +5,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ...constraints import Sphere
-from ...device import launch, load_module
-from ..base import Force, ForceResult
+from ...device import launch
+from ..base import KERNEL_SURFACES, Force, ForceResult, surface_kernels
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
@@ -102,12 +101,43 @@ class VertexModel(Force):
         if self._dimensionless is not None:
             self._dimensionless = tuple(follow(a) for a in self._dimensionless)
 
-    def _device_parameters(self, state):
-        """Per-cell parameters on the device, cached for the State they were made for."""
+    # Checkpoints: per-cell parameter arrays are state (they follow their cells through divisions
+    # and extrusions, so a grown tissue's arrays exist nowhere but here); scalars are the script's.
+    def _arrays(self):
+        """``{name: array}`` of every parameter, the dimensionless ones included."""
+        out = dict(kA=self.kA, kP=self.kP, A0=self.A0, P0=self.P0)
+        if self._dimensionless is not None:
+            out.update(zip(("kr", "p0", "a0"), self._dimensionless))
+        return out
+
+    def state_to_save(self) -> dict:
+        """The per-cell (1-D) parameters, in the State's cell order; scalar ones are not saved."""
+        return {name: np.array(a, copy=True) for name, a in self._arrays().items() if a.ndim == 1}
+
+    def restore_state(self, data: dict):
+        """Per-cell parameters come back from the checkpoint, replacing what the model was built with
+        (whose length fits the tissue before it grew); a parameter the script gives as a scalar stays
+        the script's."""
+        n = self._simulation.state.n_cells
+        arrays = self._arrays()
+        for name, saved in data.items():
+            if name not in arrays or arrays[name].ndim == 0:
+                continue
+            saved = np.asarray(saved, dtype=np.float64)
+            if saved.shape != (n,):
+                raise ValueError(f"VertexModel: saved per-cell {name!r} has shape {saved.shape}, but the State has "
+                                 f"{n} cells; the checkpoint belongs to another State")
+            arrays[name] = saved.copy()
+        self.kA, self.kP, self.A0, self.P0 = (arrays[k] for k in ("kA", "kP", "A0", "P0"))
+        if self._dimensionless is not None:
+            self._dimensionless = tuple(arrays[k] for k in ("kr", "p0", "a0"))
+
+    def device_parameters(self, state):
+        """Per-cell ``(kA, kP, A0, P0)`` on the device, cached for the State they were made for."""
         return state.cached((self, "parameters"), lambda: [state.device.asarray(np.ascontiguousarray(p))
                                                             for p in self.parameters(state)])
 
-    gpu_surfaces = (Sphere,)
+    gpu_surfaces = KERNEL_SURFACES
     surface_needs = ("cell_geometry", "shape_gradient", "total_area_np")
 
     def attach(self, simulation):
@@ -117,15 +147,20 @@ class VertexModel(Force):
     def compute(self, state) -> ForceResult:
         return self.implementation("compute", state)(state)
 
-    def _compute_cpu(self, state) -> ForceResult:
-        xp = state.device.xp
-        kA, kP, A0, P0 = self._device_parameters(state)
-        geometry = state.constraint.cell_geometry(state)
+    def cell_terms(self, state, geometry):
+        """Per cell, from the surface's ``cell_geometry``: the energy, ``dE/dA`` and ``dE/dP`` (what
+        ``shape_gradient`` turns into forces; a force fused with this one passes them on)."""
+        kA, kP, A0, P0 = self.device_parameters(state)
         dA_cell = geometry.area - A0
         dP_cell = geometry.perimeter - P0
-        cell_energy = kA * dA_cell ** 2 + kP * dP_cell ** 2
+        return kA * dA_cell ** 2 + kP * dP_cell ** 2, 2.0 * kA * dA_cell, 2.0 * kP * dP_cell
+
+    def _compute_cpu(self, state) -> ForceResult:
+        xp = state.device.xp
+        geometry = state.constraint.cell_geometry(state)
+        cell_energy, d_area, d_perimeter = self.cell_terms(state, geometry)
         energy = xp.bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)
-        forces = -state.constraint.shape_gradient(state, geometry, 2.0 * kA * dA_cell, 2.0 * kP * dP_cell)
+        forces = -state.constraint.shape_gradient(state, geometry, d_area, d_perimeter)
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
 
     def __repr__(self):
@@ -135,17 +170,19 @@ class VertexModel(Force):
         return f"VertexModel(kA={self.kA}, kP={self.kP}, A0={self.A0}, P0={self.P0})"
 
     def _compute_gpu(self, state) -> ForceResult:
-        """Two fused kernels (vertex_model.cu): cell geometry and energy, then vertex forces."""
+        """Two fused kernels (vertex_model.cu, compiled for the State's surface): cell geometry and
+        energy, then vertex forces."""
         import cupy as cp
-        kA, kP, A0, P0 = self._device_parameters(state)
-        module = load_module(_KERNELS)
+        kA, kP, A0, P0 = self.device_parameters(state)
+        module, size = surface_kernels(_KERNELS, state)
         nc, nv = state.n_cells, state.n_vertices
         coef, cell_energy = cp.empty((nc, 2)), cp.empty(nc)
         energy = cp.zeros(state.n_replicas)
         launch(module.get_function("vm_cell_geometry"), nc,
-               (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, state.radius,
+               (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, size,
                 np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, cell_energy, energy))
         forces = cp.empty_like(state.positions)
         launch(module.get_function("vm_vertex_forces"), nv,
-               (state.positions, state.vertex_neighbors, state.vertex_cells, np.int32(nv), coef, forces))
+               (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, size,
+                np.int32(nv), coef, forces))
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)

@@ -1,6 +1,6 @@
-// Brownian and active dynamics on the sphere: the CUDA path of brownian.py (same formulas and
-// the same Philox draws, spherevm/random_philox.cuh).
-#include "geometry/sphere.cuh"
+// Brownian and active dynamics: the CUDA path of brownian.py (same formulas and the same Philox
+// draws, spherevm/random_philox.cuh), compiled once per surface (geometry/surface.cuh).
+#include "geometry/surface.cuh"
 #include "random_philox.cuh"
 
 #define STREAM_BROWNIAN 0u
@@ -22,11 +22,11 @@ __device__ vec3 transport_and_rotate(vec3 d, vec3 m, double rot_amp, unsigned in
     return d;
 }
 
-// mode: 0 no self-propulsion, 1 cell directors, 2 vertex directors.
+// mode: 0 no self-propulsion, 1 cell directors, 2 vertex directors. size: the State's radius or box.
 // error: earliest (timestep << 32 | vertex) whose step was not finite or above max_step.
 extern "C" __global__ void brownian_move(
     double* __restrict__ pos, const double* __restrict__ forces, const int* __restrict__ vertex_replica,
-    const int* __restrict__ vertex_cells, const double* __restrict__ radius, const double* __restrict__ amp,
+    const int* __restrict__ vertex_cells, const double* __restrict__ size, const double* __restrict__ amp,
     const double* __restrict__ length_unit, double* __restrict__ directors, int mode, double mu, double dt,
     double v0, double rot_amp, double max_step, unsigned int seed, unsigned long long timestep, int n_vertices,
     unsigned long long* __restrict__ error)
@@ -35,7 +35,7 @@ extern "C" __global__ void brownian_move(
     if (i >= n_vertices) return;
     int r = vertex_replica[i];
     vec3 x = load3(pos, i);
-    vec3 n = normalize3(x);
+    vec3 n = Surface::normal(x);
     vec3 drift = mu * load3(forces, i);
     if (mode == 1) {
         vec3 p = load3(directors, vertex_cells[3 * i]) + load3(directors, vertex_cells[3 * i + 1]);
@@ -58,13 +58,13 @@ extern "C" __global__ void brownian_move(
         return;
     }
     vec3 y = x + dr;
-    vec3 m = normalize3(y);
-    store3(pos, i, radius[r] * m);
+    vec3 m = Surface::normal(y);
+    store3(pos, i, Surface::place(y, m, Surface::size(size, r)));
     if (mode == 2)
         store3(directors, i, transport_and_rotate(load3(directors, i), m, rot_amp, seed, timestep, (unsigned int)i));
 }
 
-// Cell directors after the move: transport to the tangent plane at the new cell centroid, rotate.
+// Cell directors after the move: transport to the tangent plane at the new cell centre, rotate.
 extern "C" __global__ void active_cell_directors(
     const double* __restrict__ pos, const int* __restrict__ cell_vertices, const int* __restrict__ cell_sides,
     double* __restrict__ directors, int n_cells, int max_sides, double rot_amp, unsigned int seed,
@@ -72,9 +72,6 @@ extern "C" __global__ void active_cell_directors(
 {
     long c = (long)blockIdx.x * blockDim.x + threadIdx.x;
     if (c >= n_cells) return;
-    const int* row = cell_vertices + c * max_sides;
-    vec3 sum = v3(0.0, 0.0, 0.0);
-    for (int k = 0; k < cell_sides[c]; ++k) sum = sum + normalize3(load3(pos, row[k]));
-    vec3 m = normalize3(sum);
+    vec3 m = Surface::cell_normal(pos, cell_vertices + c * max_sides, cell_sides[c]);
     store3(directors, c, transport_and_rotate(load3(directors, c), m, rot_amp, seed, timestep, (unsigned int)c));
 }

@@ -6,10 +6,9 @@ from pathlib import Path
 import numpy as np
 
 from ... import random as rng
-from ...constraints import Sphere
-from ...device import launch, load_module
+from ...device import launch
 from ...validation import non_negative, positive
-from ..base import Integrator, raise_flagged_step
+from ..base import KERNEL_SURFACES, Integrator, raise_flagged_step, surface_kernels
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
@@ -33,7 +32,7 @@ class Brownian(Integrator):
         self.mu = float(non_negative("mu", mu))
         self.max_step = positive("max_step", max_step)
 
-    gpu_surfaces = (Sphere,)
+    gpu_surfaces = KERNEL_SURFACES
     surface_needs = ("normal", "project_normal", "total_area_np")
 
     def attach(self, simulation):
@@ -69,17 +68,18 @@ class Brownian(Integrator):
         pass
 
     def _step_gpu(self, simulation, forces):
-        """One kernel per step (brownian.cu), plus one per cell for cell directors."""
+        """One kernel per step (brownian.cu, compiled for the State's surface), plus one per cell for
+        cell directors."""
         import cupy as cp
         state = simulation.state
         if getattr(self, "_error", None) is None:
             self._error = cp.full(1, np.iinfo(np.uint64).max, dtype=cp.uint64)
-        module = load_module(_KERNELS)
+        module, size = surface_kernels(_KERNELS, state)
         unit, amp = self._per_replica(state)
         directors = self.directors if self._mode else cp.zeros((1, 3))
         rot_amp = float(np.sqrt(2.0 * self.Dr * self.dt)) if self._mode else 0.0
         launch(module.get_function("brownian_move"), state.n_vertices,
-               (state.positions, forces, state.vertex_replica, state.vertex_cells, state.radius, amp, unit,
+               (state.positions, forces, state.vertex_replica, state.vertex_cells, size, amp, unit,
                 directors, np.int32(self._mode), np.float64(self.mu), np.float64(self.dt),
                 np.float64(getattr(self, "v0", 0.0)), np.float64(rot_amp), np.float64(self.max_step),
                 np.uint32(simulation.seed), np.uint64(simulation.timestep), np.int32(state.n_vertices),
@@ -124,6 +124,15 @@ class Brownian(Integrator):
         return f"{type(self).__name__}(dt={self.dt}, T={self.T}, mu={self.mu})"
 
 
+def _tangent_directions(normal, angle):
+    """Unit tangent vectors at the unit normals ``normal`` (NumPy, (n, 3)), at ``angle`` from the
+    tangent basis ``e1 = n x (x or y), e2 = n x e1``."""
+    e1 = np.cross(normal, np.where(np.abs(normal[:, [0]]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
+    e1 /= np.linalg.norm(e1, axis=1)[:, None]
+    e2 = np.cross(normal, e1)
+    return np.cos(angle)[:, None] * e1 + np.sin(angle)[:, None] * e2
+
+
 class Active(Brownian):
     """Self-propelled vertex-model dynamics: velocity ``mu F + v0 p`` plus optional noise T.
 
@@ -137,6 +146,14 @@ class Active(Brownian):
     move, each director is projected on the tangent plane at its new base point (the cell centroid
     or the vertex) and renormalised; this is parallel transport to first order in the step.
     Initial directors are uniform random angles in the tangent plane (stream 2, timestep 0).
+
+    Growth (Division, Extrusion): directors follow their cells or vertices (:meth:`resized`). At
+    a division the mother keeps her director and the daughter draws a new one, a uniform angle in
+    the tangent plane at her centre, as cellGPU's active cells do (``Simple2DActiveCell::
+    cellDivision``: the new cell inherits the motility, its director is random). The draw is
+    Philox stream 3 (division), draw 2, counted by (timestep, the mother's index before the
+    division). With vertex directors the two vertices a division creates draw theirs (stream 4,
+    counted by (timestep, new vertex index)); a T2's merged vertex keeps its own.
     """
 
     def __init__(self, dt, v0, Dr, mu=1.0, T=0.0, directors="cell", max_step=0.5):
@@ -152,23 +169,37 @@ class Active(Brownian):
     checkpoint_fields = ("directors",)   # a restart takes them back instead of drawing new ones
 
     def _bases(self, state):
-        """Unit normals at the directors' base points: cell centroids or vertices."""
+        """Unit normals at the directors' base points: cell centres or vertices."""
         con = state.constraint
         if self.mode == "cell":
-            return con.cell_centers(state)
+            return con.cell_normals(state)
         return con.normal(state.positions)
 
     def attach(self, simulation):
         super().attach(simulation)
         state = simulation.state
-        xp = state.device.xp
         normal = state.device.to_numpy(self._bases(state))
         n = len(normal)
         angle = rng.TWO_PI * rng.uniform(simulation.seed, rng.STREAM_DIRECTOR_INIT, 0, np.arange(n), 1)[:, 0]
-        e1 = np.cross(normal, np.where(np.abs(normal[:, [0]]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
-        e1 /= np.linalg.norm(e1, axis=1)[:, None]
-        e2 = np.cross(normal, e1)
-        self.directors = xp.asarray(np.cos(angle)[:, None] * e1 + np.sin(angle)[:, None] * e2)
+        self.directors = state.device.asarray(_tangent_directions(normal, angle))
+
+    def resized(self, change):
+        """Directors follow their cells (or vertices); a daughter cell (a created vertex) draws a
+        new one, see the class docstring."""
+        sim = self._simulation
+        state = sim.state
+        if self.mode == "cell":
+            source, born = change.cell_source, np.flatnonzero(change.new_cells)
+            stream, ids, draw = rng.STREAM_DIVISION, source[born], 2
+        else:
+            source, born = change.vertex_source, np.flatnonzero(change.vertex_source < 0)
+            stream, ids, draw = rng.STREAM_VERTEX_BIRTH, born, 0
+        dev = state.device
+        self.directors = self.directors[dev.asarray(np.maximum(source, 0))]
+        if len(born):
+            angle = rng.TWO_PI * rng.uniform(sim.seed, stream, sim.timestep, ids, draw + 1)[:, draw]
+            normal = dev.to_numpy(self._bases(state)[dev.asarray(born)])
+            self.directors[dev.asarray(born)] = dev.asarray(_tangent_directions(normal, angle))
 
     def _drift(self, simulation, forces):
         state = simulation.state

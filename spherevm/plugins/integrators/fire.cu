@@ -1,5 +1,6 @@
-// FIRE on the sphere: the CUDA path of fire.py (same update, per-replica control).
-#include "geometry/sphere.cuh"
+// FIRE: the CUDA path of fire.py (same update, per-replica control), compiled once per surface
+// (geometry/surface.cuh).
+#include "geometry/surface.cuh"
 #include "device_common.cuh"
 
 // Per vertex: F.v, v.v, F.F summed per replica.
@@ -52,10 +53,11 @@ extern "C" __global__ void fire_control(
 
 // Per vertex: mix, semi-implicit Euler, P_N re-projection and P_T velocity transport.
 // error: earliest (timestep << 32 | vertex) whose move |h w| was not finite or above
-// max_step * length_unit[r] (sqrt(<A>)); that vertex is left unmoved, check() raises.
+// max_step * length_unit[r] (sqrt(<A>)); that vertex is left unmoved, check() raises. size: the
+// State's radius or box.
 extern "C" __global__ void fire_move(
     double* __restrict__ pos, double* __restrict__ vel, const double* __restrict__ forces,
-    const int* __restrict__ vertex_replica, const double* __restrict__ radius, const bool* __restrict__ active,
+    const int* __restrict__ vertex_replica, const double* __restrict__ size, const bool* __restrict__ active,
     const double* __restrict__ keep, const double* __restrict__ scale, const double* __restrict__ step,
     int n_vertices, const double* __restrict__ length_unit, double max_step, unsigned long long timestep,
     unsigned long long* __restrict__ error)
@@ -74,8 +76,8 @@ extern "C" __global__ void fire_move(
         return;
     }
     vec3 x = load3(pos, i) + h * w;
-    vec3 n = normalize3(x);
-    x = radius[r] * n;
+    vec3 n = Surface::normal(x);
+    x = Surface::place(x, n, Surface::size(size, r));
     w = w - dot3(w, n) * n;
     store3(pos, i, x);
     store3(vel, i, w);

@@ -5,10 +5,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...constraints import Sphere
-from ...device import launch, load_module
+from ...device import launch
 from ...validation import integer, positive
-from ..base import Minimizer, raise_flagged_step
+from ..base import KERNEL_SURFACES, Minimizer, raise_flagged_step, surface_kernels
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
@@ -25,12 +24,14 @@ class FIRE(Minimizer):
     3. semi-implicit Euler: ``v <- v + dt F``, ``x <- P_N(x + dt v)``, then ``v <- P_T(x, v)``
        carries the velocity into the new tangent plane.
 
-    Defaults are Bitzek's: ``dt_max = 10 dt``, ``n_min = 5``, ``f_inc = 1.1``, ``f_dec = 0.5``,
-    ``alpha_start = 0.1``, ``f_alpha = 0.99``. Convergence (``force_tol``, ``energy_tol``,
-    ``check_every``) is per replica, see :class:`spherevm.plugins.base.Minimizer`: replicas that
-    have stopped do not move, and their dt, alpha and counter stay as they were. The tolerances are
-    in each replica's natural units (force ``kP sqrt(<A>)``, energy per cell ``kP <A>`` for the
-    vertex model), on both devices (the check reads back the largest force per replica).
+    ``dt = 0.02`` is the step the docs, the CLI and the sweeps use (measured fastest on the
+    rigidity protocol, docs/rigidity.md). The other defaults are Bitzek's: ``dt_max = 10 dt``,
+    ``n_min = 5``, ``f_inc = 1.1``, ``f_dec = 0.5``, ``alpha_start = 0.1``, ``f_alpha = 0.99``.
+    Convergence (``force_tol``, ``energy_tol``, ``check_every``) is per replica, see
+    :class:`spherevm.plugins.base.Minimizer`: replicas that have stopped do not move, and their dt,
+    alpha and counter stay as they were. The tolerances are in each replica's natural units (force
+    ``kP sqrt(<A>)``, energy per cell ``kP <A>`` for the vertex model), on both devices (the check
+    reads back the largest force per replica).
 
     ``max_step`` (units of sqrt(<A>) of the replica; default 1, a cell size, because FIRE with
     dt_max = 10 dt takes legitimate steps of half a cell on a raw tiling) guards against exploding
@@ -41,10 +42,10 @@ class FIRE(Minimizer):
     written.
     """
 
-    gpu_surfaces = (Sphere,)
+    gpu_surfaces = KERNEL_SURFACES
     surface_needs = ("normal", "project_normal")
 
-    def __init__(self, dt=0.01, dt_max=None, n_min=5, f_inc=1.1, f_dec=0.5, alpha_start=0.1, f_alpha=0.99,
+    def __init__(self, dt=0.02, dt_max=None, n_min=5, f_inc=1.1, f_dec=0.5, alpha_start=0.1, f_alpha=0.99,
                  force_tol=1e-10, energy_tol=1e-20, check_every=10, max_step=1.0):
         super().__init__(force_tol=force_tol, energy_tol=energy_tol, check_every=check_every)
         self.max_step = positive("max_step", max_step)
@@ -100,7 +101,10 @@ class FIRE(Minimizer):
         self.velocities[vertices[vertices >= 0]] = 0.0
 
     def _reset_vertices_gpu(self, vertices):
-        launch(load_module(_KERNELS).get_function("fire_reset_vertices"), len(vertices),
+        import cupy as cp
+        vertices = cp.asarray(vertices, dtype=cp.int32)      # the kernel reads int (T1 passes int32 already)
+        module = surface_kernels(_KERNELS, self._simulation.state)[0]
+        launch(module.get_function("fire_reset_vertices"), len(vertices),
                (self.velocities, vertices, np.int32(len(vertices))))
 
     def move(self, simulation, forces):
@@ -176,10 +180,11 @@ class FIRE(Minimizer):
             f"max_step={self.max_step} sqrt(<A>) or became NaN; reduce dt (now {self.dt}) or check the forces"))
 
     def _move_gpu(self, simulation, forces):
-        """Three kernels (fire.cu): per-replica sums, per-replica control, per-vertex move."""
+        """Three kernels (fire.cu, compiled for the State's surface): per-replica sums, per-replica
+        control, per-vertex move."""
         import cupy as cp
         state = simulation.state
-        module = load_module(_KERNELS)
+        module, size = surface_kernels(_KERNELS, state)
         nv, nr = state.n_vertices, state.n_replicas
         active = self.active_on_device()
         sums = cp.zeros((3, nr))
@@ -194,7 +199,7 @@ class FIRE(Minimizer):
         if getattr(self, "_error", None) is None:
             self._error = cp.full(1, np.iinfo(np.uint64).max, dtype=cp.uint64)
         launch(module.get_function("fire_move"), nv,
-               (state.positions, self.velocities, forces, state.vertex_replica, state.radius, active,
+               (state.positions, self.velocities, forces, state.vertex_replica, size, active,
                 keep, scale, step, np.int32(nv), self._length_unit(state), np.float64(self.max_step),
                 np.uint64(simulation.timestep), self._error))
         simulation.state_changed()

@@ -1,14 +1,26 @@
-"""Cell division: chosen cells are cut in two through their centre (see docs/growth.md)."""
+"""Cell division: chosen cells are cut in two through their centre (see docs/growth.md).
+
+Both devices run the same table surgery on the host (:mod:`spherevm.growth`): divisions are rare
+events, so on the steps they happen the few arrays needed come to the host, the network is edited
+there and the State is refilled on the device (``State.resize``, with capacity); every operation's
+per-cell and per-vertex data follows through ``Operation.resized``. On the other steps a pass costs
+one small read-back on the GPU (the rate rule's Philox draws and the area rule's comparison run on
+the device; only the ids of the chosen cells, usually none, come back).
+"""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
 from ... import growth
 from ... import random as rng
+from ...device import launch, load_module
 from ...validation import integer
 from ..base import Updater
+
+_KERNELS = Path(__file__).with_suffix(".cu")
 
 
 def _rate(name, value):
@@ -22,11 +34,29 @@ def _rate(name, value):
     return v
 
 
-def cpu_only(op, simulation):
-    """Refuse a State on the GPU: the table surgery runs on the host only (for now)."""
-    if simulation.state.device.is_gpu:
-        raise ValueError(f"{type(op).__name__} runs on the CPU only for now (it changes the numbers of cells and "
-                         "vertices on the host); use Simulation(device='cpu')")
+def by_area(state, threshold, above):
+    """Global ids of the cells whose area is above (``above``) or below ``threshold`` times their
+    replica's <A>, the farthest from it first. Compared on the State's device; only the chosen
+    ids (and their ratios) come back to the host."""
+    dev = state.device
+    xp = dev.xp
+    ratio = state.constraint.cell_geometry(state).area / xp.asarray(state.mean_cell_area)[state.cell_replica]
+    cells = dev.to_numpy(xp.flatnonzero(ratio > threshold if above else ratio < threshold))
+    if len(cells) == 0:
+        return cells.astype(np.int64)
+    r = dev.to_numpy(ratio[xp.asarray(cells)])
+    return cells[np.argsort(-r if above else r, kind="stable")].astype(np.int64)
+
+
+def tally(outcome, rep, reasons, refusals):
+    """Per replica, the successes among ``outcome`` (a string is a refusal reason); adds the
+    refusals to ``refusals`` (n_replicas, len(reasons)) in place."""
+    n = len(refusals)
+    for k, reason in enumerate(reasons):
+        hit = np.array([o == reason for o in outcome], dtype=bool)
+        refusals[:, k] += np.bincount(rep[hit], minlength=n)
+    done = np.array([not isinstance(o, str) for o in outcome], dtype=bool)
+    return np.bincount(rep[done], minlength=n).astype(np.int64)
 
 
 def follow(simulation, change):
@@ -73,14 +103,21 @@ class Division(Updater):
     divide: smallest draw, largest area, or the callable's order). Only replicas the integrator
     still moves (``integrator.active``) divide. Refusals (see :mod:`spherevm.growth`) are counted
     per replica and reason in ``refused``; ``lineage`` (one per cell, initially the cell's index at
-    attach) is inherited by daughters. Not narrowable: ``Simulation.minimize`` steps the whole
-    State while a Division is attached. CPU only for now.
+    attach) is inherited by daughters.
+
+    Sits minimisations out (``in_minimize = False``): ``Simulation.minimize`` quenches the tissue
+    at its N, and the time it takes does not count for the rate rule. Both devices: the GPU path
+    edits on the host on the steps cells divide (see the module's docstring) and chooses the same
+    cells as the CPU (the same Philox draws).
     """
 
-    narrowable = False
-    gpu_surfaces = ()
+    narrowable = True
+    in_minimize = False
+    gpu_surfaces = None           # the surgery runs on the host for every surface
     surface_needs = ("normal", "project_normal", "cell_geometry", "total_area_np")
     per_cell = ("lineage",)
+    per_replica = ("last_divisions", "total_divisions", "refusals")
+    checkpoint_fields = ("lineage",) + per_replica
 
     def __init__(self, rule="rate", rate=None, area_threshold=None, axis="hertwig", max_cells=None, dt=None,
                  trigger=1):
@@ -104,13 +141,30 @@ class Division(Updater):
 
     def attach(self, simulation):
         super().attach(simulation)
-        cpu_only(self, simulation)
         state = simulation.state
         n = state.n_replicas
+        self._rate_cells = self.implementation("rate_cells", state)
         self.lineage = np.arange(state.n_cells, dtype=np.int64)
         self.last_divisions = np.zeros(n, np.int64)
         self.total_divisions = np.zeros(n, np.int64)
-        self.refused = {reason: np.zeros(n, np.int64) for reason in growth.DIVISION_REASONS}
+        self.refusals = np.zeros((n, len(growth.DIVISION_REASONS)), np.int64)
+        self._last = simulation.timestep
+
+    @property
+    def refused(self):
+        """Refusals per reason (``growth.DIVISION_REASONS``), each per replica."""
+        return {reason: self.refusals[:, k] for k, reason in enumerate(growth.DIVISION_REASONS)}
+
+    def state_to_save(self) -> dict:
+        """Lineage, counters, refusals and the rate rule's clock (the timestep of the last pass)."""
+        return dict(super().state_to_save(), clock=np.array([self._last], dtype=np.int64))
+
+    def restore_state(self, data: dict):
+        super().restore_state(data)
+        self._last = int(np.asarray(data["clock"]).reshape(-1)[0])
+
+    def after_minimize(self, simulation):
+        """The minimisation's iterations are not time for the rate rule."""
         self._last = simulation.timestep
 
     # ------------------------------------------------------------------ choosing
@@ -128,15 +182,29 @@ class Division(Updater):
                 raise IndexError(f"rule returned cell ids outside 0..{state.n_cells - 1}")
             return np.unique(cells) if len(np.unique(cells)) != len(cells) else cells
         if self.rule == "area":
-            area = state.constraint.cell_areas_np(state)
-            ratio = area / state.mean_cell_area[state.cell_replica_np()]
-            cells = np.flatnonzero(ratio > self.area_threshold)
-            return cells[np.argsort(-ratio[cells], kind="stable")]
+            return by_area(state, self.area_threshold, above=True)
         steps = max(timestep - self._last, 1)
         p = -math.expm1(-self.rate * steps * self._time_step(simulation))
-        u = self._draws(simulation, timestep, np.arange(state.n_cells))[:, 0]
-        cells = np.flatnonzero(u < p)
-        return cells[np.argsort(u[cells], kind="stable")]
+        if not p > 0:
+            return np.zeros(0, np.int64)
+        cells = self._rate_cells(simulation, timestep, p)
+        u = self._draws(simulation, timestep, cells)[:, 0]
+        return cells[np.argsort(u, kind="stable")]
+
+    def _rate_cells_cpu(self, simulation, timestep, p):
+        """Cells whose draw 0 is below ``p``, in index order."""
+        u = self._draws(simulation, timestep, np.arange(simulation.state.n_cells))[:, 0]
+        return np.flatnonzero(u < p)
+
+    def _rate_cells_gpu(self, simulation, timestep, p):
+        """The same cells, drawn on the device (bitwise the same uniforms, division.cu); one
+        read-back of their ids."""
+        import cupy as cp
+        n = simulation.state.n_cells
+        chosen = cp.empty(n, dtype=cp.uint8)
+        launch(load_module(_KERNELS).get_function("division_draws"), n,
+               (np.uint32(simulation.seed), np.uint64(timestep), np.int32(n), np.float64(p), chosen))
+        return cp.flatnonzero(chosen).get().astype(np.int64)
 
     @staticmethod
     def _draws(simulation, timestep, cells):
@@ -176,11 +244,7 @@ class Division(Updater):
             else:
                 m = editor.long_axis(c)
             outcome.append(editor.divide(c, m))
-        done = np.array([not isinstance(o, str) for o in outcome])
-        for reason in growth.DIVISION_REASONS:
-            hit = np.array([o == reason for o in outcome], dtype=bool)
-            self.refused[reason] += np.bincount(rep[hit], minlength=n)
-        self.last_divisions = np.bincount(rep[done], minlength=n).astype(np.int64)
+        self.last_divisions = tally(outcome, rep, growth.DIVISION_REASONS, self.refusals)
         self.total_divisions += self.last_divisions
         follow(simulation, growth.apply(state, editor))
 
@@ -189,7 +253,7 @@ class Division(Updater):
         return {
             "division_last": lambda sim: self.last_divisions.copy(),
             "division_total": lambda sim: self.total_divisions.copy(),
-            "division_refused": lambda sim: sum(self.refused.values()),
+            "division_refused": lambda sim: self.refusals.sum(axis=1),
             "division_lineages": lambda sim: np.array([len(np.unique(self.lineage[a:b])) for a, b in
                                                        zip(sim.state.cell_start[:-1], sim.state.cell_start[1:])]),
         }

@@ -5,7 +5,7 @@ import numpy as np
 
 from ... import growth
 from ..base import Updater
-from .division import _rate, active_cells, cpu_only, follow
+from .division import _rate, active_cells, by_area, follow, tally
 
 
 class Extrusion(Updater):
@@ -20,12 +20,16 @@ class Extrusion(Updater):
     three-sided neighbour or neighbours that are not three distinct cells (``"neighbours"``: a
     two-sided cell would result) and one whose removal would fold a neighbour (``"fold"``).
     Counters per replica: ``last_extrusions``, ``total_extrusions``, ``refused[reason]``. Only
-    replicas the integrator still moves are touched. Not narrowable; CPU only for now.
+    replicas the integrator still moves are touched. Sits minimisations out, and runs on both
+    devices, as :class:`~spherevm.plugins.updaters.Division` does.
     """
 
-    narrowable = False
-    gpu_surfaces = ()
+    narrowable = True
+    in_minimize = False
+    gpu_surfaces = None
     surface_needs = ("normal", "project_normal", "cell_geometry", "total_area_np")
+    per_replica = ("last_extrusions", "total_extrusions", "refusals")
+    checkpoint_fields = per_replica
 
     def __init__(self, rule="area", area_threshold=None, trigger=1):
         super().__init__(trigger)
@@ -39,11 +43,15 @@ class Extrusion(Updater):
 
     def attach(self, simulation):
         super().attach(simulation)
-        cpu_only(self, simulation)
         n = simulation.state.n_replicas
         self.last_extrusions = np.zeros(n, np.int64)
         self.total_extrusions = np.zeros(n, np.int64)
-        self.refused = {reason: np.zeros(n, np.int64) for reason in growth.EXTRUSION_REASONS}
+        self.refusals = np.zeros((n, len(growth.EXTRUSION_REASONS)), np.int64)
+
+    @property
+    def refused(self):
+        """Refusals per reason (``growth.EXTRUSION_REASONS``), each per replica."""
+        return {reason: self.refusals[:, k] for k, reason in enumerate(growth.EXTRUSION_REASONS)}
 
     def choose(self, simulation):
         """Global ids of the cells to remove now (smallest area first for the area rule)."""
@@ -54,10 +62,7 @@ class Extrusion(Updater):
                 raise IndexError(f"rule returned cell ids outside 0..{state.n_cells - 1}")
             _, first = np.unique(cells, return_index=True)
             return cells[np.sort(first)]
-        area = state.constraint.cell_areas_np(state)
-        ratio = area / state.mean_cell_area[state.cell_replica_np()]
-        cells = np.flatnonzero(ratio < self.area_threshold)
-        return cells[np.argsort(ratio[cells], kind="stable")]
+        return by_area(state, self.area_threshold, above=False)
 
     def update(self, simulation, timestep):
         state = simulation.state
@@ -69,11 +74,7 @@ class Extrusion(Updater):
         rep = state.cell_replica_np()[cells]
         editor = growth.Editor(state)
         outcome = [editor.extrude(c) for c in cells.tolist()]
-        for reason in growth.EXTRUSION_REASONS:
-            hit = np.array([o == reason for o in outcome], dtype=bool)
-            self.refused[reason] += np.bincount(rep[hit], minlength=n)
-        done = np.array([not isinstance(o, str) for o in outcome])
-        self.last_extrusions = np.bincount(rep[done], minlength=n).astype(np.int64)
+        self.last_extrusions = tally(outcome, rep, growth.EXTRUSION_REASONS, self.refusals)
         self.total_extrusions += self.last_extrusions
         follow(simulation, growth.apply(state, editor))
 
@@ -81,7 +82,7 @@ class Extrusion(Updater):
     def loggables(self):
         return {"extrusion_last": lambda sim: self.last_extrusions.copy(),
                 "extrusion_total": lambda sim: self.total_extrusions.copy(),
-                "extrusion_refused": lambda sim: sum(self.refused.values())}
+                "extrusion_refused": lambda sim: self.refusals.sum(axis=1)}
 
     def __repr__(self):
         rule = self.rule if not callable(self.rule) else getattr(self.rule, "__name__", "callable")

@@ -21,11 +21,14 @@ class RadiusSchedule(Updater):
       ``simulation.state.cells_per_replica`` or of anything else.
 
     Put it after the updaters that change N (Division, Extrusion) so the new N is seen in the same
-    step. Sphere only. Narrowable (it keeps one ``area`` per replica).
+    step. Sphere only, both devices (a pass compares on the host with the radius last set, so a
+    step with no change costs no transfer). Sits minimisations out, as Division does. Narrowable
+    (it keeps one ``area`` per replica).
     """
 
     narrowable = True
-    per_replica = ("area",)
+    in_minimize = False
+    per_replica = ("area", "counts")
     surface_needs = ("total_area_np",)
 
     def __init__(self, mode="constant_area", area=None, trigger=1):
@@ -45,6 +48,23 @@ class RadiusSchedule(Updater):
         state = simulation.state
         self.area = (np.full(state.n_replicas, self._area) if self._area is not None
                      else np.array(state.mean_cell_area, dtype=np.float64))
+        self.counts = np.full(state.n_replicas, -1, dtype=np.int64)   # N at the last "constant_area" pass
+
+    def state_to_save(self) -> dict:
+        """The target <A> per replica and the cell counts of the last "constant_area" pass."""
+        return {"area": self.area.copy(), "counts": self.counts.copy()}
+
+    def restore_state(self, data: dict):
+        """``counts`` always; ``area`` unless the script gives one (the default, each replica's <A> at
+        the first attach, is state: after growth the <A> of the restored sphere is only rounded)."""
+        n = self._simulation.state.n_replicas
+        for name in ("area", "counts"):
+            if np.asarray(data[name]).shape != (n,):
+                raise ValueError(f"RadiusSchedule: saved {name!r} has shape {np.shape(data[name])}, but the State "
+                                 f"has {n} replicas")
+        self.counts = np.asarray(data["counts"], dtype=np.int64).copy()
+        if self._area is None:
+            self.area = np.asarray(data["area"], dtype=np.float64).copy()
 
     def target(self, simulation):
         """The radius each replica should have now (NumPy, per replica)."""
@@ -60,6 +80,10 @@ class RadiusSchedule(Updater):
 
     def update(self, simulation, timestep):
         state = simulation.state
+        if self.mode == "constant_area":      # R is a function of N: nothing to do (not even a rounding
+            if np.array_equal(self.counts, state.cells_per_replica):     # of R) until N changes
+                return
+            self.counts = state.cells_per_replica.copy()
         old, new = state.radius_np(), self.target(simulation)
         if np.array_equal(old, new):
             return

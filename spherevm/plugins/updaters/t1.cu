@@ -2,20 +2,22 @@
 // A pass is two kernels: t1_detect (one thread per vertex, its edges to higher-numbered
 // neighbours) lists the candidates and lets each claim its four cells (lowest edge index wins);
 // after one small read-back of the counters, t1_apply (one thread per candidate) flips the
-// winners. Winners touch disjoint cells and vertices, so they need no locks. A candidate whose flip
-// would fold the network (t1_fold.cuh) is refused in t1_detect, as one losing a triangle's side.
-#include "geometry/sphere.cuh"
+// winners. Winners touch disjoint cells and vertices, so they need no locks. Compiled once per
+// surface (geometry/surface.cuh): the short-edge test and the new positions are the surface's. A
+// candidate whose flip would fold the network (t1_fold.cuh) is refused in t1_detect, as one
+// losing a triangle's side.
+#include "geometry/surface.cuh"
 #include "plugins/updaters/t1_fold.cuh"
 
 #define CAND_INTS 12   // u, k, v, a, b, c, d, C1, C2, C3, C4, replica
 #define LOG_INTS 6     // pass, C1, C2, C3, C4, replica
 
-// counters: [0] candidates, [1] a C3/C4 row is full (widen the table)
+// counters: [0] candidates, [1] a C3/C4 row is full (widen the table). size: the State's radius or box.
 // new_length[r] > 0: absolute new length per replica; else length_factor times the old length.
 extern "C" __global__ void t1_detect(
     const double* __restrict__ pos, const int* __restrict__ vn, const int* __restrict__ vc,
     const int* __restrict__ sides, const int* __restrict__ cell_vertices, const int* __restrict__ vertex_replica,
-    const double* __restrict__ radius, const double* __restrict__ chord2, const double* __restrict__ new_length,
+    const double* __restrict__ size, const double* __restrict__ chord2, const double* __restrict__ new_length,
     double length_factor, const bool* __restrict__ active, int n_vertices, int max_sides,
     int* __restrict__ claim, int* __restrict__ refused, unsigned long long* __restrict__ total_refused,
     int* __restrict__ counters, int* __restrict__ cand, double* __restrict__ cand_len, int capacity)
@@ -24,14 +26,14 @@ extern "C" __global__ void t1_detect(
     if (u >= n_vertices) return;
     int r = vertex_replica[u];
     if (!active[r]) return;
+    Surface::Size s = Surface::size(size, r);
     vec3 pu = load3(pos, u);
     for (int k = 0; k < 3; ++k) {
         int v = vn[3 * u + k];
         if (v <= u) continue;
         vec3 pv = load3(pos, v);
-        vec3 chord = pu - pv;
-        if (!(dot3(chord, chord) < chord2[r])) continue;   // chord test: no trigonometry for the many long edges
-        double L = radius[r] * geodesic_length(normalize3(pu), normalize3(pv));
+        if (!(Surface::chord2(pu, pv, s) < chord2[r])) continue;   // chord test: no trigonometry for the many long edges
+        double L = Surface::edge_length(pu, pv, s);
         int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
         int a = vn[3 * u + k1], b = vn[3 * u + k2];
         int C1 = vc[3 * u + k], C3 = vc[3 * u + k1], C2 = vc[3 * u + k2];
@@ -43,9 +45,9 @@ extern "C" __global__ void t1_detect(
         if (!refuse) {
             vec3 px, py;
             double full = new_length[r] > 0.0 ? new_length[r] : length_factor * L;
-            t1_new_positions(pu, pv, load3(pos, a), load3(pos, b), load3(pos, c), load3(pos, d), radius[r], full,
-                             &px, &py);
-            refuse = t1_would_fold(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px, py);
+            Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py);
+            refuse = t1_would_fold(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px,
+                                   py, s);
         }
         if (refuse) {
             atomicAdd(refused + r, 1);
@@ -94,7 +96,7 @@ __device__ void split_in_row(int* row, int* n, int x, int first, int second) {
 extern "C" __global__ void t1_apply(
     double* __restrict__ pos, int* __restrict__ vn, int* __restrict__ vc, int* __restrict__ cell_vertices,
     int* __restrict__ sides, const int* __restrict__ claim, const int* __restrict__ cand,
-    const double* __restrict__ cand_len, int n_cand, int max_sides, const double* __restrict__ radius,
+    const double* __restrict__ cand_len, int n_cand, int max_sides, const double* __restrict__ size,
     const double* __restrict__ new_length, double length_factor, int* __restrict__ flips,
     unsigned long long* __restrict__ total_flips, int* __restrict__ moved, int* __restrict__ log_count,
     int* __restrict__ log, int pass_id)
@@ -121,17 +123,18 @@ extern "C" __global__ void t1_apply(
     n = sides[C2]; remove_from_row(cell_vertices + (long)C2 * max_sides, &n, X); sides[C2] = n;
     n = sides[C3]; split_in_row(cell_vertices + (long)C3 * max_sides, &n, u, Y, X); sides[C3] = n;
     n = sides[C4]; split_in_row(cell_vertices + (long)C4 * max_sides, &n, v, X, Y); sides[C4] = n;
-    // geometry: rotate the edge about the normal at its midpoint (the places t1_detect checked)
-    vec3 px, py;
+    // geometry: the edge turned by 90 degrees about the normal at its midpoint (Surface::t1_positions),
+    // the places t1_detect checked
     double full = new_length[r] > 0.0 ? new_length[r] : length_factor * cand_len[i];
-    t1_new_positions(load3(pos, u), load3(pos, v), load3(pos, a), load3(pos, b), load3(pos, c), load3(pos, d),
-                     radius[r], full, &px, &py);
+    vec3 px, py;
+    Surface::t1_positions(pos, u, v, a, b, c, d, Surface::size(size, r), full, &px, &py);
     store3(pos, X, px);
     store3(pos, Y, py);
     atomicAdd(flips + r, 1);
     atomicAdd(total_flips + r, 1ull);
     moved[2 * i] = u;              // for Integrator.reset_vertices
     moved[2 * i + 1] = v;
+    if (pass_id < 0) return;       // no flip-back bookkeeping (T1.counting)
     int slot = atomicAdd(log_count, 1);
     int* entry = log + (long)slot * LOG_INTS;
     entry[0] = pass_id; entry[1] = C1; entry[2] = C2; entry[3] = C3; entry[4] = C4; entry[5] = r;

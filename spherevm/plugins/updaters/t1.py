@@ -6,9 +6,8 @@ from pathlib import Path
 import numpy as np
 
 from ... import folding, topology
-from ...constraints import Sphere
-from ...device import launch, load_module
-from ..base import Updater
+from ...device import launch
+from ..base import KERNEL_SURFACES, Minimizer, Updater, surface_kernels
 from ...validation import integer, positive
 
 _KERNELS = Path(__file__).with_suffix(".cu")
@@ -46,13 +45,18 @@ class T1(Updater):
     instead of flipping back and forth until max_steps. ``flip_backs`` holds, per replica, the
     largest re-join count of any pair.
 
+    ``count_flip_backs``: keep that bookkeeping (a record of every separated cell pair). None (default):
+    unless the integrator is a dynamics integrator that is not a :class:`~spherevm.plugins.base.Minimizer`
+    (Brownian, Active): there flips back and forth are physics, nothing halts on them, and the
+    record grows with every flip (it cost half the step time of hot 1,024-cell tissues on a GPU).
+
     ``preset="reference"`` reproduces the paper's code: threshold 0.1, new edge twice the old length.
     Defaults: threshold 0.04 and new_length 0.12 (3 x threshold, so a fresh edge is not
     immediately short again). See docs/t1.md.
     """
 
     def __init__(self, threshold=0.04, new_length=0.12, length_factor=None, preset=None, trigger=1,
-                 reset_velocities=True, max_flip_backs=100):
+                 reset_velocities=True, max_flip_backs=100, count_flip_backs=None):
         super().__init__(trigger)
         if preset is not None:
             if preset not in PRESETS:
@@ -75,6 +79,9 @@ class T1(Updater):
                                  f"(else the new edge flips straight back), got {new_length!r}")
         self.max_flip_backs = integer("max_flip_backs", max_flip_backs, minimum=1)
         self.reset_velocities = bool(reset_velocities)
+        if count_flip_backs not in (None, True, False):
+            raise ValueError(f"count_flip_backs must be None (auto), True or False, got {count_flip_backs!r}")
+        self.count_flip_backs = count_flip_backs
         self._reset_counters(0)
 
     def _reset_counters(self, n_replicas):
@@ -89,7 +96,7 @@ class T1(Updater):
         self._separated = np.zeros(0, dtype=np.int64)  # cell pairs separated by a flip (sorted keys)
         self._rejoins = np.zeros(0, dtype=np.int64)    # how often each was joined again
 
-    gpu_surfaces = (Sphere,)
+    gpu_surfaces = KERNEL_SURFACES
     surface_needs = ("normal", "project_normal", "edge_lengths", "chord_length", "total_area_np", "triangle_area")
 
     def attach(self, simulation):
@@ -172,6 +179,13 @@ class T1(Updater):
     def update(self, simulation, timestep):
         self._update(simulation)
 
+    def counting(self, simulation) -> bool:
+        """Whether this pass records flip-backs (see ``count_flip_backs``)."""
+        if self.count_flip_backs is not None:
+            return self.count_flip_backs
+        integrator = simulation.operations.integrator
+        return integrator is None or isinstance(integrator, Minimizer)
+
     def _update_cpu(self, simulation):
         state = simulation.state
         n_rep = state.n_replicas
@@ -192,7 +206,8 @@ class T1(Updater):
             return
         u, slot, lengths, cells, rep = u[flip], slot[flip], lengths[flip], cells[flip], rep[flip]
         new = self.new_lengths(state, u, lengths)
-        self._count_flip_backs(state, cells, rep)
+        if self.counting(simulation):
+            self._count_flip_backs(state, cells, rep)
         moved = topology.t1_flip(state, u, slot, new)
         self.last_flips = np.bincount(rep, minlength=n_rep)
         self.total_flips += self.last_flips
@@ -208,7 +223,6 @@ class T1(Updater):
             cap, r = max(1024, state.n_vertices // 4), state.n_replicas
             # per-pass counters in one buffer, zeroed by one memset: [candidates, widen | flips | refused]
             scratch = cp.zeros(2 + 2 * r, dtype=cp.int32)
-            unit = np.sqrt(state.mean_cell_area)
             buf = dict(state=state, n_cells=state.n_cells, capacity=cap,
                        claim=cp.full(state.n_cells, np.iinfo(np.int32).max, dtype=cp.int32), scratch=scratch,
                        counters=scratch[:2], flips=scratch[2:2 + r], refused=scratch[2 + r:],
@@ -217,12 +231,19 @@ class T1(Updater):
                        log=cp.empty((cap, _LOG_INTS), dtype=cp.int32), moved=cp.empty(2 * cap, dtype=cp.int32), passes=0,
                        all_active=cp.ones(r, dtype=bool),
                        total_flips=cp.asarray(self._host_totals("total_flips", r)),
-                       total_refused=cp.asarray(self._host_totals("total_refused", r)),
-                       chord2=cp.asarray(self.chord_threshold2(state)),
-                       new_length=cp.asarray(self.new_length * unit if self.length_factor is None
-                                             else np.full(r, -1.0)))
+                       total_refused=cp.asarray(self._host_totals("total_refused", r)))
             self._gpu = buf
         return buf
+
+    def _device_lengths(self, state):
+        """Squared threshold chords and new edge lengths per replica, on the device: cached with
+        the State, so a new radius (``State.clear_cache``) or a resize renews them."""
+        def build():
+            import cupy as cp
+            unit = np.sqrt(state.mean_cell_area)
+            new = self.new_length * unit if self.length_factor is None else np.full(state.n_replicas, -1.0)
+            return cp.asarray(self.chord_threshold2(state)), cp.asarray(new)
+        return state.cached((self, "lengths"), build)
 
     def _host_totals(self, name, n_replicas):
         """A running total to continue on the device (zeros if it belongs to another State)."""
@@ -234,7 +255,8 @@ class T1(Updater):
         import cupy as cp
         state = simulation.state
         buf = self._gpu_buffers(state)
-        module = load_module(_KERNELS)
+        chord2, new_length = self._device_lengths(state)
+        module, size = surface_kernels(_KERNELS, state)
         integrator = simulation.operations.integrator
         active = integrator.active_on_device() if integrator is not None else buf["all_active"]
         while True:
@@ -242,7 +264,7 @@ class T1(Updater):
             cp.cuda.runtime.memsetAsync(scratch.data.ptr, 0, scratch.nbytes, cp.cuda.get_current_stream().ptr)
             launch(module.get_function("t1_detect"), state.n_vertices,
                    (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_sides,
-                    state.cell_vertices, state.vertex_replica, state.radius, buf["chord2"], buf["new_length"],
+                    state.cell_vertices, state.vertex_replica, size, chord2, new_length,
                     np.float64(self.length_factor or 0.0), active, np.int32(state.n_vertices),
                     np.int32(state.max_sides), buf["claim"], buf["refused"], buf["total_refused"], buf["counters"],
                     buf["cand"], buf["cand_len"], np.int32(buf["capacity"])))
@@ -260,11 +282,12 @@ class T1(Updater):
         if widen:
             pad = cp.full((state.n_cells, 1), -1, dtype=cp.int32)
             state.cell_vertices = cp.ascontiguousarray(cp.concatenate([state.cell_vertices, pad], axis=1))
-        if buf["log_bound"] + n_cand > len(buf["log"]):   # the log might overflow: replay it first
+        counting = self.counting(simulation)
+        if counting and buf["log_bound"] + n_cand > len(buf["log"]):   # the log might overflow: replay it first
             self._flush_log(state)
             if n_cand > len(buf["log"]):
                 buf["log"] = cp.empty((2 * n_cand, _LOG_INTS), cp.int32)
-        buf["log_bound"] += n_cand
+        buf["log_bound"] += n_cand if counting else 0
         if len(buf["moved"]) < 2 * n_cand:
             buf["moved"] = cp.empty(4 * n_cand, dtype=cp.int32)
         moved = buf["moved"][:2 * n_cand]
@@ -272,8 +295,8 @@ class T1(Updater):
         launch(module.get_function("t1_apply"), n_cand,
                (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_vertices, state.cell_sides,
                 buf["claim"], buf["cand"], buf["cand_len"], np.int32(n_cand), np.int32(state.max_sides),
-                state.radius, buf["new_length"], np.float64(self.length_factor or 0.0), buf["flips"],
-                buf["total_flips"], moved, buf["log_count"], buf["log"], np.int32(buf["passes"])))
+                size, new_length, np.float64(self.length_factor or 0.0), buf["flips"],
+                buf["total_flips"], moved, buf["log_count"], buf["log"], np.int32(buf["passes"] if counting else -1)))
         launch(module.get_function("t1_release"), n_cand, (buf["claim"], buf["cand"], np.int32(n_cand)))
         if self.reset_velocities and integrator is not None:
             integrator.reset_vertices(moved)
@@ -294,7 +317,7 @@ class T1(Updater):
         order = np.argsort(log[:, 0], kind="stable")
         log = log[order]
         for pass_rows in np.split(log, np.flatnonzero(np.diff(log[:, 0])) + 1):  # passes, not flips
-            self._count_flip_backs(state, pass_rows[:, 1:5].astype(np.int64), pass_rows[:, 5])
+            self._count_flip_backs(state, pass_rows[:, 1:5].astype(np.int64), pass_rows[:, 5], buf["n_cells"])
 
     def _sync_counters(self):
         """Bring the GPU counters to the host attributes (for logging and halting)."""
@@ -307,9 +330,10 @@ class T1(Updater):
         self.total_flips = buf["total_flips"].get().astype(np.int64)
         self.total_refused = buf["total_refused"].get().astype(np.int64)
 
-    def _count_flip_backs(self, state, cells, rep):
-        """Count re-joins: a flip making two cells neighbours again that an earlier flip separated."""
-        n = state.n_cells
+    def _count_flip_backs(self, state, cells, rep, n_cells=None):
+        """Count re-joins: a flip making two cells neighbours again that an earlier flip separated.
+        ``n_cells``: the cell count the flips saw (the device log's, if the State was resized since)."""
+        n = state.n_cells if n_cells is None else n_cells
 
         def pair_key(x, y):
             return np.minimum(x, y).astype(np.int64) * n + np.maximum(x, y)
@@ -391,7 +415,9 @@ class T1(Updater):
 
     def resized(self, change):
         """Cells divided or removed: the flip-back memory follows its cells (pairs with a removed
-        cell are forgotten); the per-replica counters stay."""
+        cell are forgotten); the per-replica counters stay. On the GPU the device counters and flip
+        log (in the old numbering) are read first, and the buffers are rebuilt for the new counts."""
+        self._sync_counters()
         self._separated, keep = self._pairs_between(self._separated, change.n_cells_before, change.cell_map,
                                                     len(change.cell_source))
         self._rejoins = self._rejoins[keep]

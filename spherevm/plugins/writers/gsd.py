@@ -11,7 +11,9 @@ import numpy as np
 
 from ... import gsdio
 from ...shapes import cell_shapes, shape_index_of
+from ...logging import Logger
 from ..base import Writer
+from .arguments import trigger_first
 
 DEFAULT_LOG = ("energy", "energy_per_cell", "mean_shape_index", "max_force")
 _FORCE_LOGGABLES = {"energy", "energy_per_cell", "max_force"}
@@ -30,21 +32,27 @@ def _per_replica(name, value, n_replicas):
 class GSD(Writer):
     """Write frames to a GSD file (HOOMD schema) that OVITO opens and :func:`spherevm.init.from_gsd` restores.
 
+    ``GSD(trigger, filename, mode="wb", logger=None, ...)``: HOOMD-blue's argument order
+    (``hoomd.write.GSD(trigger, filename)``); keywords work too, and the older order, the path
+    first (``GSD("run.gsd", trigger=100)``), still works with a DeprecationWarning.
+
     Parameters
     ----------
-    filename : path of the ``.gsd`` file; opened at the first write (not at construction).
     trigger : a :class:`spherevm.trigger.Trigger` or an int period (default every 1000 steps).
+    filename : path of the ``.gsd`` file; opened at the first write (not at construction).
     mode : ``"wb"`` overwrites (or creates) the file, ``"ab"`` appends to it (or creates it),
         ``"xb"`` creates it and fails if it exists. ``"w"``, ``"a"``, ``"x"`` are accepted too.
-    log : names of loggable quantities (see ``Simulation.loggables``), written as ``log/<name>``
-        with one value per replica (scalars as one value). The default skips the force-dependent
-        ones when the simulation has no force.
+        (HOOMD's default is ``"ab"``; docs/hoomd.md says why this one overwrites.)
+    logger : a :class:`spherevm.logging.Logger` choosing what is logged, written as ``log/<name>``
+        with one value per replica (scalars as one value).
+    log : the short form, a sequence of loggable names (see ``Simulation.loggables``), or a
+        Logger (HOOMD-blue 3's spelling); give ``logger`` or ``log``, not both. The default (neither) logs energy, energy per cell, mean
+        shape index and largest force, skipping the force-dependent ones without a force.
     cell_quantities : which per-cell values to record, from ``("area", "perimeter", "shape_index",
         "energy")``: exact arrays under ``spherevm/cell_<q>`` and the mean over each vertex's three
         cells under ``log/particles/cell_<q>`` (for colouring in OVITO). ``"energy"`` is written
         when every force reports per-cell energies (``ForceResult.cell_energy``, taken from the
         simulation's force cache, so writing costs no extra force evaluation).
-
     checkpoint : write the timestep's run state too (every operation's ``state_to_save``: FIRE's
         velocities and convergence, Active's directors, T1's counters), so that every frame is a
         checkpoint that ``Simulation.create_state_from_gsd`` continues bitwise (default True).
@@ -55,8 +63,9 @@ class GSD(Writer):
     later write reopens the file in append mode.
     """
 
-    def __init__(self, filename, trigger=1000, mode="wb", log=None, cell_quantities=gsdio.CELL_QUANTITIES,
-                 checkpoint=True, final=True):
+    def __init__(self, *args, trigger=None, filename=None, mode="wb", logger=None, log=None,
+                 cell_quantities=gsdio.CELL_QUANTITIES, checkpoint=True, final=True):
+        trigger, filename = trigger_first("GSD", args, trigger, filename, 1000, "filename")
         super().__init__(trigger)
         self.checkpoint = bool(checkpoint)
         self.final = bool(final)
@@ -69,19 +78,27 @@ class GSD(Writer):
                              f"{os.path.join(os.fspath(filename), 'run.gsd')!r}")
         self.filename = os.fspath(filename)
         self.mode = mode
-        self._default_log = log is None
-        names = DEFAULT_LOG if log is None else ((log,) if isinstance(log, str) else tuple(log))
-        if not all(isinstance(n, str) for n in names):
-            raise ValueError(f"log must be a sequence of loggable names (str), got {log!r}")
-        self.log = names
+        if isinstance(log, Logger) and logger is None:     # HOOMD-blue 3 spelled it log=Logger
+            logger, log = log, None
+        if logger is not None and log is not None:
+            raise ValueError("give GSD either logger= (a spherevm.logging.Logger) or log= (names), not both")
+        if logger is not None and not isinstance(logger, Logger):
+            raise TypeError(f"logger must be a spherevm.logging.Logger, got {type(logger).__name__}")
+        self._default_log = logger is None and log is None
+        self.logger = logger if logger is not None else Logger(DEFAULT_LOG if log is None else log)
         bad = [q for q in cell_quantities if q not in gsdio.CELL_QUANTITIES]
         if bad:
             raise ValueError(f"cell_quantities must be drawn from {gsdio.CELL_QUANTITIES}, got {bad}")
         self.cell_quantities = tuple(cell_quantities)
         self._frames = None      # the open file, a gsdio.FrameWriter
         self._opened = False
-        self._log_names = None   # fixed at the first write
+        self._checked = False    # the logger is checked against the Simulation at the first write
         self._cell_keys = None   # fixed at the first write
+
+    @property
+    def log(self) -> tuple:
+        """The logged names (the logger's)."""
+        return self.logger.names
 
     # ------------------------------------------------------------------ file handling
     def _open(self):
@@ -130,16 +147,12 @@ class GSD(Writer):
         self.close()
 
     # ------------------------------------------------------------------ writing
-    def _resolve_log_names(self, simulation):
-        names = self.log
-        has_forces = bool(simulation.operations.forces)
-        if self._default_log and not has_forces:
-            names = tuple(n for n in names if n not in _FORCE_LOGGABLES)
-        known = simulation.loggables
-        unknown = [n for n in names if n not in known]
-        if unknown:
-            raise ValueError(f"GSD writer: unknown loggable(s) {unknown}; available: {sorted(known)}")
-        return names
+    def _check_logger(self, simulation):
+        if self._default_log and not simulation.operations.forces:
+            for name in _FORCE_LOGGABLES:
+                self.logger.remove(name)
+        self.logger.check(simulation, who="GSD writer")
+        self._checked = True
 
     def write(self, simulation, timestep):
         state = simulation.state
@@ -151,10 +164,10 @@ class GSD(Writer):
                                      f"non-finite position {state.device.to_numpy(state.positions[v])} at "
                                      f"timestep {timestep}; frame not written, the last good frame stays in "
                                      f"{self.filename!r}")
-        if self._log_names is None:
-            self._log_names = self._resolve_log_names(simulation)
+        if not self._checked:
+            self._check_logger(simulation)
         frames = self._open()
-        log = {name: _per_replica(name, simulation.log(name), state.n_replicas) for name in self._log_names}
+        log = {name: _per_replica(name, value, state.n_replicas) for name, value in self.logger.log(simulation).items()}
         vertex_values = {}
         if simulation.operations.forces:
             forces, _ = simulation.compute_forces()
@@ -190,7 +203,7 @@ class GSD(Writer):
         return {q: out.get(q, np.full(state.n_cells, np.nan)) for q in self._cell_keys}
 
     def __repr__(self):
-        return f"GSD({self.filename!r}, trigger={self.trigger!r}, mode={self.mode!r}, log={self.log!r})"
+        return f"GSD({self.trigger!r}, {self.filename!r}, mode={self.mode!r}, logger={self.logger!r})"
 
 
 def write_gsd(simulation, filename, mode="wb", **options):
@@ -198,7 +211,7 @@ def write_gsd(simulation, filename, mode="wb", **options):
     at ``simulation.timestep``, and close the file: the one-shot form of :class:`GSD` (``mode``
     and ``options`` as there; ``"ab"`` appends a frame to an existing file)."""
     simulation._require_state()
-    writer = GSD(filename, trigger=1, mode=mode, **options)
+    writer = GSD(1, filename, mode=mode, **options)
     try:
         writer.write(simulation, simulation.timestep)
     finally:

@@ -5,7 +5,9 @@ import sys
 
 import numpy as np
 
+from ...logging import Logger
 from ..base import Writer
+from .arguments import trigger_first
 
 DEFAULT_QUANTITIES = ("timestep", "energy_per_cell", "mean_shape_index", "max_force")
 
@@ -13,26 +15,42 @@ DEFAULT_QUANTITIES = ("timestep", "energy_per_cell", "mean_shape_index", "max_fo
 class Table(Writer):
     """One CSV row per replica and trigger: ``timestep, replica, <quantities...>``.
 
-    ``path=None`` writes to standard output. Each row is flushed, so the file is complete up to
-    the last write if the run stops.
+    ``Table(trigger, path=None, quantities=..., logger=None)``: the trigger first, as HOOMD-blue's
+    ``hoomd.write.Table(trigger, logger)`` (the older ``Table("log.csv", trigger=100)`` still works
+    with a DeprecationWarning). ``path=None`` writes to standard output. What is logged:
+    ``quantities`` (names) or a :class:`spherevm.logging.Logger`; unknown names fail at the first
+    write, before the header. Each row is flushed, so the file is complete up to the last write if
+    the run stops.
     """
 
-    def __init__(self, path=None, quantities=DEFAULT_QUANTITIES, trigger=1000):
+    def __init__(self, *args, trigger=None, path=None, quantities=None, logger=None):
+        trigger, path = trigger_first("Table", args, trigger, path, 1000, "path")
         super().__init__(trigger)
+        if logger is not None and quantities is not None:
+            raise ValueError("give Table either logger= (a spherevm.logging.Logger) or quantities= (names), not both")
+        if logger is not None and not isinstance(logger, Logger):
+            raise TypeError(f"logger must be a spherevm.logging.Logger, got {type(logger).__name__}")
         self.path = path
-        self.quantities = tuple(q for q in quantities if q != "timestep")
+        self.logger = logger if logger is not None else Logger(DEFAULT_QUANTITIES if quantities is None else quantities)
         self._file = None
 
-    def _open(self):
+    @property
+    def quantities(self) -> tuple:
+        """The logged columns after ``timestep`` and ``replica``."""
+        return tuple(q for q in self.logger.names if q != "timestep")
+
+    def _open(self, simulation):
         if self._file is None:
+            self.logger.check(simulation, who="Table writer")
             self._file = sys.stdout if self.path is None else open(self.path, "w")
             self._file.write(",".join(("timestep", "replica") + self.quantities) + "\n")
         return self._file
 
     def write(self, simulation, timestep):
-        f = self._open()
+        f = self._open(simulation)
         n = simulation.state.n_replicas
-        cols = [np.broadcast_to(np.asarray(simulation.log(q), dtype=float), (n,)) for q in self.quantities]
+        values = self.logger.log(simulation)
+        cols = [np.broadcast_to(np.asarray(values[q], dtype=float), (n,)) for q in self.quantities]
         for r in range(n):  # output formatting, not a per-step path
             f.write(",".join([str(timestep), str(r)] + [f"{c[r]:.12g}" for c in cols]) + "\n")
         f.flush()

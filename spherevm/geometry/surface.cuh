@@ -1,0 +1,201 @@
+// The surface a kernel is compiled for: one kernel source serves every surface. Each surface is a
+// struct of static device functions with the same names; a kernel calls them through `Surface`,
+// which is PlaneSurface when the module is compiled with -DSVM_SURFACE_PLANE and SphereSurface
+// otherwise (spherevm.plugins.base.surface_module picks the flag from the State's constraint).
+//
+//   Size                      the per-replica size (a radius, or a box (Lx, Ly))
+//   size(s, r)                replica r's size from the State's size array (radius or box)
+//   vertex_size               whether the vertex-force kernel needs each vertex's size
+//   cell_measures(...)        a cell's area and perimeter
+//   area_unit, length_unit    what the vertex-force coefficients are scaled by
+//   vertex_force(...)         minus the surface gradient of sum_c a_c A_c + p_c P_c at a vertex (on the
+//                             sphere a force fused into the vertex model adds its gradient through
+//                             an `extra`, see plugins/forces/vertex_model.cuh)
+//   normal(x)                 the unit normal at x
+//   place(y, n, s)            P_N: the surface point for y, whose normal n = normal(y) the caller has
+//   cell_normal(...)          the normal at a cell's centre (active cell directors)
+//   chord2, edge_length       the T1 short-edge test and the edge's length
+//   t1_positions(...)         the two vertices of a flipped edge
+//   triangle_area(a, b, c, s) the sign-carrying area of a triangle, delta(a, b, s) the vector a -> b
+//                             (T1's fold rule, plugins/updaters/t1_fold.cuh)
+#pragma once
+
+#include "geometry/plane.cuh"
+#include "geometry/sphere.cuh"
+
+// What a force fused into the vertex model's kernels adds (nothing): see plugins/forces/vertex_model.cuh.
+struct NoExtra {
+    __device__ __forceinline__ void cell(const double*, const int*, int, long) const {}
+    __device__ __forceinline__ void add_gradient(vec3&, const double*, const int*, const int*, long, vec3) const {}
+};
+
+// ------------------------------------------------------------------------------------ the sphere
+struct SphereSurface {
+    typedef double Size;
+    static constexpr bool vertex_size = false;
+
+    __device__ static Size size(const double* radius, long r) { return radius[r]; }
+    __device__ static double length_scale(Size R) { return R; }
+    __device__ static double area_unit(Size R) { return R * R; }
+    __device__ static double length_unit(Size R) { return R; }
+
+    // Area: a fan about the cell's first vertex a, each triangle (a, b, d) as den + i num with
+    // num = (a - b).(b x d), den = 1 + b.d + a.(b + d), the area 2 arg of their product: one atan2
+    // per cell, valid below a hemisphere. Perimeter: the sum of the arcs.
+    __device__ static void cell_measures(const double* pos, const int* row, int n, Size R, double* area,
+                                         double* perimeter) {
+        vec3 a = normalize3(load3(pos, row[0]));
+        vec3 b = a;
+        double P = 0.0, re = 1.0, im = 0.0;
+        for (int i = 0; i < n; ++i) {
+            vec3 d = i + 1 < n ? normalize3(load3(pos, row[i + 1])) : a;
+            edge_terms t = make_edge(b, d);
+            P += half_angle(t);
+            double num = dot3(a - b, t.x);
+            double den = 0.5 * t.q + dot3(a, b + d);
+            double r = re * den - im * num;
+            im = re * num + im * den;
+            re = r;
+            b = d;
+        }
+        *area = 2.0 * atan2(im, re) * (R * R);
+        P *= 2.0 * R;
+        *perimeter = P;
+    }
+
+    // Each of v's edges v -> n_j lies in cell j (slot j) and, as n_j -> v, in cell j-1 (slot j+2
+    // mod 3): sum_j (coefA[j-1] - coefA[j]) w(v, n_j) + (coefP[j] + coefP[j-1]) d theta_j / dv on
+    // the unit sphere (coefficients carry R^2 and R), projected on the tangent plane, as in
+    // Sphere.shape_gradient.
+    template <class Extra = NoExtra>
+    __device__ static vec3 vertex_force(const double* pos, const int* vn, const int* vc, long v, Size,
+                                        const double* coef, const Extra& extra = Extra()) {
+        vec3 r = load3(pos, v);
+        double inv_rn = rsqrt(dot3(r, r));
+        vec3 u = inv_rn * r;
+        vec3 g = v3(0.0, 0.0, 0.0);
+        for (int j = 0; j < 3; ++j) {
+            int c_next = vc[3 * v + j], c_prev = vc[3 * v + (j + 2) % 3];
+            edge_terms t = make_edge(u, normalize3(load3(pos, vn[3 * v + j])));
+            g = g + (coef[2 * c_prev] - coef[2 * c_next]) * edge_area_term(t)
+                  + (coef[2 * c_next + 1] + coef[2 * c_prev + 1]) * edge_length_term(t);
+        }
+        extra.add_gradient(g, pos, vn, vc, v, r);   // a fused force's terms, in the same units
+        g = g - dot3(g, u) * u;
+        return -(inv_rn * g);
+    }
+
+    __device__ static vec3 normal(vec3 x) { return normalize3(x); }
+    __device__ static vec3 place(vec3, vec3 n, Size R) { return R * n; }
+
+    // the normalised centroid of the cell's unit vertex directions
+    __device__ static vec3 cell_normal(const double* pos, const int* row, int n) {
+        vec3 sum = v3(0.0, 0.0, 0.0);
+        for (int k = 0; k < n; ++k) sum = sum + normalize3(load3(pos, row[k]));
+        return normalize3(sum);
+    }
+
+    __device__ static double chord2(vec3 pu, vec3 pv, Size) { vec3 c = pu - pv; return dot3(c, c); }
+    __device__ static double edge_length(vec3 pu, vec3 pv, Size R) {
+        return R * geodesic_length(normalize3(pu), normalize3(pv));
+    }
+
+    // The solid angle of the unit vectors (Sphere.triangle_area without its R^2) and b - a.
+    __device__ static double triangle_area(vec3 a, vec3 b, vec3 c, Size) {
+        return solid_angle(normalize3(a), normalize3(b), normalize3(c));
+    }
+    __device__ static vec3 delta(vec3 a, vec3 b, Size) { return b - a; }
+
+    // The edge u-v rotated by 90 degrees about the normal at its midpoint, its ends at geodesic
+    // distance `full` apart (exact geodesic offsets); a zero-length edge turns towards the side of
+    // the cells at a and d (topology.t1_flip). x_pos goes to X = v (the C1 side), y_pos to Y = u.
+    __device__ static void t1_positions(const double* pos, int u, int v, int a, int b, int c, int d, Size R,
+                                        double full, vec3* x_pos, vec3* y_pos) {
+        vec3 pu = load3(pos, u), pv = load3(pos, v);
+        vec3 mid = R * normalize3(0.5 * (pu + pv));
+        vec3 nrm = normalize3(mid);
+        vec3 w = pv - pu;
+        vec3 along = w - dot3(w, nrm) * nrm;
+        double len = norm3(along);
+        vec3 perp;
+        if (len <= 1e-12 * R) {
+            vec3 s = 0.5 * (load3(pos, a) + load3(pos, d)) - 0.5 * (load3(pos, b) + load3(pos, c));
+            perp = s - dot3(s, nrm) * nrm;
+        } else {
+            perp = cross3(nrm, v3(along.x / len, along.y / len, along.z / len));
+        }
+        perp = normalize3(perp);
+        double phi = 0.5 * full / R;
+        vec3 m = normalize3(mid);
+        *x_pos = R * (cos(phi) * m + sin(phi) * perp);
+        *y_pos = R * (cos(phi) * m + sin(phi) * (-perp));
+    }
+};
+
+// ------------------------------------------------------------------------------------ the plane
+struct PlaneSurface {
+    typedef box2 Size;
+    static constexpr bool vertex_size = true;
+
+    __device__ static Size size(const double* box, long r) { return load_box(box, r); }
+    __device__ static double length_scale(Size b) { return sqrt(b.x * b.y); }
+    __device__ static double area_unit(Size) { return 1.0; }
+    __device__ static double length_unit(Size) { return 1.0; }
+
+    __device__ static void cell_measures(const double* pos, const int* row, int n, Size b, double* area,
+                                         double* perimeter) {
+        plane_cell_measures(pos, row, n, b, area, perimeter);
+    }
+
+    template <class Extra = NoExtra>   // no force is fused into the plane's kernels (bending is zero there)
+    __device__ static vec3 vertex_force(const double* pos, const int* vn, const int* vc, long v, Size b,
+                                        const double* coef, const Extra& = Extra()) {
+        return -plane_vertex_gradient(pos, vn, vc, v, b, coef);
+    }
+
+    __device__ static vec3 normal(vec3) { return v3(0.0, 0.0, 1.0); }
+    __device__ static vec3 place(vec3 y, vec3, Size b) { return wrap_into_box(y, b); }
+    __device__ static vec3 cell_normal(const double*, const int*, int) { return v3(0.0, 0.0, 1.0); }
+
+    // T1 takes the edge as PeriodicPlane.displacement(u, v): the minimum image of x_v - x_u
+    __device__ static double chord2(vec3 pu, vec3 pv, Size b) { return plane_length2(plane_edge(pu, pv, b)); }
+    __device__ static double edge_length(vec3 pu, vec3 pv, Size b) { return plane_length(plane_edge(pu, pv, b)); }
+
+    // PeriodicPlane.triangle_area (b and c as seen from a) and the minimum image of b - a.
+    __device__ static double triangle_area(vec3 a, vec3 b, vec3 c, Size box) {
+        vec3 u = minimum_image(b - a, box), v = minimum_image(c - a, box);
+        return 0.5 * (u.x * v.y - u.y * v.x);
+    }
+    __device__ static vec3 delta(vec3 a, vec3 b, Size box) { return minimum_image(b - a, box); }
+
+    // topology.t1_flip on the plane: v, a, b, c, d unwrapped about u; the midpoint wrapped into the
+    // box; the edge turned by +90 degrees about z; each end `full` / 2 from the midpoint, wrapped.
+    __device__ static void t1_positions(const double* pos, int u, int v, int a, int b, int c, int d, Size box,
+                                        double full, vec3* x_pos, vec3* y_pos) {
+        vec3 pu = load3(pos, u);
+        pu.z = 0.0;
+        vec3 pv = plane_unwrap(load3(pos, v), pu, box);
+        vec3 mid = wrap_into_box(0.5 * (pu + pv), box);
+        vec3 along = pv - pu;
+        double len = sqrt(along.x * along.x + along.y * along.y);
+        vec3 perp;
+        if (len <= 1e-12 * length_scale(box)) {
+            vec3 pa = plane_unwrap(load3(pos, a), pu, box), pb = plane_unwrap(load3(pos, b), pu, box);
+            vec3 pc = plane_unwrap(load3(pos, c), pu, box), pd = plane_unwrap(load3(pos, d), pu, box);
+            perp = 0.5 * (pa + pd) - 0.5 * (pb + pc);
+        } else {
+            perp = v3(-(along.y / len), along.x / len, 0.0);
+        }
+        double n = sqrt(perp.x * perp.x + perp.y * perp.y);
+        perp = v3(perp.x / n, perp.y / n, 0.0);
+        double half = 0.5 * full;
+        *x_pos = wrap_into_box(mid + half * perp, box);
+        *y_pos = wrap_into_box(mid + half * (-perp), box);
+    }
+};
+
+#ifdef SVM_SURFACE_PLANE
+typedef PlaneSurface Surface;
+#else
+typedef SphereSurface Surface;
+#endif

@@ -1,0 +1,56 @@
+// The vertex model's two kernel bodies, as templates over what a force fused into them adds: the
+// vertex model alone instantiates them with NoExtra (vertex_model.cu, every surface), the bending
+// force with its terms (bending.cu, the sphere). An extra gets, after the cell's measures, the cell
+// (its vertex row), and adds to the vertex's gradient before the tangent projection
+// (Surface::vertex_force); it runs its own loop over the positions just loaded (from L1/L2), so its
+// registers are not live across the vertex model's (fewer registers, no spills).
+#pragma once
+#include "geometry/surface.cuh"
+#include "device_common.cuh"
+
+// One thread per cell: area and perimeter (Surface::cell_measures), the cell's energy, the
+// per-replica energy sum, and the two coefficients the vertex kernel needs:
+// coef = (2 kA (A - A0) area_unit, 2 kP (P - P0) length_unit) (R^2 and R on the sphere, 1 on the plane).
+// size: the State's radius (n_replicas,) or box (n_replicas, 2).
+template <class Extra>
+__device__ __forceinline__ void vm_cell_geometry_body(
+    const double* __restrict__ pos, const int* __restrict__ cell_vertices, const int* __restrict__ cell_sides,
+    const int* __restrict__ cell_replica, const double* __restrict__ size, int n_cells, int max_sides,
+    const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
+    const double* __restrict__ P0, double* __restrict__ coef, double* __restrict__ cell_energy,
+    double* __restrict__ replica_energy, Extra extra)
+{
+    long c = (long)blockIdx.x * blockDim.x + threadIdx.x;
+    int rep = -1;
+    double e = 0.0;
+    if (c < n_cells) {
+        rep = cell_replica[c];
+        Surface::Size s = Surface::size(size, rep);
+        const int* row = cell_vertices + c * max_sides;
+        int n = cell_sides[c];
+        double A, P;
+        Surface::cell_measures(pos, row, n, s, &A, &P);
+        extra.cell(pos, row, n, c);
+        double dA = A - A0[c], dP = P - P0[c];
+        e = kA[c] * dA * dA + kP[c] * dP * dP;
+        coef[2 * c] = 2.0 * kA[c] * dA * Surface::area_unit(s);
+        coef[2 * c + 1] = 2.0 * kP[c] * dP * Surface::length_unit(s);
+        cell_energy[c] = e;
+    }
+    segmented_block_add(e, rep, replica_energy);
+}
+
+// One thread per vertex, no atomics: minus the surface gradient of the energy from the vertex's
+// three edges and the coefficients of the cells on either side (Surface::vertex_force), with the
+// extra's gradient added before the projection.
+template <class Extra>
+__device__ __forceinline__ void vm_vertex_forces_body(
+    const double* __restrict__ pos, const int* __restrict__ vertex_neighbors, const int* __restrict__ vertex_cells,
+    const int* __restrict__ vertex_replica, const double* __restrict__ size, int n_vertices,
+    const double* __restrict__ coef, double* __restrict__ forces, Extra extra)
+{
+    long v = (long)blockIdx.x * blockDim.x + threadIdx.x;
+    if (v >= n_vertices) return;
+    Surface::Size s = Surface::size(size, Surface::vertex_size ? vertex_replica[v] : 0);
+    store3(forces, v, Surface::vertex_force(pos, vertex_neighbors, vertex_cells, v, s, coef, extra));
+}

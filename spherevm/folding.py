@@ -1,25 +1,47 @@
-"""Whether a T1 flip would fold the network (the rule :class:`spherevm.plugins.updaters.T1` applies
-before flipping; the CUDA twin is ``plugins/updaters/t1_fold.cuh``)."""
+"""Whether a T1 flip would fold the network, and which way round to place it (the rule
+:class:`spherevm.plugins.updaters.T1` applies before flipping; the CUDA twin is
+``plugins/updaters/t1_fold.cuh``)."""
 from __future__ import annotations
 
 import numpy as np
 
 from .topology import t1_cells, t1_new_positions
 
+CLEAN, INVERTED, FOLDS = 0, 1, 2    # fold levels of a placement, see t1_fold_level
 
-def t1_folds(state, u, slot, new_length):
-    """Which of the flips of the edges ``(u, vertex_neighbors[u, slot])`` (to ``new_length``) would
-    fold the network: leave one of the four cells with signed area <= 0, or invert a corner that
-    was not inverted: turn the three edges at one of the six vertices whose edges change (the
-    flipped pair and a, b, c, d) clockwise (two of the three turns between consecutive edges
-    negative). An edge the dynamics pushed through zero length already has inverted corners at
-    its ends; flipping it is the cure, not a fold, so only new inversions count.
 
-    Areas: what the constraint will measure after the flip, the fan about each cell's first vertex
-    after the flip (at its new place if it is u or v), over the cell's edges that do not touch u or
-    v in table order, then its new edges (:func:`t1_flip`'s rows); so a fan that would wrap (a big
-    cell, A - 4 pi R^2) is refused too. Exactly what ``t1_would_fold`` in
-    plugins/updaters/t1_fold.cuh computes, in the same order."""
+def t1_placement(state, u, slot, new_length):
+    """``(refused, turn)`` masks over the candidate flips. The usual placement
+    (:func:`spherevm.topology.t1_new_positions`) if it is clean (:func:`t1_fold_level`), else the
+    edge rotated the other way round (``turn``) if that is clean, else the usual one if it only
+    keeps corners that were inverted already (an edge the dynamics pushed through zero length,
+    which no placement cures), else refused: a flip never folds the network."""
+    new_length = np.broadcast_to(np.asarray(new_length, dtype=np.float64), np.shape(u))
+    usual = t1_fold_level(state, u, slot, new_length)
+    turn = np.zeros(len(u), dtype=bool)
+    again = np.flatnonzero(usual != CLEAN)
+    if len(again):
+        turn[again] = t1_fold_level(state, u[again], slot[again], new_length[again],
+                                    turn=np.ones(len(again), dtype=bool)) == CLEAN
+    return (usual == FOLDS) & ~turn, turn
+
+
+def t1_fold_level(state, u, slot, new_length, turn=None):
+    """Per candidate flip of the edges ``(u, vertex_neighbors[u, slot])`` to ``new_length``
+    (``turn``: rotated the other way round), with its two vertices at their new places:
+
+    * ``FOLDS`` (2): one of its four cells would have signed area <= 0, or their areas would not
+      add up to what they did (a cell wrapping or overlapping another: the sum moves by a whole
+      sphere or box), or a corner that was not inverted would be: the three edges at one of the
+      six vertices whose edges change (the flipped pair and a, b, c, d) turning clockwise (two of
+      the three turns between consecutive edges negative);
+    * ``INVERTED`` (1): not that, but one of those corners stays inverted (it was before);
+    * ``CLEAN`` (0): neither.
+
+    Areas are what the constraint will measure: the fan about each cell's first vertex (after
+    the flip: at its new place if it is u or v) over its edges that do not touch u or v in table
+    order, then its new edges (:func:`spherevm.topology.t1_flip`'s rows), summed left to right.
+    Exactly what ``t1_fold_level`` in plugins/updaters/t1_fold.cuh computes, in the same order."""
     dev = state.device
     vn, vc = dev.to_numpy(state.vertex_neighbors), dev.to_numpy(state.vertex_cells)
     table, sides = dev.to_numpy(state.cell_vertices), dev.to_numpy(state.cell_sides)
@@ -27,29 +49,32 @@ def t1_folds(state, u, slot, new_length):
     con = state.constraint
     size = con.size_np(state)[state.vertex_replica_np()[u]]
     v, a, b, c, d, C1, C2, C3, C4 = t1_cells(vn, vc, u, slot)
-    px, py = t1_new_positions(state, pos, u, v, a, b, c, d, new_length)
+    px, py = t1_new_positions(state, pos, u, v, a, b, c, d, new_length, turn)
     n, width = len(u), table.shape[1]
-    # areas of C1..C4 (axis 1): old sides not touching u or v, then the new chains (a X d), (c Y b),
-    # (b Y X a), (d X Y c), all as one array of fan triangles summed left to right (cumsum)
     rows = table[np.stack([C1, C2, C3, C4], axis=1)]                       # (n, 4, width)
     k = sides[np.stack([C1, C2, C3, C4], axis=1)][..., None]
     col = np.arange(width)
     nxt = np.take_along_axis(rows, np.broadcast_to((col + 1) % k, rows.shape), axis=2)
+    real = col < k
+    p, q = pos[np.where(real, rows, 0)], pos[np.where(real, nxt, 0)]     # (n, 4, width, 3)
+    tri = con.triangle_area(np.broadcast_to(pos[rows[:, :, :1]], p.shape), p, q, _per_row(size, 2))
+    before = np.cumsum(np.where(real, tri, 0.0), axis=2)[:, :, -1]
+    # after: old sides not touching u or v, then the chains (a X d), (c Y b), (b Y X a), (d X Y c)
     hit = (rows == u[:, None, None]) | (rows == v[:, None, None])
-    keep = (col < k) & ~hit & ~((nxt == u[:, None, None]) | (nxt == v[:, None, None]))
-    p, q = pos[np.where(keep, rows, 0)], pos[np.where(keep, nxt, 0)]      # (n, 4, width, 3)
+    keep = real & ~hit & ~((nxt == u[:, None, None]) | (nxt == v[:, None, None]))
     pa, pb, pc, pd = pos[a], pos[b], pos[c], pos[d]
     chain = np.stack([np.stack(e, axis=1) for e in ((pa, px, pd, pd), (pc, py, pb, pb), (pb, py, px, pa),
                                                      (pd, px, py, pc))], axis=1)   # (n, 4, 4, 3); 3 edges each
-    p = np.concatenate([p, chain[:, :, :3]], axis=2)
-    q = np.concatenate([q, chain[:, :, 1:]], axis=2)
-    keep = np.concatenate([keep, np.broadcast_to([True, True, False], (n, 4, 3)),], axis=2)
+    p = np.concatenate([pos[np.where(keep, rows, 0)], chain[:, :, :3]], axis=2)
+    q = np.concatenate([pos[np.where(keep, nxt, 0)], chain[:, :, 1:]], axis=2)
+    keep = np.concatenate([keep, np.broadcast_to([True, True, False], (n, 4, 3))], axis=2)
     keep[:, 2:, width + 2] = True                                          # C3 and C4 have three new edges
     moved = np.stack([px, py, py, px], axis=1)                             # each row's first vertex after
     apex = np.where(hit[:, :, :1], moved, pos[rows[:, :, 0]])
     tri = con.triangle_area(np.broadcast_to(apex[:, :, None], p.shape), p, q, _per_row(size, 2))
-    area = np.cumsum(np.where(keep, tri, 0.0), axis=2)[:, :, -1]
-    bad = ~(area > 0).all(axis=1)
+    after = np.cumsum(np.where(keep, tri, 0.0), axis=2)[:, :, -1]
+    half = 0.5 * con.total_area_np(size)
+    folds = ~(after > 0).all(axis=1) | ~(np.abs(after.sum(axis=1) - before.sum(axis=1)) < half)
     # corners: X = v's new row (Y, d, a), Y = u's (X, b, c); a, d, b, c with u or v at its new place
     ring_now = pos[vn[np.stack([v, u, a, d, b, c], axis=1)]]                # (n, 6, 3 neighbours, 3)
     ring_new = ring_now.copy()
@@ -58,8 +83,9 @@ def t1_folds(state, u, slot, new_length):
         ring_new[:, i] = np.where((vn[w] == old[:, None])[..., None], new[:, None], ring_now[:, i])
     centre_now = pos[np.stack([v, u, a, d, b, c], axis=1)]
     centre_new = np.concatenate([np.stack([px, py], axis=1), centre_now[:, 2:]], axis=1)
-    bad |= (_inverted(con, centre_new, ring_new, size) & ~_inverted(con, centre_now, ring_now, size)).any(axis=1)
-    return bad
+    inverted = _inverted(con, centre_new, ring_new, size)
+    folds |= (inverted & ~_inverted(con, centre_now, ring_now, size)).any(axis=1)
+    return np.where(folds, FOLDS, np.where(inverted.any(axis=1), INVERTED, CLEAN))
 
 
 def _per_row(size, axes):

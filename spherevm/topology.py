@@ -302,12 +302,13 @@ def _split_in_rows(table, sides, rows, vert, first, second):
     sides[rows] += 1
 
 
-def t1_new_positions(state, pos, u, v, a, b, c, d, new_length):
+def t1_new_positions(state, pos, u, v, a, b, c, d, new_length, turn=None):
     """Where a T1 flip of the edges ``(u, v)`` puts its two vertices: ``(on the C1 side, on the C2
     side)``, rotating each edge by 90 degrees about the surface normal at its midpoint, the two
     points ``new_length`` apart symmetrically about it (``pos``: host positions; a..d as from
-    :func:`t1_cells`). The CUDA twin is ``t1_new_positions`` in plugins/updaters/t1_fold.cuh;
-    :func:`spherevm.folding.t1_folds` checks the places before T1 flips."""
+    :func:`t1_cells`). ``turn`` (a mask): rotate those edges the other way, the C1-side vertex to
+    the other side (where the usual way would fold the network, :func:`spherevm.folding.t1_placement`).
+    The CUDA twin is ``Surface::t1_positions`` (geometry/surface.cuh)."""
     con = state.constraint
     radius = con.size_np(state)[state.vertex_replica_np()[u]]     # the surface size (a box on a plane)
     pu = pos[u]
@@ -321,19 +322,22 @@ def t1_new_positions(state, pos, u, v, a, b, c, d, new_length):
     tiny = norm <= 1e-12 * con.length_scale(radius)
     perp = np.cross(normal, along / np.where(tiny, 1.0, norm)[:, None])
     perp[tiny] = across_c1[tiny]
+    if turn is not None:
+        perp[np.asarray(turn, dtype=bool)] *= -1.0
     perp /= np.linalg.norm(perp, axis=1)[:, None]
     half = 0.5 * np.broadcast_to(np.asarray(new_length, dtype=np.float64), u.shape)
     return con.geodesic_offset(mid, perp, half, radius), con.geodesic_offset(mid, -perp, half, radius)
 
 
-def t1_flip(state, u, slot, new_length, sense: int = 1):
+def t1_flip(state, u, slot, new_length, sense: int = 1, turn=None):
     """Flip the edges ``(u[i], vertex_neighbors[u[i], slot[i]])`` of ``state`` in place.
 
     The caller guarantees the flips touch disjoint cells and that ``C1``, ``C2`` keep >= 3 sides.
     Each edge is rotated by +90 degrees (``sense=1``, counter-clockwise seen from outside) or -90
     degrees about the surface normal at its midpoint: ``C1`` and ``C2`` (which shared it) lose a
     side, ``C3`` and ``C4`` (at its ends) gain one and now share it. The two vertices are placed
-    symmetrically about the midpoint at geodesic separation ``new_length``. Flipping again with the
+    symmetrically about the midpoint at geodesic separation ``new_length`` (``turn``: see
+    :func:`t1_new_positions`). Flipping again with the
     opposite sense restores the original network. Tables stay on the host (NumPy) here; the
     State's arrays are updated in place, widening ``cell_vertices`` when a cell needs more room.
     Returns the array of vertices moved (``u`` and ``v`` of every flip).
@@ -365,7 +369,7 @@ def t1_flip(state, u, slot, new_length, sense: int = 1):
     _remove_from_rows(table, sides, C2, X)
     _split_in_rows(table, sides, C3, u, Y, X)
     _split_in_rows(table, sides, C4, v, X, Y)
-    pos[X], pos[Y] = t1_new_positions(state, pos, u, v, a, b, c, d, new_length)
+    pos[X], pos[Y] = t1_new_positions(state, pos, u, v, a, b, c, d, new_length, turn)
     xp = dev.xp
     state.vertex_neighbors = xp.asarray(vn)
     state.vertex_cells = xp.asarray(vc)

@@ -163,7 +163,7 @@ def test_at_most_one_flip_per_cell_per_pass_under_stress():
     s = svm.init.random_tiling(200, seed=5)
     t1 = T1(threshold=0.5, new_length=0.6)
     u, slot, lengths = t1.short_edges(s)
-    flip, refused, cells = t1.select(s, u, slot, lengths)
+    flip, refused, cells, _ = t1.select(s, u, slot, lengths)
     assert flip.sum() > 5
     used = cells[flip].reshape(-1)
     assert len(np.unique(used)) == len(used)

@@ -1,11 +1,13 @@
-"""T1 flips that would fold the network are refused (issue 13, item 7): a flip must leave its four
-cells with positive signed area (as the forces will measure it) and must not invert a corner
-(turn the three edges at one of its six vertices clockwise) that was not inverted.
+"""T1 flips never fold the network (issue 13, item 7): a flip must leave its four cells with positive
+signed area (as the forces will measure it) adding up to what they did, and must not invert a
+corner (turn the three edges at one of its six vertices clockwise) that was not inverted; where the
+usual placement would, the edge is rotated the other way round if that is clean, else refused.
 
-Checked here: the rule (spherevm.folding.t1_folds) against flipping a copy and measuring it with
-code written here; constructed flips that fold, on the sphere and the plane; the CUDA header
-t1_fold.cuh compiled on the CPU against the NumPy rule (positions and decisions), and t1.cu
-compiled with nvcc where there is one. tests/test_fuzz.py counts folds under fuzzing."""
+Checked here: the rule (spherevm.folding.t1_fold_level) against flipping a copy and measuring it
+with code written here; constructed flips that fold, on the sphere and the plane, and an edge
+turned past its cells; the CUDA header t1_fold.cuh compiled on the CPU for both surfaces against
+the NumPy rule (positions, levels, placements), and t1.cu compiled with nvcc where there is one.
+tests/test_fuzz.py counts folds under fuzzing."""
 import ctypes
 import pathlib
 import shutil
@@ -23,17 +25,26 @@ from test_fuzz import fan_areas as cell_fan_areas, inverted_corners
 
 
 # ------------------------------------------------------------------ measured independently
-def folds_when_flipped(state, u, slot, new_length):
-    """Flip each candidate alone on a copy and look: a cell of area <= 0, or a new inverted corner."""
+def level_when_flipped(state, u, slot, new_length, turn=None):
+    """Flip each candidate alone on a copy and look: 2 for a cell of area <= 0, a replica whose
+    cells no longer add up to its sphere (mod nothing), or a new inverted corner; 1 for an inverted
+    corner among the six that was inverted before; 0 otherwise."""
     out = []
     before = inverted_corners(state)
+    total = np.bincount(state.cell_replica_np(), weights=cell_fan_areas(state))
+    turn = np.zeros(len(u), dtype=bool) if turn is None else np.asarray(turn, dtype=bool)
     for i in range(len(u)):
         st = state.copy()
         v, a, b, c, d, *cells = topology.t1_cells(st.vertex_neighbors, st.vertex_cells, u[i:i + 1], slot[i:i + 1])
-        topology.t1_flip(st, u[i:i + 1], slot[i:i + 1], new_length[i:i + 1])
-        area = cell_fan_areas(st)[np.concatenate(cells)]
+        topology.t1_flip(st, u[i:i + 1], slot[i:i + 1], new_length[i:i + 1], turn=turn[i:i + 1])
+        areas = cell_fan_areas(st)
+        moved = np.abs(np.bincount(st.cell_replica_np(), weights=areas) - total).max() > 1.0
         six = np.concatenate([u[i:i + 1], v, a, b, c, d])
-        out.append(bool((area <= 0).any() or (inverted_corners(st)[six] & ~before[six]).any()))
+        inverted = inverted_corners(st)[six]
+        if (areas[np.concatenate(cells)] <= 0).any() or moved or (inverted & ~before[six]).any():
+            out.append(2)
+        else:
+            out.append(int(inverted.any()))
     return np.array(out)
 
 
@@ -59,10 +70,11 @@ def candidates(state, threshold):
 def test_rule_is_what_flipping_a_copy_shows(n_cells, seed, kick, threshold):
     state = kicked(n_cells, seed, kick)
     u, slot, new = candidates(state, threshold)
-    rule = folding.t1_folds(state, u, slot, new)
-    seen = folds_when_flipped(state, u, slot, new)
-    assert len(u) > 20 and rule.any() and (~rule).any(), (len(u), rule.sum())
-    assert np.array_equal(rule, seen), np.flatnonzero(rule != seen)
+    for turn in (False, True):
+        rule = folding.t1_fold_level(state, u, slot, new, turn=np.full(len(u), turn))
+        seen = level_when_flipped(state, u, slot, new, turn=np.full(len(u), turn))
+        assert len(u) > 20 and (rule == 2).any() and (turn or (rule == 0).any()), (len(u), np.bincount(rule))
+        assert np.array_equal(rule, seen), np.flatnonzero(rule != seen)
 
 
 def _dodecahedron_pass(new_length):
@@ -78,19 +90,57 @@ def _dodecahedron_pass(new_length):
 
 def test_a_flip_that_would_fold_is_refused_and_counted():
     """Pentagons of area 1 and edges of 0.70: a new edge of 0.8 folds nothing; one of 4.0 puts the
-    flipped vertices beyond the cells across it, which would fold them."""
+    flipped vertices beyond the cells across it, which would fold them, whichever way it turns."""
     sim, t1, _ = _dodecahedron_pass(0.8)
     assert t1.last_flips.sum() >= 1 and t1.last_refused.sum() == 0
     sim.state.validate()
-    sim, t1, before = _dodecahedron_pass(4.0)
-    assert t1.last_flips.sum() == 0 and t1.last_refused.sum() == 30       # every edge, refused and counted
-    assert np.array_equal(sim.state.positions, before)                    # nothing moved
     st = svm.init.regular_tiling("dodecahedron")
-    u = np.array([0])
-    slot = np.array([0])
-    flipped = st.copy()
-    topology.t1_flip(flipped, u, slot, np.array([4.0 * np.sqrt(st.mean_cell_area[0])]))
-    assert (cell_fan_areas(flipped) <= 0).any() or inverted_corners(flipped).any()   # it really folds
+    new = np.array([4.0 * np.sqrt(st.mean_cell_area[0])])
+    for turn in (False, True):
+        assert level_when_flipped(st, np.array([0]), np.array([0]), new, turn=[turn])[0] == 2   # it really folds
+    assert folding.t1_placement(st, np.array([0]), np.array([0]), new)[0].all()
+    sim, t1, before = _dodecahedron_pass(4.0)
+    refused = t1.last_refused.sum()
+    assert refused >= 1 and refused + t1.last_flips.sum() <= 30
+    sim.state.validate()                                        # what flipped (turned) folded nothing
+    assert not inverted_corners(sim.state).any()
+
+
+def backwards_edge():
+    """A dodecahedron whose edge (u, v) the 'dynamics' turned past its cells: shortened to 0.02 and
+    its ends swapped across the midpoint, so that u -> v points the wrong way."""
+    st = svm.init.regular_tiling("dodecahedron")
+    u, slot = 0, 0
+    v = int(st.vertex_neighbors[u, slot])
+    pos = st.positions.copy()
+    R = np.linalg.norm(pos[u])
+    m = (pos[u] + pos[v]) / np.linalg.norm(pos[u] + pos[v])
+    t = pos[v] - pos[u]
+    t -= (t @ m) * m
+    t /= np.linalg.norm(t)
+    h = 0.01 * np.sqrt(st.mean_cell_area[0]) / R
+    pos[u], pos[v] = R * (np.cos(h) * m + np.sin(h) * t), R * (np.cos(h) * m - np.sin(h) * t)
+    st.positions = pos
+    return st, np.array([u]), np.array([slot])
+
+
+def test_an_edge_turned_past_its_cells_flips_the_other_way():
+    """The usual rotation would put X among the cells across the edge (an inverted corner); turned
+    the other way the flip folds nothing, so it flips that way (folding.t1_placement)."""
+    st, u, slot = backwards_edge()
+    assert inverted_corners(st)[[0, int(st.vertex_neighbors[0, 0])]].all()  # the swap inverted both ends
+    new = np.array([0.12 * np.sqrt(st.mean_cell_area[0])])
+    refused, turn = folding.t1_placement(st, u, slot, new)
+    assert not refused[0] and turn[0]
+    assert level_when_flipped(st, u, slot, new, turn=[True])[0] == 0
+    sim = svm.Simulation(device="cpu")
+    sim.state = st
+    t1 = T1()
+    sim.operations.updaters.append(t1)
+    sim._update()
+    assert t1.last_flips.tolist() == [1] and t1.last_refused.tolist() == [0]
+    sim.state.validate()
+    assert not inverted_corners(sim.state).any()                # the flip cured the swapped edge
 
 
 def test_a_folding_flip_on_the_plane_is_refused():
@@ -109,25 +159,26 @@ def test_a_folding_flip_on_the_plane_is_refused():
 
 
 def test_ordinary_minimisations_refuse_nothing_that_does_not_fold():
-    """A FIRE + T1 minimisation: every refusal by the fold rule is a flip that really folds."""
+    """A FIRE + T1 minimisation: the rule's verdict on every candidate (either way round) is what
+    flipping a copy shows."""
     sim = svm.Simulation(device="cpu")
     sim.state = svm.init.random_tiling(200, replicas=3, seed=5)
     sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=3.8))
     sim.operations.updaters.append(T1())
     sim.operations.integrator = svm.plugins.integrators.FIRE(dt=0.02)
     checked = []
-    rule = folding.t1_folds
+    rule = folding.t1_fold_level
 
-    def spy(state, u, slot, new_length):
-        out = rule(state, u, slot, new_length)
-        checked.append(np.array_equal(out, folds_when_flipped(state, u, slot, np.asarray(new_length))))
+    def spy(state, u, slot, new_length, turn=None):
+        out = rule(state, u, slot, new_length, turn)
+        checked.append(np.array_equal(out, level_when_flipped(state, u, slot, np.asarray(new_length), turn)))
         return out
 
-    folding.t1_folds = spy
+    folding.t1_fold_level = spy
     try:
         res = sim.minimize(force_tol=1e-9, max_steps=3000)
     finally:
-        folding.t1_folds = rule
+        folding.t1_fold_level = rule
     assert res.all_converged and len(checked) > 10 and all(checked)
 
 
@@ -159,29 +210,35 @@ def kicked_plane(n_cells, seed, kick, replicas=3):
     ("sphere", 200, 4, 0.02, 0.25), ("plane", 40, 1, 0.05, 0.4), ("plane", 60, 2, 0.12, 0.5)])
 def test_cuda_header_agrees_with_numpy(fold_header, surface, n_cells, seed, kick, threshold):
     """Surface::t1_positions and t1_would_fold, built for the host, against topology.t1_new_positions
-    and folding.t1_folds on every candidate of kicked tilings (a few hundred, folding or not)."""
+    and folding.t1_fold_level on every candidate of kicked tilings (a few hundred, folding or not)."""
     state = kicked(n_cells, seed, kick, replicas=3) if surface == "sphere" else kicked_plane(n_cells, seed, kick)
     lib = fold_header[surface]
     u, slot, new = candidates(state, threshold)
     vn, vc, pos = state.vertex_neighbors, state.vertex_cells, state.positions
     v, a, b, c, d, C1, C2, C3, C4 = topology.t1_cells(vn, vc, u, slot)
-    px, py = topology.t1_new_positions(state, pos, u, v, a, b, c, d, new)
     n = len(u)
     cand = np.ascontiguousarray(np.stack([u, v, a, b, c, d, C1, C2, C3, C4], axis=1), dtype=np.int32)
     size = np.ascontiguousarray(state.constraint.size_np(state)[state.vertex_replica_np()[u]], dtype=np.float64)
-    hx, hy = np.empty((n, 3)), np.empty((n, 3))
-    lib.h_t1_positions(ctypes.c_long(n), _p(np.ascontiguousarray(pos)), _p(cand), _p(size),
-                       _p(np.ascontiguousarray(new, dtype=np.float64)), _p(hx), _p(hy))
-    scale = state.constraint.length_scale(size)[:, None]
-    assert np.max(np.abs(hx - px) / scale) < 1e-14 and np.max(np.abs(hy - py) / scale) < 1e-14
     table = np.ascontiguousarray(state.cell_vertices, dtype=np.int32)
-    host = np.empty(n, dtype=np.int32)
-    lib.h_t1_would_fold(ctypes.c_long(n), _p(np.ascontiguousarray(pos)), _p(np.ascontiguousarray(vn, np.int32)),
-                        _p(table), _p(np.ascontiguousarray(state.cell_sides, np.int32)), ctypes.c_int(table.shape[1]),
-                        _p(cand), _p(size), _p(np.ascontiguousarray(px)), _p(np.ascontiguousarray(py)), _p(host))
-    rule = folding.t1_folds(state, u, slot, new)
-    assert n > 20 and rule.any() and (~rule).any(), (n, rule.sum())
-    assert np.array_equal(host.astype(bool), rule), np.flatnonzero(host.astype(bool) != rule)
+    scale = state.constraint.length_scale(size)[:, None]
+    levels = {}
+    for turn in (False, True):      # t1_detect: the usual placement, then the other way round
+        px, py = topology.t1_new_positions(state, pos, u, v, a, b, c, d, new, np.full(n, turn))
+        hx, hy = np.empty((n, 3)), np.empty((n, 3))
+        lib.h_t1_positions(ctypes.c_long(n), _p(np.ascontiguousarray(pos)), _p(cand), _p(size),
+                           _p(np.ascontiguousarray(new, dtype=np.float64)), ctypes.c_int(turn), _p(hx), _p(hy))
+        assert np.max(np.abs(hx - px) / scale) < 1e-14 and np.max(np.abs(hy - py) / scale) < 1e-14
+        host = np.empty(n, dtype=np.int32)
+        lib.h_t1_fold_level(ctypes.c_long(n), _p(np.ascontiguousarray(pos)), _p(np.ascontiguousarray(vn, np.int32)),
+                            _p(table), _p(np.ascontiguousarray(state.cell_sides, np.int32)), ctypes.c_int(table.shape[1]),
+                            _p(cand), _p(size), _p(np.ascontiguousarray(px)), _p(np.ascontiguousarray(py)), _p(host))
+        rule = folding.t1_fold_level(state, u, slot, new, turn=np.full(n, turn))
+        assert np.array_equal(host, rule), np.flatnonzero(host != rule)
+        levels[turn] = rule
+    refused, turned = folding.t1_placement(state, u, slot, new)   # what t1_detect decides from the two levels
+    assert np.array_equal(turned, (levels[False] != 0) & (levels[True] == 0))
+    assert np.array_equal(refused, (levels[False] == 2) & ~turned)
+    assert n > 20 and (levels[False] == 2).any() and (levels[False] == 0).any(), (n, np.bincount(levels[False]))
 
 
 @pytest.mark.skipif(shutil.which("nvcc") is None, reason="no nvcc: the T1 kernels are compiled at run time by CuPy")

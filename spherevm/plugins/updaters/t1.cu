@@ -4,12 +4,12 @@
 // after one small read-back of the counters, t1_apply (one thread per candidate) flips the
 // winners. Winners touch disjoint cells and vertices, so they need no locks. Compiled once per
 // surface (geometry/surface.cuh): the short-edge test and the new positions are the surface's. A
-// candidate whose flip would fold the network (t1_fold.cuh) is refused in t1_detect, as one
-// losing a triangle's side.
+// candidate whose flip would fold the network (t1_fold.cuh) turns the other way if that does not
+// fold it, and is refused otherwise, in t1_detect (folding.t1_placement).
 #include "geometry/surface.cuh"
 #include "plugins/updaters/t1_fold.cuh"
 
-#define CAND_INTS 12   // u, k, v, a, b, c, d, C1, C2, C3, C4, replica
+#define CAND_INTS 13   // u, k, v, a, b, c, d, C1, C2, C3, C4, replica, turn
 #define LOG_INTS 6     // pass, C1, C2, C3, C4, replica
 
 // counters: [0] candidates, [1] a C3/C4 row is full (widen the table). size: the State's radius or box.
@@ -41,13 +41,19 @@ extern "C" __global__ void t1_detect(
         int c = vn[3 * v + (j + 1) % 3], d = vn[3 * v + (j + 2) % 3];
         int C4 = vc[3 * v + (j + 1) % 3];
         bool distinct = C1 != C2 && C1 != C3 && C1 != C4 && C2 != C3 && C2 != C4 && C3 != C4;
-        bool refuse = sides[C1] <= 3 || sides[C2] <= 3 || !distinct;
-        if (!refuse) {
+        bool refuse = sides[C1] <= 3 || sides[C2] <= 3 || !distinct, turn = false;
+        if (!refuse) {      // folding.t1_placement: usual if clean, else turned if clean, else usual unless it folds
             vec3 px, py;
             double full = new_length[r] > 0.0 ? new_length[r] : length_factor * L;
             Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py);
-            refuse = t1_would_fold(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px,
-                                   py, s);
+            int usual = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px,
+                                      py, s);
+            if (usual != T1_CLEAN) {
+                Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py, true);
+                turn = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px,
+                                     py, s) == T1_CLEAN;
+                refuse = usual == T1_FOLDS && !turn;
+            }
         }
         if (refuse) {
             atomicAdd(refused + r, 1);
@@ -64,7 +70,7 @@ extern "C" __global__ void t1_detect(
         if (i < capacity) {
             int* e = cand + (long)i * CAND_INTS;
             e[0] = u; e[1] = k; e[2] = v; e[3] = a; e[4] = b; e[5] = c; e[6] = d;
-            e[7] = C1; e[8] = C2; e[9] = C3; e[10] = C4; e[11] = r;
+            e[7] = C1; e[8] = C2; e[9] = C3; e[10] = C4; e[11] = r; e[12] = turn ? 1 : 0;
             cand_len[i] = L;
         }
     }
@@ -127,7 +133,7 @@ extern "C" __global__ void t1_apply(
     // the places t1_detect checked
     double full = new_length[r] > 0.0 ? new_length[r] : length_factor * cand_len[i];
     vec3 px, py;
-    Surface::t1_positions(pos, u, v, a, b, c, d, Surface::size(size, r), full, &px, &py);
+    Surface::t1_positions(pos, u, v, a, b, c, d, Surface::size(size, r), full, &px, &py, e[12] != 0);
     store3(pos, X, px);
     store3(pos, Y, py);
     atomicAdd(flips + r, 1);

@@ -11,7 +11,7 @@ from ..base import KERNEL_SURFACES, Minimizer, Updater, surface_kernels
 from ...validation import integer, positive
 
 _KERNELS = Path(__file__).with_suffix(".cu")
-_CAND_INTS, _LOG_INTS = 12, 6
+_CAND_INTS, _LOG_INTS = 13, 6
 
 PRESETS = {
     # The rules of the paper's own code: threshold 0.1, new edge twice the old length.
@@ -30,7 +30,8 @@ class T1(Updater):
     * a flip that would leave a cell with fewer than 3 sides (a triangle losing a side), or fold
       the network (leave one of its four cells with signed area <= 0, or invert a corner: the
       three edges at one of its six vertices no longer counter-clockwise; see
-      :func:`spherevm.folding.t1_folds`), is refused and counted, never an error;
+      :func:`spherevm.folding.t1_placement`), is refused and counted, never an error; one whose
+      usual placement would fold is rotated the other way round if that does not;
     * conflicting flips (short edges touching a common cell) are resolved deterministically: an
       edge flips only if it has the lowest index among the candidate edges touching each of its
       four cells, so at most one flip per cell per pass; the rest wait for the next pass. The edge
@@ -157,7 +158,8 @@ class T1(Updater):
         return self.new_length * np.sqrt(state.mean_cell_area)[state.vertex_replica_np()[u]]
 
     def select(self, state, u, slot, lengths):
-        """Apply the rules: returns (flip mask, refused mask) over the candidates, and their cells."""
+        """Apply the rules: returns (flip mask, refused mask) over the candidates, their cells, and
+        which flips turn the other way (:func:`spherevm.folding.t1_placement`)."""
         dev = state.device
         vn, vc = dev.to_numpy(state.vertex_neighbors), dev.to_numpy(state.vertex_cells)
         sides = dev.to_numpy(state.cell_sides)
@@ -167,13 +169,15 @@ class T1(Updater):
         distinct = (ordered[:, 1:] != ordered[:, :-1]).all(axis=1)
         refused = (sides[C1] <= 3) | (sides[C2] <= 3) | ~distinct
         rest = np.flatnonzero(~refused)
-        refused[rest] = folding.t1_folds(state, u[rest], slot[rest], self.new_lengths(state, u[rest], lengths[rest]))
+        turn = np.zeros(len(u), dtype=bool)
+        refused[rest], turn[rest] = folding.t1_placement(state, u[rest], slot[rest],
+                                                         self.new_lengths(state, u[rest], lengths[rest]))
         index = 3 * u + slot
         claim = np.full(state.n_cells, np.iinfo(np.int64).max, dtype=np.int64)
         ok = ~refused
         np.minimum.at(claim, cells[ok].reshape(-1), np.repeat(index[ok], 4))
         flip = ok & (claim[cells] == index[:, None]).all(axis=1)
-        return flip, refused, cells
+        return flip, refused, cells, turn
 
     # ------------------------------------------------------------------ the pass
     def update(self, simulation, timestep):
@@ -198,7 +202,7 @@ class T1(Updater):
             u, slot, lengths = u[keep], slot[keep], lengths[keep]
         if len(u) == 0:
             return
-        flip, refused, cells = self.select(state, u, slot, lengths)
+        flip, refused, cells, turn = self.select(state, u, slot, lengths)
         rep = state.vertex_replica_np()[u]
         self.last_refused = np.bincount(rep[refused], minlength=n_rep)
         self.total_refused += self.last_refused
@@ -208,7 +212,7 @@ class T1(Updater):
         new = self.new_lengths(state, u, lengths)
         if self.counting(simulation):
             self._count_flip_backs(state, cells, rep)
-        moved = topology.t1_flip(state, u, slot, new)
+        moved = topology.t1_flip(state, u, slot, new, turn=turn[flip])
         self.last_flips = np.bincount(rep, minlength=n_rep)
         self.total_flips += self.last_flips
         if self.reset_velocities and integrator is not None:

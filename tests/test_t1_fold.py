@@ -209,7 +209,7 @@ def kicked_plane(n_cells, seed, kick, replicas=3):
     ("sphere", 40, 1, 0.05, 0.3), ("sphere", 24, 2, 0.12, 0.5), ("sphere", 12, 3, 0.1, 0.9),
     ("sphere", 200, 4, 0.02, 0.25), ("plane", 40, 1, 0.05, 0.4), ("plane", 60, 2, 0.12, 0.5)])
 def test_cuda_header_agrees_with_numpy(fold_header, surface, n_cells, seed, kick, threshold):
-    """Surface::t1_positions and t1_would_fold, built for the host, against topology.t1_new_positions
+    """Surface::t1_positions and t1_fold_level, built for the host, against topology.t1_new_positions
     and folding.t1_fold_level on every candidate of kicked tilings (a few hundred, folding or not)."""
     state = kicked(n_cells, seed, kick, replicas=3) if surface == "sphere" else kicked_plane(n_cells, seed, kick)
     lib = fold_header[surface]

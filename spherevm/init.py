@@ -7,9 +7,9 @@ from scipy.spatial import ConvexHull
 
 from . import gsdio, topology
 from .constraints import Sphere
-from .device import CPU
+from .device import CPU, resolve
 from .state import State
-from .validation import integer
+from .validation import check_tiling_memory, integer
 
 REGULAR_TILINGS = ("dodecahedron", "truncated_icosahedron")
 MAX_ATTEMPTS = 1000
@@ -83,8 +83,9 @@ def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, v
     Small spheres: a point set lying within one hemisphere (probability (N^2 - N + 2)/2^N, so
     common for N < 16 and below 1e-6 from N = 32) has the origin outside its hull and gives a cell
     larger than a hemisphere; facet centroids can also fold a cell over when a facet is very
-    obtuse. Such draws are rejected and redrawn from the stream ``(seed, r, attempt)``, so every
-    tiling returned has all cells counter-clockwise with positive area. This conditions the
+    obtuse, or push one past a hemisphere. Such draws are rejected and redrawn from the stream
+    ``(seed, r, attempt)``, so every tiling returned has all cells counter-clockwise with positive
+    area, each smaller than a hemisphere (what :meth:`State.validate` requires). This conditions the
     ensemble of small-N tilings; at N >= 32 it practically never happens.
 
     ``sort=True`` numbers cells and vertices along a Morton curve on the sphere
@@ -95,25 +96,8 @@ def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, v
     replicas = integer("replicas", replicas, minimum=1)
     seed = integer("seed", seed)
     R = _check_radius(radius, n)
-    _check_tiling_memory(n, replicas, device)
+    check_tiling_memory(f"random_tiling({n}, replicas={replicas})", n, replicas, gpu=resolve(device).is_gpu)
     return _tilings(n, [(seed, r) for r in range(replicas)], R, vertices, sort, device)
-
-
-# Bytes per cell, measured (tracemalloc and qhull, random_tiling(50000)): the finished State holds
-# about 160 B per cell on the host; building one replica peaks near 2.5 kB per cell; a simulation
-# on the GPU keeps about 400 B per cell there (State, forces, integrator memory, scratch).
-_HOST_STATE_BYTES, _HOST_BUILD_BYTES, _DEVICE_BYTES = 500, 2500, 400
-
-
-def _check_tiling_memory(n_cells, replicas, device):
-    """Refuse before allocating a request that cannot fit (InsufficientMemory, naming both numbers)."""
-    from .device import resolve
-    from .validation import check_memory
-    dev = resolve(device)
-    total = float(n_cells) * replicas
-    check_memory(f"random_tiling({n_cells}, replicas={replicas})",
-                 host_bytes=total * _HOST_STATE_BYTES + float(n_cells) * _HOST_BUILD_BYTES,
-                 device_bytes=total * _DEVICE_BYTES, gpu=dev.is_gpu)
 
 
 def random_tilings(n_cells: int, seeds, radius=None, vertices="centroid", sort: bool = True, device=CPU) -> State:
@@ -128,7 +112,9 @@ def random_tilings(n_cells: int, seeds, radius=None, vertices="centroid", sort: 
     seeds = [int(x) for x in seeds]
     if not seeds or min(seeds) < 0:
         raise ValueError("seeds must be a non-empty list of non-negative integers")
-    return _tilings(n, [(x, 0) for x in seeds], _check_radius(radius, n), vertices, sort, device)
+    R = _check_radius(radius, n)
+    check_tiling_memory(f"random_tilings({n}, {len(seeds)} seeds)", n, len(seeds), gpu=resolve(device).is_gpu)
+    return _tilings(n, [(x, 0) for x in seeds], R, vertices, sort, device)
 
 
 def _draw_hull(n, key, attempt):
@@ -157,7 +143,8 @@ def _tilings(n, keys, R, vertices, sort, device):
                 attempts[i] += 1
         state = _batched_dual(n, hulls, R, vertices, sort)
         area = state.constraint.cell_areas_np(state)
-        folded = np.unique(state.cell_replica_np()[area <= 0])   # a very obtuse facet folded a cell
+        half = 0.5 * state.constraint.total_area_np(R)            # a cell over a hemisphere is refused too
+        folded = np.unique(state.cell_replica_np()[(area <= 0) | (area > half)])   # a very obtuse facet
         attempts[folded] += 1
         todo = folded.tolist()
     state = state.to(device) if device is not CPU else state

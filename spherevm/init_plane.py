@@ -9,9 +9,9 @@ import numpy as np
 
 from . import topology
 from .constraints import PeriodicPlane
-from .device import CPU
+from .device import CPU, resolve
 from .state import State
-from .validation import integer
+from .validation import check_tiling_memory, integer
 
 MAX_ATTEMPTS = 1000
 #: the fewest cells a random periodic tiling may have. Trivalent cells on a torus average 6 sides and
@@ -117,7 +117,9 @@ def random_planar_tiling(n_cells: int, replicas: int = 1, seed: int = 0, box=Non
     n = integer("n_cells", n_cells, minimum=MIN_PLANAR_CELLS)
     replicas = integer("replicas", replicas, minimum=1)
     seed = integer("seed", seed)
-    return _planar_tilings(n, [(seed, r) for r in range(replicas)], check_box(box, n), sort, device)
+    b = check_box(box, n)
+    check_tiling_memory(f"random_planar_tiling({n}, replicas={replicas})", n, replicas, gpu=resolve(device).is_gpu)
+    return _planar_tilings(n, [(seed, r) for r in range(replicas)], b, sort, device)
 
 
 def random_planar_tilings(n_cells: int, seeds, box=None, sort: bool = True, device=CPU) -> State:
@@ -128,7 +130,9 @@ def random_planar_tilings(n_cells: int, seeds, box=None, sort: bool = True, devi
     seeds = [int(x) for x in seeds]
     if not seeds or min(seeds) < 0:
         raise ValueError("seeds must be a non-empty list of non-negative integers")
-    return _planar_tilings(n, [(x, 0) for x in seeds], check_box(box, n), sort, device)
+    b = check_box(box, n)
+    check_tiling_memory(f"random_planar_tilings({n}, {len(seeds)} seeds)", n, len(seeds), gpu=resolve(device).is_gpu)
+    return _planar_tilings(n, [(x, 0) for x in seeds], b, sort, device)
 
 
 def _planar_tilings(n, keys, b, sort, device):

@@ -14,6 +14,7 @@ from .plugins.updaters import T1
 from .plugins.writers import GSD
 from .simulation import Simulation
 from .state import State
+from .validation import check_run_memory, integer
 
 
 @dataclass
@@ -94,6 +95,9 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
             raise TypeError(f"initial_state must be a spherevm State, got {type(initial_state).__name__}")
         sim.state = initial_state
     elif restart is None:
+        n_cells, replicas = integer("n_cells", n_cells, minimum=4), integer("replicas", replicas, minimum=1)
+        check_run_memory(f"dynamics of {replicas} replica(s) of {n_cells} cells", n_cells * replicas, n_cells,
+                         gpu=sim.device.is_gpu)
         tiling = init.random_planar_tiling if surface == "plane" else init.random_tiling
         sim.state = tiling(n_cells, replicas=replicas, seed=seed)
     else:

@@ -9,7 +9,7 @@ import numpy as np
 from . import shapes
 from .device import resolve
 from .plugins.base import Force, Integrator, Minimizer, Updater, Writer, compute_all
-from .validation import integer
+from .validation import GPU_RUN_BYTES_PER_CELL, check_memory, integer
 
 
 class Operations:
@@ -173,6 +173,9 @@ class Simulation:
         self._set_state(value, pending={})
 
     def _set_state(self, value, pending, updated_at=None, held_back=False):
+        if self.device.is_gpu:        # refuse at once what the GPU cannot hold, not at the first kernel
+            check_memory(f"a run of {value.n_cells} cells on the GPU", host_bytes=0.0,
+                         device_bytes=float(value.n_cells) * GPU_RUN_BYTES_PER_CELL, gpu=True)
         self._state = value.copy() if value.device is self.device else value.to(self.device)
         self._cache = None
         self._pending = dict(pending)

@@ -196,13 +196,15 @@ class State:
         self.topology_changed()
 
     # ------------------------------------------------------------------ checks and copies
-    def validate(self, tol: float = 1e-9, orientation: bool = True):
+    def validate(self, tol: float = 1e-9, orientation: bool = True, cover: bool = True):
         """Raise ValueError naming the first offending cell or vertex if the network is invalid.
 
         ``tol`` is the allowed distance from the surface in units of R; ``orientation=False`` skips
-        the positive-area test (cells may fold over at kA = 0).
+        the positive-area test (cells may fold over at kA = 0); ``cover=False`` skips it and the
+        total-area test (cells cover the surface once, none over a hemisphere): see
+        :func:`spherevm.topology.check`.
         """
-        topology.check(self, tol=tol, orientation=orientation)
+        topology.check(self, tol=tol, orientation=orientation, cover=cover)
         return self
 
     def to(self, device) -> "State":

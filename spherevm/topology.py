@@ -102,14 +102,16 @@ def edges(vertex_neighbors):
     return np.stack([u[keep], v[keep]], axis=1).astype(np.int32)
 
 
-def check(state, tol: float = 1e-9, orientation: bool = True):
+def check(state, tol: float = 1e-9, orientation: bool = True, cover: bool = True):
     """Validate a State; raise ValueError naming the first offending cell or vertex.
 
     Checks: finite positions on the surface, trivalent network with reciprocal neighbours, cell
     table and vertex tables consistent (so every edge is shared by exactly two cells, once in each
-    direction), replica layout, counter-clockwise cells (positive area), and V - E + F = 2 per
-    replica. ``orientation=False`` skips the area sign test: at kA = 0 the energy does not care
-    about area, and minimisation may legitimately fold a cell over.
+    direction), replica layout, V - E + F = 2 per replica, the cells covering the surface once
+    (their areas add up to its area, none over a hemisphere) and counter-clockwise cells (positive
+    area). ``orientation=False`` skips the area sign test: at kA = 0 the energy does not care
+    about area, and minimisation may legitimately fold a cell over. ``cover=False`` skips both area
+    tests, for networks that are not physical states (random walks of T1 tests on tiny spheres).
     """
     pos = state.device.to_numpy(state.positions)
     vn = state.device.to_numpy(state.vertex_neighbors)
@@ -173,23 +175,54 @@ def check(state, tol: float = 1e-9, orientation: bool = True):
     if np.any(nvr % 2) or np.any(chi != want):
         r = int(np.flatnonzero((chi != want) | (nvr % 2 == 1))[0])
         raise ValueError(f"replica {r} has Euler characteristic V - E + F = {int(chi[r])}, {con!r} needs {want}")
+    if not cover or con.missing(("cell_geometry",)):
+        return
+    areas = con.cell_areas_np(state)
+    _check_cover(state, areas)
     if not orientation:
         return
     # orientation: counter-clockwise cells have positive area
-    areas = state.constraint.cell_areas_np(state)
     neg = areas <= 0
     if neg.any():
         c = int(np.flatnonzero(neg)[0])
         raise ValueError(f"cell {c} has area {areas[c]:.3g} <= 0: it is listed clockwise seen from outside "
                          "(list cell vertices counter-clockwise) or it is folded")
-    if want == 0:   # a periodic plane: the cells tile the box exactly once
-        total = np.bincount(state.cell_replica_np(), weights=areas, minlength=state.n_replicas)
-        box = con.total_area_np(con.size_np(state))
-        wrong = np.abs(total - box) > 1e-9 * box
-        if wrong.any():
-            r = int(np.flatnonzero(wrong)[0])
-            raise ValueError(f"replica {r}: the cells cover an area {total[r]:.12g}, but the box's is {box[r]:.12g}; "
-                             "some cell wraps around the box or overlaps another")
+
+
+def _check_cover(state, areas):
+    """The cells cover the surface exactly once: their areas add up to its area, and on a sphere
+    none covers more than a hemisphere. A cell's area is a fan of signed triangles, exact below a
+    hemisphere; a larger cell measures A - 4 pi R^2 (and looks clockwise), so the sum catches it."""
+    con = state.constraint
+    try:
+        surface = con.total_area_np(con.size_np(state))
+    except NotImplementedError:       # a surface that does not know its area: nothing to compare
+        return
+    crep = state.cell_replica_np()
+    total = np.bincount(crep, weights=areas, minlength=state.n_replicas)
+    wrong = np.flatnonzero(np.abs(total - surface) > 1e-9 * surface)
+    if len(wrong) and getattr(con, "euler_characteristic", 2) == 0:
+        r = int(wrong[0])
+        raise ValueError(f"replica {r}: the cells cover an area {total[r]:.12g}, but the box's is {surface[r]:.12g}; "
+                         "some cell wraps around the box or overlaps another")
+    if len(wrong):
+        r = int(wrong[0])
+        cells = np.flatnonzero(crep == r)
+        if abs(total[r] + surface[r]) <= 1e-9 * surface[r]:
+            raise ValueError(f"replica {r}: cell {int(cells[0])} and every other cell is listed clockwise seen from "
+                             "outside (their areas add up to -4 pi R^2); list cell vertices counter-clockwise")
+        c = int(cells[np.argmin(areas[cells])])
+        raise ValueError(f"replica {r}: the cell areas add up to {total[r]:.12g}, not the sphere's 4 pi R^2 = "
+                         f"{surface[r]:.12g}: cell {c} (measured {areas[c]:.6g}) is larger than a hemisphere, which "
+                         "spherevm cannot measure (areas are fans of spherical triangles: such a cell gets "
+                         "A - 4 pi R^2), or cells overlap; use more cells, so that every cell is smaller than a "
+                         "hemisphere")
+    if getattr(con, "euler_characteristic", 2) == 2:
+        big = np.flatnonzero(areas > 0.5 * surface[crep])
+        if len(big):
+            c = int(big[0])
+            raise ValueError(f"cell {c} covers {areas[c] / surface[crep[c]]:.3g} of its sphere, more than a "
+                             "hemisphere: spherevm measures cells smaller than a hemisphere only; use more cells")
 
 
 def cell_table(vertex_neighbors, vertex_cells, n_cells: int, min_width: int = 0):
@@ -269,14 +302,42 @@ def _split_in_rows(table, sides, rows, vert, first, second):
     sides[rows] += 1
 
 
-def t1_flip(state, u, slot, new_length, sense: int = 1):
+def t1_new_positions(state, pos, u, v, a, b, c, d, new_length, turn=None):
+    """Where a T1 flip of the edges ``(u, v)`` puts its two vertices: ``(on the C1 side, on the C2
+    side)``, rotating each edge by 90 degrees about the surface normal at its midpoint, the two
+    points ``new_length`` apart symmetrically about it (``pos``: host positions; a..d as from
+    :func:`t1_cells`). ``turn`` (a mask): rotate those edges the other way, the C1-side vertex to
+    the other side (where the usual way would fold the network, :func:`spherevm.folding.t1_placement`).
+    The CUDA twin is ``Surface::t1_positions`` (geometry/surface.cuh)."""
+    con = state.constraint
+    radius = con.size_np(state)[state.vertex_replica_np()[u]]     # the surface size (a box on a plane)
+    pu = pos[u]
+    pv, pa, pb, pc, pd = (con.unwrap(pos[w], pu, radius) for w in (v, a, b, c, d))  # nearest images
+    mid = con.project_normal(0.5 * (pu + pv), radius)
+    normal = con.normal(mid)
+    along = con.project_tangent(mid, pv - pu)
+    norm = np.linalg.norm(along, axis=1)
+    # a zero-length edge has no direction: fall back to the direction between the cells' sides
+    across_c1 = con.project_tangent(mid, 0.5 * (pa + pd) - 0.5 * (pb + pc))
+    tiny = norm <= 1e-12 * con.length_scale(radius)
+    perp = np.cross(normal, along / np.where(tiny, 1.0, norm)[:, None])
+    perp[tiny] = across_c1[tiny]
+    if turn is not None:
+        perp[np.asarray(turn, dtype=bool)] *= -1.0
+    perp /= np.linalg.norm(perp, axis=1)[:, None]
+    half = 0.5 * np.broadcast_to(np.asarray(new_length, dtype=np.float64), u.shape)
+    return con.geodesic_offset(mid, perp, half, radius), con.geodesic_offset(mid, -perp, half, radius)
+
+
+def t1_flip(state, u, slot, new_length, sense: int = 1, turn=None):
     """Flip the edges ``(u[i], vertex_neighbors[u[i], slot[i]])`` of ``state`` in place.
 
     The caller guarantees the flips touch disjoint cells and that ``C1``, ``C2`` keep >= 3 sides.
     Each edge is rotated by +90 degrees (``sense=1``, counter-clockwise seen from outside) or -90
     degrees about the surface normal at its midpoint: ``C1`` and ``C2`` (which shared it) lose a
     side, ``C3`` and ``C4`` (at its ends) gain one and now share it. The two vertices are placed
-    symmetrically about the midpoint at geodesic separation ``new_length``. Flipping again with the
+    symmetrically about the midpoint at geodesic separation ``new_length`` (``turn``: see
+    :func:`t1_new_positions`). Flipping again with the
     opposite sense restores the original network. Tables stay on the host (NumPy) here; the
     State's arrays are updated in place, widening ``cell_vertices`` when a cell needs more room.
     Returns the array of vertices moved (``u`` and ``v`` of every flip).
@@ -308,24 +369,7 @@ def t1_flip(state, u, slot, new_length, sense: int = 1):
     _remove_from_rows(table, sides, C2, X)
     _split_in_rows(table, sides, C3, u, Y, X)
     _split_in_rows(table, sides, C4, v, X, Y)
-    # positions: rotate the edge about the normal at its midpoint
-    con = state.constraint
-    radius = con.size_np(state)[state.vertex_replica_np()[u]]     # the surface size (a box on a plane)
-    pu = pos[u]
-    pv, pa, pb, pc, pd = (con.unwrap(pos[w], pu, radius) for w in (v, a, b, c, d))  # nearest images
-    mid = con.project_normal(0.5 * (pu + pv), radius)
-    normal = con.normal(mid)
-    along = con.project_tangent(mid, pv - pu)
-    norm = np.linalg.norm(along, axis=1)
-    # a zero-length edge has no direction: fall back to the direction between the cells' sides
-    across_c1 = con.project_tangent(mid, 0.5 * (pa + pd) - 0.5 * (pb + pc))
-    tiny = norm <= 1e-12 * con.length_scale(radius)
-    perp = np.cross(normal, along / np.where(tiny, 1.0, norm)[:, None])
-    perp[tiny] = across_c1[tiny]
-    perp /= np.linalg.norm(perp, axis=1)[:, None]
-    half = 0.5 * np.broadcast_to(np.asarray(new_length, dtype=np.float64), u.shape)
-    pos[X] = con.geodesic_offset(mid, perp, half, radius)
-    pos[Y] = con.geodesic_offset(mid, -perp, half, radius)
+    pos[X], pos[Y] = t1_new_positions(state, pos, u, v, a, b, c, d, new_length, turn)
     xp = dev.xp
     state.vertex_neighbors = xp.asarray(vn)
     state.vertex_cells = xp.asarray(vc)

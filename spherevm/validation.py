@@ -73,23 +73,59 @@ def available_host_memory():
         return None
 
 
+def available_device_memory():
+    """Bytes free on the current GPU now (CuPy's ``memGetInfo``), or None without one."""
+    try:
+        import cupy
+        return int(cupy.cuda.runtime.memGetInfo()[0])
+    except Exception:
+        return None
+
+
+# The memory model behind the guards, in bytes per cell (measured with tracemalloc, random_tiling(100000)
+# and 20 FIRE + T1 steps, 2-core VM): building one random tiling peaks near 1.5 kB per cell of it
+# (qhull, the dual, the Morton sort); a finished State holds ~160 B per cell (a second copy when a
+# Simulation takes it); a CPU run (State, forces, FIRE memory, geometry scratch) peaks near 1.9 kB
+# per cell; a GPU run keeps ~400 B per cell on the device and little beyond the State on the host.
+# Rounded up: a guard that refuses a run that would fit is worse than one that lets a tight one try.
+BUILD_BYTES_PER_CELL = 2500
+STATE_BYTES_PER_CELL = 500
+CPU_RUN_BYTES_PER_CELL = 2500
+GPU_RUN_BYTES_PER_CELL = 400
+
+
 def _gib(n):
-    return f"{n / 2 ** 30:.3g} GiB"
+    return f"{n / 2 ** 40:.3g} TiB" if n >= 2 ** 40 else f"{n / 2 ** 30:.3g} GiB"
 
 
-def check_memory(what: str, host_bytes: float, device_bytes: float = 0.0, gpu: bool = False):
+def check_memory(what: str, host_bytes: float, device_bytes: float = 0.0, gpu: bool = False,
+                 advice: str = "ask for fewer cells or replicas"):
     """Refuse (InsufficientMemory) a request whose estimated host or GPU memory exceeds what is
     available now, with both numbers in the message."""
     host = available_host_memory()
     if host is not None and host_bytes > host:
         raise InsufficientMemory(f"{what} needs about {_gib(host_bytes)} of host memory, but only {_gib(host)} "
-                                 "is available; ask for fewer cells or replicas")
-    if gpu and device_bytes:
-        try:
-            import cupy
-            free = int(cupy.cuda.runtime.memGetInfo()[0])
-        except Exception:
-            return
-        if device_bytes > free:
-            raise InsufficientMemory(f"{what} needs about {_gib(device_bytes)} of GPU memory, but only {_gib(free)} "
-                                     "is free; ask for fewer cells or replicas")
+                                 f"is available; {advice}")
+    free = available_device_memory() if gpu and device_bytes else None
+    if free is not None and device_bytes > free:
+        raise InsufficientMemory(f"{what} needs about {_gib(device_bytes)} of GPU memory, but only {_gib(free)} "
+                                 f"is free; {advice}")
+
+
+def check_tiling_memory(what: str, n_cells: float, replicas: int, gpu: bool):
+    """Refuse before allocating tilings that cannot fit: the States and the largest tiling being
+    built on the host, the States on a GPU (``gpu``: the tilings are made on one)."""
+    total = float(n_cells) * replicas
+    check_memory(what, host_bytes=total * STATE_BYTES_PER_CELL + float(n_cells) * BUILD_BYTES_PER_CELL,
+                 device_bytes=total * GPU_RUN_BYTES_PER_CELL, gpu=gpu)
+
+
+def check_run_memory(what: str, cells: float, largest: float, gpu: bool, copies: int = 1,
+                     advice: str = "ask for fewer cells or replicas"):
+    """Refuse (InsufficientMemory) before anything is built a run of ``cells`` cells in all, in
+    tilings of at most ``largest`` cells each, on the GPU or the CPU, ``copies`` times at once (a
+    sweep's worker processes): the host must hold the tiling being built and the run (its State on
+    a GPU run, everything on a CPU run), the GPU the device arrays of a GPU run."""
+    per_cell = STATE_BYTES_PER_CELL if gpu else CPU_RUN_BYTES_PER_CELL
+    host = copies * (float(cells) * per_cell + float(largest) * BUILD_BYTES_PER_CELL)
+    check_memory(what, host_bytes=host, device_bytes=float(cells) * GPU_RUN_BYTES_PER_CELL, gpu=gpu, advice=advice)

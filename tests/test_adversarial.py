@@ -152,18 +152,139 @@ def test_folded_states_read_unless_orientation_is_asked(tmp_path):
     assert cv.shape == state.cell_vertices.shape
 
 
+# ------------------------------------------------------------------ item 8: cells larger than a hemisphere
+def squeezed_dodecahedron(factor):
+    """The dodecahedron with every polar angle scaled by ``factor`` (the issue's reproduction)."""
+    s = svm.init.regular_tiling("dodecahedron")
+    R = float(s.radius_np()[0])
+    p = s.positions
+    theta, phi = factor * np.arccos(p[:, 2] / R), np.arctan2(p[:, 1], p[:, 0])
+    s.positions = R * np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], axis=1)
+    return s
+
+
+@pytest.mark.parametrize("factor", [0.45, 0.55])
+def test_a_cell_larger_than_a_hemisphere_is_refused_at_validation(factor, tmp_path):
+    s = squeezed_dodecahedron(factor)
+    total = s.constraint.cell_areas_np(s).sum()
+    assert abs(total - 4 * np.pi * s.radius_np()[0] ** 2) > 1           # the invariant is broken (0, not 4 pi R^2)
+    for orientation in (False, True):          # not reported as "clockwise", with or without the sign test
+        with pytest.raises(ValueError, match=r"replica 0: the cell areas add up to .* larger than a hemisphere"):
+            s.validate(orientation=orientation)
+    with pytest.raises(ValueError, match="larger than a hemisphere"):
+        svm.State(s.positions, s.cell_vertices, s.cell_sides, s.vertex_neighbors, s.vertex_cells, s.vertex_start,
+                  s.cell_start, s.radius)
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.State(s.positions, s.cell_vertices, s.cell_sides, s.vertex_neighbors, s.vertex_cells,
+                          s.vertex_start, s.cell_start, s.radius, validate=False)
+    svm.write_gsd(sim, tmp_path / "big.gsd")
+    with pytest.raises(ValueError, match=r"big.gsd.*frame 0.*larger than a hemisphere"):
+        svm.init.from_gsd(tmp_path / "big.gsd")
+
+
+@pytest.mark.parametrize("factor", [0.6, 0.75, 0.9, 1.0])
+def test_the_total_area_invariant_holds_for_states_that_pass(factor):
+    """Squeezed less, the largest cell stays under a hemisphere: areas add up to 4 pi R^2, no cell is
+    clockwise, and the state is valid."""
+    s = squeezed_dodecahedron(factor)
+    area = s.constraint.cell_areas_np(s)
+    R = s.radius_np()[0]
+    assert abs(area.sum() - 4 * np.pi * R ** 2) <= 1e-12 * 4 * np.pi * R ** 2
+    assert area.min() > 0 and area.max() < 2 * np.pi * R ** 2
+    s.validate()
+
+
+def test_a_cell_over_a_hemisphere_measured_right_is_refused_too():
+    """The sum may hold while one cell covers more than half the sphere: refused, it is beyond what
+    cell centres and fans are exact for."""
+    s = svm.init.regular_tiling("dodecahedron")
+    area = s.constraint.cell_areas_np(s)
+    big = area.copy()
+    big[0], big[1:] = 0.6 * area.sum(), 0.4 * area.sum() / (len(area) - 1)
+    with pytest.raises(ValueError, match="cell 0 covers 0.6 of its sphere, more than a hemisphere"):
+        svm.topology._check_cover(s, big)
+    svm.topology._check_cover(s, area)
+
+
+def test_small_random_tilings_have_no_cell_over_a_hemisphere():
+    """random_tiling redraws such draws (facet centroids can push a cell past a hemisphere at N = 6)."""
+    for seed in range(3):
+        s = svm.init.random_tiling(6, replicas=6, seed=seed)
+        area = s.constraint.cell_areas_np(s)
+        assert area.max() < 2 * np.pi * s.radius_np()[0] ** 2
+
+
 # ------------------------------------------------------------------ item 3: size guard
 def test_huge_tiling_is_refused_before_allocating():
-    with pytest.raises(svm.validation.InsufficientMemory, match=r"needs about .* GiB of host memory, but only"):
+    with pytest.raises(svm.validation.InsufficientMemory, match=r"needs about .* TiB of host memory, but only"):
         svm.init.random_tiling(10 ** 12)
 
 
-def test_cli_huge_request_is_a_usage_error(tmp_path):
+def test_cli_huge_request_is_a_usage_error_at_once(tmp_path):
     import subprocess
     import sys
+    import time
+    start = time.monotonic()
     out = subprocess.run([sys.executable, "-m", "spherevm", "minimize", "--cells", "1000000000", "--replicas", "1",
                           "-q"], capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=os.getcwd()))
-    assert out.returncode == 2 and "GiB of host memory" in out.stderr, out.stderr
+    assert out.returncode == 2, out.stderr
+    assert "minimize --cells 1000000000 --replicas 1 needs about" in out.stderr and "is available" in out.stderr
+    assert time.monotonic() - start < 60          # refused before anything is built (it was killed at 24 GB)
+
+
+@pytest.fixture
+def half_a_gib(monkeypatch):
+    """The machine, as the guards see it, has 0.5 GiB of host memory and 0.25 GiB free on its GPU."""
+    monkeypatch.setattr(svm.validation, "available_host_memory", lambda: 2 ** 29)
+    monkeypatch.setattr(svm.validation, "available_device_memory", lambda: 2 ** 28)
+
+
+@pytest.mark.parametrize("make", [lambda: svm.init.random_tiling(200_000, replicas=2),
+                                  lambda: svm.init.random_tilings(300_000, [1]),
+                                  lambda: svm.init_plane.random_planar_tiling(300_000),
+                                  lambda: svm.init_plane.random_planar_tilings(200_000, [1, 2])],
+                         ids=["random_tiling", "random_tilings", "random_planar_tiling", "random_planar_tilings"])
+def test_initialisers_refuse_what_does_not_fit(half_a_gib, make):
+    """States of 500 B per cell plus 2.5 kB per cell of the tiling being built: 0.65 to 0.84 GiB."""
+    with pytest.raises(svm.validation.InsufficientMemory, match=r"needs about [0-9.]+ GiB of host memory, but only "
+                                                                 r"0.5 GiB is available"):
+        make()
+
+
+@pytest.mark.parametrize("argv, what", [
+    (["minimize", "--cells", "150000", "--replicas", "1"], "minimize --cells 150000 --replicas 1"),
+    (["dynamics", "--cells", "150000", "--replicas", "1"], "dynamics of 1 replica(s) of 150000 cells"),
+])
+def test_cli_runs_refuse_what_does_not_fit(half_a_gib, capsys, argv, what):
+    """150,000 cells: the State alone (~75 MB) would fit, the CPU run (~0.7 GiB) does not."""
+    from spherevm import cli
+    assert cli.main([*argv, "--device", "cpu", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert f"{what} needs about 0.698 GiB of host memory, but only 0.5 GiB is available" in err, err
+
+
+def test_sweep_refuses_what_does_not_fit_before_making_anything(half_a_gib, tmp_path):
+    sweep = svm.sweeps.RigiditySweep(cells=(150_000,), p0=(3.7, 3.8), replicas=1)
+    with pytest.raises(svm.validation.InsufficientMemory, match=r"the sweep \(1 worker\(s\), chunks of up to 150000 "
+                                                                 r"cells\) needs about .* fewer workers"):
+        svm.sweeps.run_sweep(sweep, tmp_path / "sweep", device="cpu", workers=1)
+    assert not (tmp_path / "sweep").exists()
+
+
+def test_gpu_estimates_are_checked_against_free_gpu_memory(half_a_gib):
+    """A GPU run needs its State on the host and ~400 B per cell on the GPU (0.25 GiB free here)."""
+    svm.validation.check_run_memory("a run", 100_000, 100_000, gpu=True)             # 38 MB on the GPU
+    with pytest.raises(svm.validation.InsufficientMemory, match=r"a run needs about 0.373 GiB of GPU memory, but "
+                                                                 r"only 0.25 GiB is free"):
+        svm.validation.check_run_memory("a run", 1_000_000, 1000, gpu=True)
+
+
+@pytest.mark.gpu
+def test_a_gpu_simulation_refuses_a_state_the_gpu_cannot_hold(monkeypatch):
+    monkeypatch.setattr(svm.validation, "available_device_memory", lambda: 1000)
+    sim = svm.Simulation(device="gpu")
+    with pytest.raises(svm.validation.InsufficientMemory, match="a run of 64 cells on the GPU needs about"):
+        sim.state = svm.init.random_tiling(64)
 
 
 # ------------------------------------------------------------------ item 9: messages at the point of the mistake
@@ -176,3 +297,41 @@ def test_absurd_radius_is_refused_with_the_reason(radius):
 def test_nan_cell_count_is_refused():
     with pytest.raises(ValueError, match="n_cells"):
         svm.init.random_tiling(float("nan"))
+
+
+def test_seed_beyond_philox_key_is_refused_at_construction():
+    with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 4294967295\]"):
+        svm.Simulation(device="cpu", seed=2 ** 40)
+
+
+def test_t1_new_edge_shorter_than_the_old_is_refused():
+    with pytest.raises(ValueError, match="length_factor must be > 1"):
+        svm.plugins.updaters.T1(length_factor=0.5)
+
+
+def test_gsd_writer_given_a_directory_is_refused_at_construction(tmp_path):
+    with pytest.raises(ValueError, match="is a directory; give a file name such as"):
+        GSD(tmp_path)
+
+
+def test_cli_out_in_proc_is_a_usage_error_naming_out():
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-m", "spherevm", "minimize", "--cells", "16", "--replicas", "1", "-q",
+                          "--out", "/proc/x.gsd"], capture_output=True, text=True,
+                         env=dict(os.environ, PYTHONPATH=os.getcwd()))
+    assert out.returncode == 2 and "argument --out" in out.stderr and "Traceback" not in out.stderr, out.stderr
+
+
+def test_single_p0_sweep_says_why_there_is_no_p0_star(tmp_path, capsys):
+    """One p0 value: F(p0) is measured and written, and the table and a note say p0* needs two."""
+    from spherevm import cli
+    rc = cli.main(["rigidity", "--cells", "16", "--p0", "3.8", "--replicas", "3", "--device", "cpu", "-j", "1",
+                   "--no-plots", "--out", str(tmp_path / "one")])
+    out, err = capsys.readouterr()
+    assert rc == 0
+    assert "F at fewer than two p0 values: no p0*" in out and "transition not inside" not in out
+    assert "p0* needs F at two or more p0 values" in err and "widen --p0" not in err
+    header, row = (tmp_path / "one" / "fraction.csv").read_text().splitlines()
+    values = dict(zip(header.split(","), row.split(",")))
+    assert values["n_cells"] == "16" and float(values["p0"]) == 3.8 and 0 <= float(values["F"]) <= 1

@@ -16,7 +16,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent / "spherevm"
 LAYERS = [
     ["geometry", "device", "validation", "random", "trigger", "logging", "provenance", "progress"],
     ["constraints"],
-    ["topology", "growth"],
+    ["topology", "folding", "growth"],
     ["state"],
     ["shapes", "gsdio", "init", "init_plane"],
     ["plugins", "testing"],

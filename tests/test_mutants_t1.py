@@ -99,7 +99,7 @@ def test_pairs_between_rekeys_and_drops():
 
 
 def test_loggables_and_counters_after_a_pass():
-    sim, t = _attached(threshold=50.0, new_length=60.0)
+    sim, t = _attached(threshold=1.0, new_length=1.1)     # every edge short, no flip folds
     assert set(t.loggables) == {"t1_flips", "t1_refused", "t1_total_flips", "t1_total_refused", "t1_flip_backs"}
     sim.run(1)
     flips = t.loggables["t1_flips"](sim)

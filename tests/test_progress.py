@@ -43,12 +43,12 @@ def test_minimize_bar_shows_replicas_step_and_force():
     term = Terminal()
     sim = _sim(replicas=3)
     with MinimizeBar(sim, stream=term) as b:
-        result = sim.minimize(force_tol=1e-8, max_steps=3000, progress=b)
+        result = sim.minimize(force_tol=1e-8, max_steps=400, progress=b)
     last = _last(term.getvalue())                  # the state the minimisation ended in
     stopped = int((result.reason != "max_steps").sum())
-    assert 0 < stopped < 3                         # seed 4: one replica runs to max_steps
+    assert 0 < stopped < 3                         # seed 4: the replicas need 440, 390 and 380 steps
     assert last.startswith(f"minimize: {stopped}/3 replicas done"), last
-    assert int(re.search(r"step=(\d+)", last).group(1)) == max(result.steps) == 3000
+    assert int(re.search(r"step=(\d+)", last).group(1)) == max(result.steps) == 400
     fmax = float(re.search(r"max\|F\|=([0-9.e+-]+)", last).group(1))
     assert fmax == pytest.approx(max(result.max_force), rel=0.01)
 

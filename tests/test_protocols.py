@@ -7,7 +7,9 @@ from spherevm.protocols import glassy_dynamics
 
 
 def test_glassy_dynamics_hot_small_sphere_relaxes():
-    res = glassy_dynamics(16, 3.9, 0.0, T=[0.05, 0.05], dt=0.05, steps=3000, replicas=2, relax_steps=500,
+    # dt = 0.02 (the same time as 3000 steps of 0.05): at T = 0.05 a step of 0.05 moves vertices
+    # past the T1 threshold and about one run in seven ends in an exploding step, seed-dependently
+    res = glassy_dynamics(16, 3.9, 0.0, T=[0.05, 0.05], dt=0.02, steps=7500, replicas=2, relax_steps=500,
                           device="cpu")
     assert res.lag[0] == 0 and np.all(np.diff(res.lag) > 0)
     assert res.msd[0] == 0 and res.msd[-1] > res.msd[1] > 0

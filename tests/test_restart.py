@@ -185,7 +185,7 @@ def test_write_gsd_one_shot(tiling, tmp_path):
 
 def test_gsd_writer_given_a_directory(tiling, tmp_path):
     sim = minimizer(tiling)
-    with pytest.raises(IsADirectoryError, match="is a directory"):
+    with pytest.raises(ValueError, match="is a directory; give a file name"):
         svm.write_gsd(sim, tmp_path)
 
 

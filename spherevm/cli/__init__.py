@@ -10,47 +10,56 @@ Subcommands::
 
 Bad arguments and bad input caught by the library end with one line on standard error,
 ``spherevm: error: ...``, and exit status 2; a failure while a minimisation runs gives status 1.
-No traceback is shown unless ``--debug`` is given before the subcommand. See docs/cli.md.
+No traceback is shown unless ``--debug`` is given before the subcommand. Ctrl-C (SIGINT), also
+during start-up (the subcommands and NumPy are imported inside :func:`main`), ends with the one
+line ``spherevm: interrupted`` and exit status 130. See docs/cli.md.
 
 The command line sits above the library: nothing in spherevm outside this package imports it.
 """
 from __future__ import annotations
 
-import argparse
+import importlib
 import os
 import sys
 
-from . import dynamics, export, info, minimize, plugins, render, rigidity
-from .arguments import RUNTIME_ERROR, USAGE_ERROR, CLIError, one_line
-
 PROG = "spherevm"
-COMMANDS = (minimize, dynamics, rigidity, info, plugins, export, render)
-COMMAND_NAMES = tuple(c.__name__.rsplit(".", 1)[-1] for c in COMMANDS)
+COMMAND_NAMES = ("minimize", "dynamics", "rigidity", "info", "plugins", "export", "render")
 COMMANDS_METAVAR = "{" + ",".join(COMMAND_NAMES) + "}"
+INTERRUPTED = 130   # 128 + SIGINT, as a shell reports it
 
 __all__ = ["CLIError", "PROG", "RUNTIME_ERROR", "USAGE_ERROR", "build_parser", "main"]
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse, but a usage error becomes a CLIError (one line, no usage dump, no SystemExit)."""
-
-    def error(self, message):
-        if message.startswith(f"argument {COMMANDS_METAVAR}: invalid choice:"):
-            message = "unknown command" + message.split("invalid choice", 1)[1]
-        raise CLIError(message, USAGE_ERROR)
+def __getattr__(name):
+    """The exit codes and CLIError of :mod:`.arguments`, imported on first use (it imports NumPy)."""
+    if name in ("CLIError", "RUNTIME_ERROR", "USAGE_ERROR", "one_line"):
+        return getattr(importlib.import_module(".arguments", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser():
     """The parser of the whole command line; each subcommand sets ``func``, its handler."""
+    import argparse
+
     from .. import __version__
+    from .arguments import USAGE_ERROR, CLIError
+
+    class _Parser(argparse.ArgumentParser):
+        """argparse, but a usage error becomes a CLIError (one line, no usage dump, no SystemExit)."""
+
+        def error(self, message):
+            if message.startswith(f"argument {COMMANDS_METAVAR}: invalid choice:"):
+                message = "unknown command" + message.split("invalid choice", 1)[1]
+            raise CLIError(message, USAGE_ERROR)
+
     parser = _Parser(prog=PROG, description="Vertex models of confluent tissue on a sphere.",
                      epilog="Run 'spherevm <command> --help' for a command's options. Docs: docs/cli.md")
     parser.add_argument("--version", action="version", version=f"spherevm {__version__}")
     parser.add_argument("--debug", action="store_true",
                         help="show the full traceback on errors instead of one line")
     sub = parser.add_subparsers(dest="command", metavar=COMMANDS_METAVAR, parser_class=_Parser)
-    for command in COMMANDS:
-        command.add_parser(sub)
+    for name in COMMAND_NAMES:
+        importlib.import_module(f".{name}", __name__).add_parser(sub)
     return parser
 
 
@@ -60,7 +69,21 @@ def _report(message):
 
 
 def main(argv=None) -> int:
-    """Run the command line ``argv`` (default ``sys.argv[1:]``); return the exit status."""
+    """Run the command line ``argv`` (default ``sys.argv[1:]``); return the exit status (130
+    after Ctrl-C, at any point, with one line on standard error)."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        try:
+            sys.stderr.write(f"\n{PROG}: interrupted\n")
+            sys.stderr.flush()
+        except (OSError, ValueError, KeyboardInterrupt):
+            pass
+        return INTERRUPTED
+
+
+def _main(argv):
+    from .arguments import RUNTIME_ERROR, USAGE_ERROR, CLIError, one_line
     parser = build_parser()
     try:
         args = parser.parse_args(None if argv is None else [os.fspath(a) for a in argv])
@@ -79,9 +102,6 @@ def main(argv=None) -> int:
             raise
         _report(exc.message)
         return exc.code
-    except KeyboardInterrupt:
-        sys.stderr.write(f"\n{PROG}: interrupted\n")
-        return 130
     except BrokenPipeError:  # e.g. `spherevm plugins | head -1`: the reader left, nothing to report
         try:
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

@@ -35,9 +35,10 @@ def add_parser(subparsers):
     g = m.add_argument_group("minimiser")
     g.add_argument("--dt", type=real(strict=True), default=0.02, help="FIRE time step, > 0 (default: %(default)s)")
     g.add_argument("--force-tol", type=real(), default=1e-8,
-                   help="a replica converges when its largest vertex force is below this (default: %(default)s)")
+                   help="a replica converges when its largest vertex force is below this, in units of "
+                        "kP sqrt(<A>) (default: %(default)s)")
     g.add_argument("--energy-tol", type=real(), default=1e-14,
-                   help="... or its energy per cell below this (default: %(default)s)")
+                   help="... or its energy per cell below this, in units of kP <A> (default: %(default)s)")
     g.add_argument("--max-steps", type=integer(0), default=20000, help="step limit (default: %(default)s)")
     g.add_argument("--check-every", type=integer(1), default=10,
                    help="steps between convergence checks and progress updates (default: %(default)s)")
@@ -101,6 +102,8 @@ def run(args) -> int:
         device = svm.device.resolve(args.device)
         sim = svm.Simulation(device=device, seed=args.seed)
         if args.restart is None:
+            svm.validation.check_run_memory(f"minimize --cells {args.cells} --replicas {args.replicas}",
+                                            args.cells * args.replicas, args.cells, gpu=device.is_gpu)
             tiling = svm.init.random_planar_tiling if args.surface == "plane" else svm.init.random_tiling
             sim.state = tiling(args.cells, replicas=args.replicas, seed=args.seed)
         else:

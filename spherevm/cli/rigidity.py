@@ -41,9 +41,10 @@ def add_parser(subparsers):
     g.add_argument("--dt", type=real(strict=True), default=RigiditySweep.dt,
                    help="FIRE time step (default: %(default)s)")
     g.add_argument("--force-tol", type=real(), default=RigiditySweep.force_tol,
-                   help="stop a replica when its largest vertex force is below this (default: %(default)s)")
+                   help="stop a replica when its largest vertex force is below this, in units of kP sqrt(<A>) "
+                        "(default: %(default)s)")
     g.add_argument("--energy-tol", type=real(), default=RigiditySweep.energy_tol,
-                   help="... or its energy per cell below this (default: %(default)s)")
+                   help="... or its energy per cell below this, in units of kP <A> (default: %(default)s)")
     g.add_argument("--max-steps", type=integer(1), default=RigiditySweep.max_steps,
                    help="step limit; replicas reaching it are reported as not converged (default: %(default)s)")
     g.add_argument("--t1", type=real(strict=True), default=RigiditySweep.t1_threshold, metavar="THRESHOLD",
@@ -132,7 +133,10 @@ def run(args) -> int:
         err.write(f"spherevm: {len(result.computed)} chunk(s) computed, {result.reused} found on disk, "
                   f"{result.elapsed:.1f} s; not converged: {n_max} max_steps, {n_osc} t1_oscillation "
                   f"(left out of F, counted in fraction.csv)\n")
-        if not all(tables["p0star"]["bracketed"]):
+        if len(sweep.p0) < 2:
+            err.write("spherevm: note: one p0 value: F(p0, N) is in fraction.csv, but p0* needs F at two or more "
+                      "p0 values (give a range such as --p0 3.6:4.0:0.02)\n")
+        elif not all(tables["p0star"]["bracketed"]):
             err.write("spherevm: note: for some N, F does not go from 0 to 1 inside the p0 grid; widen --p0\n")
         if tables["plot_note"]:
             err.write(f"spherevm: note: {tables['plot_note']}\n")

@@ -78,6 +78,12 @@ class Constraint:
         raise NotImplementedError(f"{type(self).__name__} does not yet provide area and perimeter gradients "
                                   "(only Sphere does); vertex-model forces need them")
 
+    def triangle_area(self, a, b, c, size):
+        """Signed area of the geodesic triangle ``(a, b, c)`` (rows of points; ``size`` per row),
+        positive when counter-clockwise seen from outside (T1 refuses flips that fold a cell)."""
+        raise NotImplementedError(f"{type(self).__name__} does not yet provide triangle areas (Sphere and "
+                                  "PeriodicPlane do)")
+
     def cell_normals(self, state):
         """The unit surface normal at each cell's centre, ``(n_cells, 3)`` (active cell directors
         live in the tangent plane there)."""

@@ -101,6 +101,12 @@ class PeriodicPlane(Constraint):
         out[..., 2] = x[..., 2]
         return out
 
+    def triangle_area(self, a, b, c, box):
+        """Half the z-component of ``(b - a) x (c - a)``, with ``b`` and ``c`` the images nearest ``a``."""
+        u = minimum_image(b[..., :2] - a[..., :2], box)
+        v = minimum_image(c[..., :2] - a[..., :2], box)
+        return 0.5 * (u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0])
+
     def outside_box(self, x, box):
         """Mask of the points not stored in ``[0, Lx) x [0, Ly)``."""
         return ((x[..., :2] < 0) | (x[..., :2] >= box)).any(axis=-1)

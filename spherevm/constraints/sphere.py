@@ -78,6 +78,11 @@ class Sphere(Constraint):
         phi = (distance / radius)[..., None]
         return xp.asarray(radius)[..., None] * (xp.cos(phi) * geo.normalize(x) + xp.sin(phi) * direction)
 
+    def triangle_area(self, a, b, c, radius):
+        """``R^2`` times the signed solid angle of the unit vectors (geometry.sphere.solid_angle)."""
+        xp = array_module(radius)
+        return xp.asarray(radius) ** 2 * geo.solid_angle(geo.normalize(a), geo.normalize(b), geo.normalize(c))
+
     def chord_length(self, length, radius):
         """``2 R sin(L / 2R)`` (capped at the diameter)."""
         xp = array_module(length, radius)

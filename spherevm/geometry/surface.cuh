@@ -16,6 +16,9 @@
 //   cell_normal(...)          the normal at a cell's centre (active cell directors)
 //   chord2, edge_length       the T1 short-edge test and the edge's length
 //   t1_positions(...)         the two vertices of a flipped edge
+//   triangle_area(a, b, c, s) the sign-carrying area of a triangle, half_area(s) half the surface's
+//                             in the same unit, delta(a, b, s) the vector a -> b (T1's fold rule,
+//                             plugins/updaters/t1_fold.cuh)
 #pragma once
 
 #include "geometry/plane.cuh"
@@ -98,11 +101,19 @@ struct SphereSurface {
         return R * geodesic_length(normalize3(pu), normalize3(pv));
     }
 
+    // The solid angle of the unit vectors (Sphere.triangle_area without its R^2), a hemisphere's, b - a.
+    __device__ static double triangle_area(vec3 a, vec3 b, vec3 c, Size) {
+        return solid_angle(normalize3(a), normalize3(b), normalize3(c));
+    }
+    __device__ static double half_area(Size) { return 6.283185307179586; }   // 2 pi, as NumPy's float64
+    __device__ static vec3 delta(vec3 a, vec3 b, Size) { return b - a; }
+
     // The edge u-v rotated by 90 degrees about the normal at its midpoint, its ends at geodesic
     // distance `full` apart (exact geodesic offsets); a zero-length edge turns towards the side of
-    // the cells at a and d (topology.t1_flip). x_pos goes to X = v (the C1 side), y_pos to Y = u.
+    // the cells at a and d; `turn`: the other way round (topology.t1_new_positions). x_pos goes to
+    // X = v (the C1 side), y_pos to Y = u.
     __device__ static void t1_positions(const double* pos, int u, int v, int a, int b, int c, int d, Size R,
-                                        double full, vec3* x_pos, vec3* y_pos) {
+                                        double full, vec3* x_pos, vec3* y_pos, bool turn = false) {
         vec3 pu = load3(pos, u), pv = load3(pos, v);
         vec3 mid = R * normalize3(0.5 * (pu + pv));
         vec3 nrm = normalize3(mid);
@@ -116,6 +127,7 @@ struct SphereSurface {
         } else {
             perp = cross3(nrm, v3(along.x / len, along.y / len, along.z / len));
         }
+        if (turn) perp = -perp;
         perp = normalize3(perp);
         double phi = 0.5 * full / R;
         vec3 m = normalize3(mid);
@@ -153,10 +165,19 @@ struct PlaneSurface {
     __device__ static double chord2(vec3 pu, vec3 pv, Size b) { return plane_length2(plane_edge(pu, pv, b)); }
     __device__ static double edge_length(vec3 pu, vec3 pv, Size b) { return plane_length(plane_edge(pu, pv, b)); }
 
+    // PeriodicPlane.triangle_area (b and c as seen from a), half the box, the minimum image of b - a.
+    __device__ static double triangle_area(vec3 a, vec3 b, vec3 c, Size box) {
+        vec3 u = minimum_image(b - a, box), v = minimum_image(c - a, box);
+        return 0.5 * (u.x * v.y - u.y * v.x);
+    }
+    __device__ static double half_area(Size box) { return 0.5 * (box.x * box.y); }
+    __device__ static vec3 delta(vec3 a, vec3 b, Size box) { return minimum_image(b - a, box); }
+
     // topology.t1_flip on the plane: v, a, b, c, d unwrapped about u; the midpoint wrapped into the
-    // box; the edge turned by +90 degrees about z; each end `full` / 2 from the midpoint, wrapped.
+    // box; the edge turned by +90 degrees about z (-90 with `turn`); each end `full` / 2 from the
+    // midpoint, wrapped.
     __device__ static void t1_positions(const double* pos, int u, int v, int a, int b, int c, int d, Size box,
-                                        double full, vec3* x_pos, vec3* y_pos) {
+                                        double full, vec3* x_pos, vec3* y_pos, bool turn = false) {
         vec3 pu = load3(pos, u);
         pu.z = 0.0;
         vec3 pv = plane_unwrap(load3(pos, v), pu, box);
@@ -171,6 +192,7 @@ struct PlaneSurface {
         } else {
             perp = v3(-(along.y / len), along.x / len, 0.0);
         }
+        if (turn) perp = -perp;
         double n = sqrt(perp.x * perp.x + perp.y * perp.y);
         perp = v3(perp.x / n, perp.y / n, 0.0);
         double half = 0.5 * full;

@@ -218,6 +218,11 @@ class Force(Operation):
     def compute(self, state) -> ForceResult:
         raise NotImplementedError
 
+    def energy_scale(self, state):
+        """This force's natural energy per cell per replica (NumPy), or None (the default): a
+        :class:`Minimizer` measures its tolerances in the largest scale its forces declare."""
+        return None
+
     def combined(self, other, state):
         """A :class:`ForceResult` of this force and ``other`` together (forces, energies and cell
         energies summed), where this force computes the pair in fewer passes than the two apart;
@@ -325,8 +330,9 @@ class Minimizer(Integrator):
 
     Every ``check_every`` steps (one small read-back) :meth:`check_convergence` stops, per replica,
     the replicas whose largest vertex force is below ``force_tol`` or whose energy per cell is
-    below ``energy_tol``, and those that an operation halts (:meth:`Operation.halted`); the others
-    go on. HOOMD-style use: ``while not fire.done: sim.run(100)``, or ``sim.minimize()``.
+    below ``energy_tol`` (in the replica's natural units, :meth:`tolerance_units`: the same shape
+    at any size), and those that an operation halts (:meth:`Operation.halted`); the others go on.
+    HOOMD-style use: ``while not fire.done: sim.run(100)``, or ``sim.minimize()``.
 
     Per replica (NumPy): ``replica_converged``, ``reason`` ("force", "energy", an operation's
     ``halt_reason``, or "running"), ``steps`` (the iteration at which it stopped, -1 while running).
@@ -407,6 +413,16 @@ class Minimizer(Integrator):
     def done(self) -> bool:
         return bool(self.stopped.all())
 
+    @staticmethod
+    def tolerance_units(simulation):
+        """The units of ``energy_tol`` and ``force_tol`` per replica (NumPy): the largest
+        :meth:`Force.energy_scale` of the forces (1 if none, or 0) and that over sqrt(<A>)."""
+        state = simulation.state
+        scales = [s for s in (f.energy_scale(state) for f in simulation.operations.forces) if s is not None]
+        energy = np.max(scales, axis=0) if scales else np.ones(state.n_replicas)
+        energy = np.where(np.isfinite(energy) & (energy > 0), energy, 1.0)
+        return energy, energy / np.sqrt(state.mean_cell_area)
+
     def check_convergence(self, simulation):
         """Stop the replicas that reached a tolerance now, or that an operation halts."""
         self._checked_at = self.iteration
@@ -415,9 +431,10 @@ class Minimizer(Integrator):
         _, energy = simulation.compute_forces()
         fmax = to_np(simulation.max_force())
         epc = to_np(energy) / state.cells_per_replica
+        energy_unit, force_unit = self.tolerance_units(simulation)
         running = ~self.stopped
-        by_force = running & (fmax < self.force_tol)
-        by_energy = running & ~by_force & (epc < self.energy_tol)
+        by_force = running & (fmax < self.force_tol * force_unit)
+        by_energy = running & ~by_force & (epc < self.energy_tol * energy_unit)
         self.reason[by_force], self.reason[by_energy] = "force", "energy"
         newly = by_force | by_energy
         for op in simulation.operations:

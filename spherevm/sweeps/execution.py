@@ -5,13 +5,14 @@ from __future__ import annotations
 import concurrent.futures as cf
 import math
 import os
+import signal
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..progress import bar as progress_bar
-from ..validation import integer
+from ..validation import check_run_memory, integer
 from .spec import Chunk, RigiditySweep, plan_chunks, tiling_seed
 from .states import chunk_state_gsd, save_chunk_state, state_path
 from .store import (CHUNK_DIR, RECORD_COLUMNS, merge_records, open_sweep_folder, scan_chunks, sorted_records,
@@ -176,7 +177,36 @@ def default_executor(device="auto", workers=None):
         return InProcessExecutor(), dev.name, True
     import multiprocessing
     # spawn: no fork of a process that may hold a CUDA context or threads
-    return cf.ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn")), dev.name, True
+    return cf.ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"),
+                                  initializer=_ignore_interrupts), dev.name, True
+
+
+def _ignore_interrupts():
+    """In a pool worker: Ctrl-C is the main process's business (it stops the workers), so a worker
+    neither prints a traceback nor reports a chunk as failed when the terminal sends SIGINT to all."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _stop_now(executor):
+    """Shut an owned executor down without waiting for the chunks still running: a process pool's
+    workers are terminated, else Ctrl-C would wait for each to finish its chunk (minutes)."""
+    processes = list((getattr(executor, "_processes", None) or {}).values())
+    executor.shutdown(wait=False, cancel_futures=True)
+    for p in processes:
+        p.terminate()
+    for p in processes:
+        p.join(timeout=5)
+
+
+def _check_sweep_memory(sweep, batch_cells, device_name, workers):
+    """Refuse (InsufficientMemory) a sweep whose largest chunk, in every worker at once, cannot fit
+    on this machine, before the folder or any worker is made."""
+    largest = max(sweep.cells)
+    chunk = max(min(max(1, batch_cells // n) * n, sweep.units_per_size * n) for n in sweep.cells)
+    copies = min(workers, sum(-(-sweep.units_per_size // max(1, batch_cells // n)) for n in sweep.cells))
+    check_run_memory(f"the sweep ({copies} worker(s), chunks of up to {chunk} cells)", chunk, largest,
+                     gpu=device_name == "gpu", copies=copies,
+                     advice="use smaller systems (cells), fewer workers or a smaller batch_cells")
 
 
 # ---------------------------------------------------------------------------------------- progress
@@ -308,6 +338,12 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         device_name = device.name if isinstance(device, Device) else device.lower()
     if batch_cells is None:
         batch_cells = GPU_BATCH_CELLS if device_name == "gpu" else CPU_BATCH_CELLS
+    if owned:
+        try:
+            _check_sweep_memory(sweep, batch_cells, device_name, getattr(executor, "_max_workers", 1))
+        except BaseException:
+            executor.shutdown(wait=False, cancel_futures=True)
+            raise
     prefetch = None
     try:
         path = open_sweep_folder(sweep, out, create=True)
@@ -371,7 +407,7 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         # a failed chunk or Ctrl-C: do not wait for the chunks still running (finished ones are on disk)
         if owned:
             owned = False
-            executor.shutdown(wait=False, cancel_futures=True)
+            _stop_now(executor)
         raise
     finally:
         if prefetch is not None:

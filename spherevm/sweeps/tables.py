@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 
 from ..analysis import rigidity
@@ -75,6 +76,14 @@ def write_tables(out, records: dict, zero_tol=None, plots=True, sigma=None, surf
             "plot_note": note}
 
 
+def _note(p0star, i) -> str:
+    if p0star["bracketed"][i]:
+        return ""
+    if math.isnan(p0star["p0_star"][i]) and math.isnan(p0star["F_first"][i]):
+        return "F at fewer than two p0 values: no p0*"
+    return "transition not inside the p0 grid"
+
+
 def format_p0star_table(p0star) -> str:
     """p0*(N) beside the pentagon bound, as plain text."""
     head = ("N", "p0*", "+-", "spread", "p0(F=1/2)", "pentagon", "p0*-pent", "replicas", "unconv", "note")
@@ -84,7 +93,7 @@ def format_p0star_table(p0star) -> str:
         rows.append((str(int(p0star["n_cells"][i])), f"{p:.4f}", f"{p0star['p0_star_err'][i]:.4f}",
                      f"{p0star['std'][i]:.4f}", f"{p0star['p0_half'][i]:.4f}", f"{pent:.4f}", f"{p - pent:+.4f}",
                      str(int(p0star["n_replicas"][i])), str(int(p0star["n_unconverged"][i])),
-                     "" if p0star["bracketed"][i] else "transition not inside the p0 grid"))
+                     _note(p0star, i)))
     widths = [max(len(h), *(len(r[j]) for r in rows)) if rows else len(h) for j, h in enumerate(head)]
     lines = ["  ".join(h.rjust(w) for h, w in zip(head, widths)).rstrip()]
     lines += ["  ".join(v.rjust(w) if j < len(head) - 1 else v for j, (v, w) in enumerate(zip(r, widths))).rstrip()

@@ -29,7 +29,9 @@ class FIRE(Minimizer):
     ``n_min = 5``, ``f_inc = 1.1``, ``f_dec = 0.5``, ``alpha_start = 0.1``, ``f_alpha = 0.99``.
     Convergence (``force_tol``, ``energy_tol``, ``check_every``) is per replica, see
     :class:`spherevm.plugins.base.Minimizer`: replicas that have stopped do not move, and their dt,
-    alpha and counter stay as they were.
+    alpha and counter stay as they were. The tolerances are in each replica's natural units (force
+    ``kP sqrt(<A>)``, energy per cell ``kP <A>`` for the vertex model), on both devices (the check
+    reads back the largest force per replica).
 
     ``max_step`` (units of sqrt(<A>) of the replica; default 1, a cell size, because FIRE with
     dt_max = 10 dt takes legitimate steps of half a cell on a raw tiling) guards against exploding

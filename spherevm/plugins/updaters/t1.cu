@@ -3,17 +3,22 @@
 // neighbours) lists the candidates and lets each claim its four cells (lowest edge index wins);
 // after one small read-back of the counters, t1_apply (one thread per candidate) flips the
 // winners. Winners touch disjoint cells and vertices, so they need no locks. Compiled once per
-// surface (geometry/surface.cuh): the short-edge test and the new positions are the surface's.
+// surface (geometry/surface.cuh): the short-edge test and the new positions are the surface's. A
+// candidate whose flip would fold the network (t1_fold.cuh) turns the other way if that does not
+// fold it, and is refused otherwise, in t1_detect (folding.t1_placement).
 #include "geometry/surface.cuh"
+#include "plugins/updaters/t1_fold.cuh"
 
-#define CAND_INTS 12   // u, k, v, a, b, c, d, C1, C2, C3, C4, replica
+#define CAND_INTS 13   // u, k, v, a, b, c, d, C1, C2, C3, C4, replica, turn
 #define LOG_INTS 6     // pass, C1, C2, C3, C4, replica
 
 // counters: [0] candidates, [1] a C3/C4 row is full (widen the table). size: the State's radius or box.
+// new_length[r] > 0: absolute new length per replica; else length_factor times the old length.
 extern "C" __global__ void t1_detect(
     const double* __restrict__ pos, const int* __restrict__ vn, const int* __restrict__ vc,
-    const int* __restrict__ sides, const int* __restrict__ vertex_replica, const double* __restrict__ size,
-    const double* __restrict__ chord2, const bool* __restrict__ active, int n_vertices, int max_sides,
+    const int* __restrict__ sides, const int* __restrict__ cell_vertices, const int* __restrict__ vertex_replica,
+    const double* __restrict__ size, const double* __restrict__ chord2, const double* __restrict__ new_length,
+    double length_factor, const bool* __restrict__ active, int n_vertices, int max_sides,
     int* __restrict__ claim, int* __restrict__ refused, unsigned long long* __restrict__ total_refused,
     int* __restrict__ counters, int* __restrict__ cand, double* __restrict__ cand_len, int capacity)
 {
@@ -36,7 +41,21 @@ extern "C" __global__ void t1_detect(
         int c = vn[3 * v + (j + 1) % 3], d = vn[3 * v + (j + 2) % 3];
         int C4 = vc[3 * v + (j + 1) % 3];
         bool distinct = C1 != C2 && C1 != C3 && C1 != C4 && C2 != C3 && C2 != C4 && C3 != C4;
-        if (sides[C1] <= 3 || sides[C2] <= 3 || !distinct) {
+        bool refuse = sides[C1] <= 3 || sides[C2] <= 3 || !distinct, turn = false;
+        if (!refuse) {      // folding.t1_placement: usual if clean, else turned if clean, else usual unless it folds
+            vec3 px, py;
+            double full = new_length[r] > 0.0 ? new_length[r] : length_factor * L;
+            Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py);
+            int usual = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px,
+                                      py, s);
+            if (usual != T1_CLEAN) {
+                Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py, true);
+                turn = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px,
+                                     py, s) == T1_CLEAN;
+                refuse = usual == T1_FOLDS && !turn;
+            }
+        }
+        if (refuse) {
             atomicAdd(refused + r, 1);
             atomicAdd(total_refused + r, 1ull);
             continue;
@@ -51,7 +70,7 @@ extern "C" __global__ void t1_detect(
         if (i < capacity) {
             int* e = cand + (long)i * CAND_INTS;
             e[0] = u; e[1] = k; e[2] = v; e[3] = a; e[4] = b; e[5] = c; e[6] = d;
-            e[7] = C1; e[8] = C2; e[9] = C3; e[10] = C4; e[11] = r;
+            e[7] = C1; e[8] = C2; e[9] = C3; e[10] = C4; e[11] = r; e[12] = turn ? 1 : 0;
             cand_len[i] = L;
         }
     }
@@ -110,10 +129,11 @@ extern "C" __global__ void t1_apply(
     n = sides[C2]; remove_from_row(cell_vertices + (long)C2 * max_sides, &n, X); sides[C2] = n;
     n = sides[C3]; split_in_row(cell_vertices + (long)C3 * max_sides, &n, u, Y, X); sides[C3] = n;
     n = sides[C4]; split_in_row(cell_vertices + (long)C4 * max_sides, &n, v, X, Y); sides[C4] = n;
-    // geometry: the edge turned by 90 degrees about the normal at its midpoint (Surface::t1_positions)
+    // geometry: the edge turned by 90 degrees about the normal at its midpoint (Surface::t1_positions),
+    // the places t1_detect checked
     double full = new_length[r] > 0.0 ? new_length[r] : length_factor * cand_len[i];
     vec3 px, py;
-    Surface::t1_positions(pos, u, v, a, b, c, d, Surface::size(size, r), full, &px, &py);
+    Surface::t1_positions(pos, u, v, a, b, c, d, Surface::size(size, r), full, &px, &py, e[12] != 0);
     store3(pos, X, px);
     store3(pos, Y, py);
     atomicAdd(flips + r, 1);

@@ -5,13 +5,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ... import topology
+from ... import folding, topology
 from ...device import launch
 from ..base import KERNEL_SURFACES, Minimizer, Updater, surface_kernels
 from ...validation import integer, positive
 
 _KERNELS = Path(__file__).with_suffix(".cu")
-_CAND_INTS, _LOG_INTS = 12, 6
+_CAND_INTS, _LOG_INTS = 13, 6
 
 PRESETS = {
     # The rules of the paper's own code: threshold 0.1, new edge twice the old length.
@@ -27,8 +27,11 @@ class T1(Updater):
     symmetrically about the midpoint, ``new_length`` apart (or ``length_factor`` times the old
     length). Rules, applied per pass (every time the trigger fires):
 
-    * a flip that would leave a cell with fewer than 3 sides (a triangle losing a side) is refused
-      and counted, never an error;
+    * a flip that would leave a cell with fewer than 3 sides (a triangle losing a side), or fold
+      the network (leave one of its four cells with signed area <= 0, or invert a corner: the
+      three edges at one of its six vertices no longer counter-clockwise; see
+      :func:`spherevm.folding.t1_placement`), is refused and counted, never an error; one whose
+      usual placement would fold is rotated the other way round if that does not;
     * conflicting flips (short edges touching a common cell) are resolved deterministically: an
       edge flips only if it has the lowest index among the candidate edges touching each of its
       four cells, so at most one flip per cell per pass; the rest wait for the next pass. The edge
@@ -95,7 +98,7 @@ class T1(Updater):
         self._rejoins = np.zeros(0, dtype=np.int64)    # how often each was joined again
 
     gpu_surfaces = KERNEL_SURFACES
-    surface_needs = ("normal", "project_normal", "edge_lengths", "chord_length", "total_area_np")
+    surface_needs = ("normal", "project_normal", "edge_lengths", "chord_length", "total_area_np", "triangle_area")
 
     def attach(self, simulation):
         super().attach(simulation)
@@ -148,8 +151,15 @@ class T1(Updater):
         lengths = state.constraint.edge_lengths(state, xp.asarray(uu), vn[xp.asarray(uu), xp.asarray(slot)])
         return uu, slot, dev.to_numpy(lengths)
 
-    def select(self, state, u, slot):
-        """Apply the rules: returns (flip mask, refused mask) over the candidates, and their cells."""
+    def new_lengths(self, state, u, lengths):
+        """The length each candidate edge gets when it flips (``lengths``: its current length)."""
+        if self.length_factor is not None:
+            return self.length_factor * lengths
+        return self.new_length * np.sqrt(state.mean_cell_area)[state.vertex_replica_np()[u]]
+
+    def select(self, state, u, slot, lengths):
+        """Apply the rules: returns (flip mask, refused mask) over the candidates, their cells, and
+        which flips turn the other way (:func:`spherevm.folding.t1_placement`)."""
         dev = state.device
         vn, vc = dev.to_numpy(state.vertex_neighbors), dev.to_numpy(state.vertex_cells)
         sides = dev.to_numpy(state.cell_sides)
@@ -158,12 +168,16 @@ class T1(Updater):
         ordered = np.sort(cells, axis=1)
         distinct = (ordered[:, 1:] != ordered[:, :-1]).all(axis=1)
         refused = (sides[C1] <= 3) | (sides[C2] <= 3) | ~distinct
+        rest = np.flatnonzero(~refused)
+        turn = np.zeros(len(u), dtype=bool)
+        refused[rest], turn[rest] = folding.t1_placement(state, u[rest], slot[rest],
+                                                         self.new_lengths(state, u[rest], lengths[rest]))
         index = 3 * u + slot
         claim = np.full(state.n_cells, np.iinfo(np.int64).max, dtype=np.int64)
         ok = ~refused
         np.minimum.at(claim, cells[ok].reshape(-1), np.repeat(index[ok], 4))
         flip = ok & (claim[cells] == index[:, None]).all(axis=1)
-        return flip, refused, cells
+        return flip, refused, cells, turn
 
     # ------------------------------------------------------------------ the pass
     def update(self, simulation, timestep):
@@ -188,20 +202,17 @@ class T1(Updater):
             u, slot, lengths = u[keep], slot[keep], lengths[keep]
         if len(u) == 0:
             return
-        flip, refused, cells = self.select(state, u, slot)
+        flip, refused, cells, turn = self.select(state, u, slot, lengths)
         rep = state.vertex_replica_np()[u]
         self.last_refused = np.bincount(rep[refused], minlength=n_rep)
         self.total_refused += self.last_refused
         if not flip.any():
             return
         u, slot, lengths, cells, rep = u[flip], slot[flip], lengths[flip], cells[flip], rep[flip]
-        if self.length_factor is not None:
-            new = self.length_factor * lengths
-        else:
-            new = self.new_length * np.sqrt(state.mean_cell_area)[rep]
+        new = self.new_lengths(state, u, lengths)
         if self.counting(simulation):
             self._count_flip_backs(state, cells, rep)
-        moved = topology.t1_flip(state, u, slot, new)
+        moved = topology.t1_flip(state, u, slot, new, turn=turn[flip])
         self.last_flips = np.bincount(rep, minlength=n_rep)
         self.total_flips += self.last_flips
         if self.reset_velocities and integrator is not None:
@@ -257,7 +268,8 @@ class T1(Updater):
             cp.cuda.runtime.memsetAsync(scratch.data.ptr, 0, scratch.nbytes, cp.cuda.get_current_stream().ptr)
             launch(module.get_function("t1_detect"), state.n_vertices,
                    (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_sides,
-                    state.vertex_replica, size, chord2, active, np.int32(state.n_vertices),
+                    state.cell_vertices, state.vertex_replica, size, chord2, new_length,
+                    np.float64(self.length_factor or 0.0), active, np.int32(state.n_vertices),
                     np.int32(state.max_sides), buf["claim"], buf["refused"], buf["total_refused"], buf["counters"],
                     buf["cand"], buf["cand_len"], np.int32(buf["capacity"])))
             n_cand, widen = (int(x) for x in buf["counters"].get())   # the one read-back

@@ -73,6 +73,9 @@ class GSD(Writer):
             raise ValueError(f"filename must be a non-empty path, got {filename!r}")
         if mode not in _MODES:
             raise ValueError(f"mode must be one of 'wb' (overwrite), 'ab' (append) or 'xb' (create), got {mode!r}")
+        if os.path.isdir(filename):
+            raise ValueError(f"GSD writer: {os.fspath(filename)!r} is a directory; give a file name such as "
+                             f"{os.path.join(os.fspath(filename), 'run.gsd')!r}")
         self.filename = os.fspath(filename)
         self.mode = mode
         if isinstance(log, Logger) and logger is None:     # HOOMD-blue 3 spelled it log=Logger

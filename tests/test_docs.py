@@ -15,7 +15,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 FILES = [ROOT / "README.md"] + sorted((ROOT / "docs").glob("*.md"))
 BLOCK = re.compile(r"(?:(<!--[^\n]*-->)\s*\n)?```python\n(.*?)```", re.S)
 # pages that need an optional package: page -> module (skipped, with the reason, where it is missing)
-NEEDS = {"visualisation.md": "ovito"}
+NEEDS = {"visualisation.md": "ovito", "rigidity.md": "distributed"}   # optional extras a page uses
 RUNNER = """
 import sys, traceback
 blocks = eval(sys.stdin.read())

@@ -281,21 +281,12 @@ class Reader:
         step = self._chunk("configuration/step", self.index(frame))
         return 0 if step is None else int(step[0])
 
-    def _chunk_names(self, prefix):
-        """The file's chunk names starting with ``prefix``; ValueError naming the file if its index
-        of names is damaged (bytes that are not UTF-8)."""
-        try:
-            return self.file.find_matching_chunk_names(prefix)
-        except UnicodeDecodeError as exc:
-            raise ValueError(f"{self.path!r}: the file's index of chunk names is damaged ({exc}); the file is "
-                             "damaged or was not written by spherevm") from exc
-
     def _require_spherevm(self):
         path = self.path
         if len(self) == 0:
             raise ValueError(f"{path!r} holds no complete frame (the writer stopped before its first frame "
                              "ended, or nothing was written); write the run again")
-        if not self._chunk_names(PREFIX):
+        if not self.file.find_matching_chunk_names(PREFIX):
             raise ValueError(f"{path!r} is a GSD file (schema {self.file.schema!r}) without spherevm chunks: it "
                              "was not written by spherevm.plugins.writers.GSD (a plain HOOMD trajectory, say), so "
                              "it holds no cell topology; write the run with spherevm.plugins.writers.GSD, or build "
@@ -359,7 +350,7 @@ class Reader:
         idx = self.index(frame)
         out = {"simulation": {}, "op": {}}
         for kind in ("simulation/", "op/"):
-            for name in self._chunk_names(PREFIX + kind):
+            for name in self.file.find_matching_chunk_names(PREFIX + kind):
                 if not self.file.chunk_exists(frame=idx, name=name):
                     continue
                 rest = name[len(PREFIX + kind):]

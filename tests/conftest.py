@@ -119,3 +119,25 @@ PHILOX_KAT = [
     (7, [0x243f6a88, 0x85a308d3, 0x13198a2e, 0x03707344], [0xa4093822, 0x299f31d0],
      [0x4dfccaba, 0x190a87f0, 0xc47362ba, 0xb6b5242a]),
 ]
+
+
+def t1_simulations(state, **t1):
+    """One Simulation per device on the same State with only a T1 updater (``T1(**t1)``), for
+    flip-for-flip comparisons of the NumPy and CUDA passes: ``{"cpu": sim, "gpu": sim}``."""
+    from spherevm.plugins.updaters import T1
+    sims = {}
+    for dev in ("cpu", "gpu"):
+        sim = svm.Simulation(device=dev)
+        sim.state = state
+        sim.operations.updaters.append(T1(**t1))
+        sims[dev] = sim
+    return sims
+
+
+def kick_on_surface(sim, kick):
+    """Move every vertex by the tangent part of ``kick`` (NumPy, (V, 3)) and back onto the surface."""
+    st = sim.state
+    con = st.constraint
+    k = st.device.asarray(kick)
+    st.positions = con.project_normal(st.positions + con.project_tangent(st.positions, k),
+                                      con.size(st, st.vertex_replica))

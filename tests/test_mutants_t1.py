@@ -9,6 +9,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import t1_simulations
 
 import spherevm as svm
 from spherevm.plugins.updaters import T1
@@ -179,12 +180,7 @@ def test_gpu_pass_with_more_candidates_than_room_matches_numpy():
     """Nearly every edge short: more candidates than the GPU's first candidate room and flip log
     (1024 rows), so a pass regrows both and replays the log; it still flips as NumPy does."""
     state = svm.init.random_tiling(1000, replicas=2, seed=5)
-    sims = {}
-    for dev in ("cpu", "gpu"):
-        sim = svm.Simulation(device=dev)
-        sim.state = state
-        sim.operations.updaters.append(T1(threshold=1.0, new_length=1.5, max_flip_backs=10 ** 6))
-        sims[dev] = sim
+    sims = t1_simulations(state, threshold=1.0, new_length=1.5, max_flip_backs=10 ** 6)
     c, g = sims["cpu"], sims["gpu"]
     for _ in range(3):
         c._update()

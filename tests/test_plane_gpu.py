@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import kick_on_surface, t1_simulations
 
 import spherevm as svm
 from spherevm import cli, sweeps
@@ -108,21 +109,12 @@ def test_planar_t1_passes_match_numpy_flip_for_flip():
     across the periodic boundary among them."""
     rng = np.random.default_rng(3)
     state = _boxes(300, 3, seed=15)
-    sims = {}
-    for dev in ("cpu", "gpu"):
-        sim = svm.Simulation(device=dev)
-        sim.state = state
-        sim.operations.updaters.append(T1(threshold=0.3, new_length=0.45, max_flip_backs=10 ** 6))
-        sims[dev] = sim
+    sims = t1_simulations(state, threshold=0.3, new_length=0.45, max_flip_backs=10 ** 6)
     across = 0
     for _ in range(40):
         kick = rng.normal(scale=0.06, size=state.positions.shape)
-        for dev, sim in sims.items():
-            st = sim.state
-            con = st.constraint
-            k = st.device.asarray(kick)
-            st.positions = con.project_normal(st.positions + con.project_tangent(st.positions, k),
-                                              con.size(st, st.vertex_replica))
+        for sim in sims.values():
+            kick_on_surface(sim, kick)
             sim._update()
         c, g = sims["cpu"], sims["gpu"]
         assert np.array_equal(g.log("t1_flips"), c.log("t1_flips"))

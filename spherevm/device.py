@@ -219,3 +219,52 @@ def launch(kernel, n, args, block=BLOCK):
     """Launch ``kernel`` with one thread per item over ``n`` items."""
     if n > 0:
         kernel(((n + block - 1) // block,), (block,), args)
+
+
+def segment_sums(state, over: str, n_sums: int = 1):
+    """The arguments (start, n_segments, scratch, count) of a kernel's per-replica sums over the
+    State's ``over`` ("cells" or "vertices"), launched with :func:`launch` one thread per item
+    (``device_common.cuh``: no floating-point atomics, so the sums have the same bits on every
+    run). Kept with the State (a resize, which changes the offsets, clears it): the scratch is
+    reused by every launch (they run one after another on the stream), and each launch leaves the
+    ticket counters at zero."""
+    def build():
+        xp = state.device.xp
+        start = state.cell_start if over == "cells" else state.vertex_start
+        n_segments = len(start) - 1
+        n_tiles = (int(start[-1]) + BLOCK - 1) // BLOCK
+        return (xp.asarray(start.astype(np.int32)), np.int32(n_segments), xp.empty(n_sums * (n_tiles + n_segments)),
+                xp.zeros(n_segments, dtype=np.uint32))
+    return state.cached((segment_sums, over, n_sums), build)
+
+
+_ORDERED_BINCOUNT = r"""
+extern "C" __global__ void ordered_bincount(const long long* order, const long long* start, const double* w,
+                                            long long n_bins, double* out)
+{
+    long long b = (long long)blockIdx.x * blockDim.x + threadIdx.x;
+    if (b >= n_bins) return;
+    double s = 0.0;
+    for (long long j = start[b]; j < start[b + 1]; ++j) s += w[order[j]];
+    out[b] = s;
+}
+"""
+
+
+def weighted_bincount(index, weights, minlength):
+    """``numpy.bincount(index, weights, minlength)`` on either device (``minlength``: the number of
+    bins, above every index). On the GPU each bin adds its weights one by one in the order NumPy
+    does (a stable sort of the indices), not with CuPy's atomics, whose order varies from run to
+    run: the same bits on every run, and the NumPy path's bits for the same weights."""
+    if isinstance(index, np.ndarray):
+        return np.bincount(index, weights=weights, minlength=minlength)
+    import cupy
+    if "ordered_bincount" not in _MODULES:
+        _MODULES["ordered_bincount"] = cupy.RawKernel(_ORDERED_BINCOUNT, "ordered_bincount")
+    index = index.reshape(-1)
+    w = cupy.ascontiguousarray(weights, dtype=cupy.float64).reshape(-1)
+    order = cupy.argsort(index)                          # CuPy's sort is stable
+    start = cupy.searchsorted(index[order], cupy.arange(minlength + 1, dtype=index.dtype)).astype(cupy.int64)
+    out = cupy.empty(minlength)
+    launch(_MODULES["ordered_bincount"], minlength, (order.astype(cupy.int64), start, w, np.int64(minlength), out))
+    return out

@@ -1,54 +1,112 @@
-// Reductions shared by spherevm's kernels: per-replica (segmented) sums.
+// Reductions shared by spherevm's kernels: per-replica (segmented) sums that give bitwise the same
+// result on every run, in any order of blocks (no floating-point atomics), so that a GPU run repeats
+// exactly: restarts, sweeps on several GPUs, narrowed minimisations (docs/random.md, "Repeatability").
+//
+// Items (cells or vertices) are one per thread, i = blockIdx.x * blockDim.x + threadIdx.x, and the
+// segments (replicas) are contiguous ranges start[s]..start[s+1] of items. Each block sums the run of
+// every segment inside its tile of items in a fixed order (segment_sum_partial). A segment inside
+// one tile is then complete and written at once. A segment over several tiles leaves its part in
+// its first tile in first[s] and its part in each later tile t in head[t] (slots that one block
+// alone writes); each of its blocks then takes a ticket (count[s]), and the block with the last
+// ticket adds the parts in tile order (segment_sum_finish) and sets the ticket back to zero.
 #pragma once
 
-struct AddOp { __device__ static double apply(double a, double b) { return a + b; }
-               __device__ static void commit(double* p, double v) { atomicAdd(p, v); } };
+// The kernel arguments of a kernel's sums (spherevm.device.segment_sums builds them): start
+// (n_segments + 1 item offsets), scratch (n_sums * (gridDim.x + n_segments) doubles: head, then
+// first, per sum) and count (n_segments zeros, left at zero by every launch).
+struct SegmentSum {
+    const int* start;
+    int n_segments;
+    double* scratch;
+    unsigned int* count;
+};
 
-// Combine `value` into out[segment] with Op (a sum). Threads of a block usually share one segment (replicas are
-// contiguous ranges): then the block reduces in shared memory and issues one atomic; otherwise
-// every thread adds its own value. Every thread of the block must call it (it synchronises);
-// threads without work pass value 0 and any valid segment, or segment -1 to skip.
-template <class Op>
-__device__ void segmented_block_reduce(double value, int segment, double* out) {
-    __shared__ double partial[32];
-    __shared__ int first_segment;
-    __shared__ int uniform;
-    if (threadIdx.x == 0) { first_segment = -2; uniform = 1; }
-    __syncthreads();
-    if (segment >= 0) atomicCAS(&first_segment, -2, segment);
-    __syncthreads();
-    if (segment >= 0 && segment != first_segment) uniform = 0;
-    __syncthreads();
-    if (!uniform) {
-        // segments are contiguous runs of threads: a segmented suffix scan inside each warp leaves
-        // every run's total in its first lane, which commits it (one atomic per run and warp)
-        double v = value;
-        int lane = threadIdx.x & 31;
-        for (int offset = 1; offset < 32; offset <<= 1) {
-            double other = __shfl_down_sync(0xffffffffu, v, offset);
-            int other_segment = __shfl_down_sync(0xffffffffu, segment, offset);
-            if (lane + offset < 32 && other_segment == segment) v = Op::apply(v, other);
-        }
-        int previous = __shfl_up_sync(0xffffffffu, segment, 1);
-        if (segment >= 0 && (lane == 0 || previous != segment)) Op::commit(out + segment, v);
-        __syncthreads();
-        return;
-    }
+// The (at most two) segments that cross this block's tile edges, found by segment_sum_partial.
+__shared__ int segment_sum_crossing[2];
+
+// Sum number `which` of this block's items: out[s] (plus out[s] if add) for a segment inside the
+// tile, the parts of the others to the scratch. Every thread of the block calls it (it synchronises);
+// a thread without an item passes segment -1 (only after the last item).
+__device__ void segment_sum_partial(double value, int segment, const SegmentSum& sums, int which, double* out,
+                                    bool add)
+{
+    __shared__ double warp_first_part[32];
+    __shared__ int warp_first_segment[32];
+    __shared__ int warp_last_segment[32];
+    int lane = threadIdx.x & 31, warp = threadIdx.x >> 5, n_warps = (blockDim.x + 31) >> 5;
+    if (threadIdx.x < 2) segment_sum_crossing[threadIdx.x] = -1;
+    // segmented suffix sum inside the warp: each lane ends with the sum from itself to the end of
+    // its segment's run in the warp, always in the same order
     double v = segment >= 0 ? value : 0.0;
-    for (int offset = 16; offset > 0; offset >>= 1) v = Op::apply(v, __shfl_down_sync(0xffffffffu, v, offset));
-    int lane = threadIdx.x & 31, warp = threadIdx.x >> 5;
-    if (lane == 0) partial[warp] = v;
+    for (int offset = 1; offset < 32; offset <<= 1) {
+        double other = __shfl_down_sync(0xffffffffu, v, offset);
+        int other_segment = __shfl_down_sync(0xffffffffu, segment, offset);
+        if (lane + offset < 32 && other_segment == segment) v += other;
+    }
+    int previous = __shfl_up_sync(0xffffffffu, segment, 1);
+    if (lane == 0) { warp_first_part[warp] = v; warp_first_segment[warp] = segment; }
+    if (lane == 31) warp_last_segment[warp] = segment;
     __syncthreads();
-    if (warp == 0) {
-        int n_warps = (blockDim.x + 31) >> 5;
-        v = lane < n_warps ? partial[lane] : 0.0;
-        for (int offset = 16; offset > 0; offset >>= 1) v = Op::apply(v, __shfl_down_sync(0xffffffffu, v, offset));
-        if (lane == 0 && first_segment >= 0) Op::commit(out + first_segment, v);
+    if (lane == 0) previous = warp > 0 ? warp_last_segment[warp - 1] : -2;
+    if (segment >= 0 && previous != segment) {
+        // the first thread of a run in the tile: the run's total, over the warps it continues into
+        double total = v;
+        for (int w = warp + 1; w < n_warps && warp_first_segment[w] == segment; ++w) total += warp_first_part[w];
+        long tile = blockDim.x, t0 = sums.start[segment] / tile, t1 = (sums.start[segment + 1] - 1) / tile;
+        if (t0 == t1) {
+            out[segment] = add ? out[segment] + total : total;
+        } else {
+            double* head = sums.scratch + (long)which * (gridDim.x + sums.n_segments);
+            if (blockIdx.x == t0) head[gridDim.x + segment] = total;
+            else head[blockIdx.x] = total;
+            segment_sum_crossing[threadIdx.x == 0 ? 0 : 1] = segment;
+        }
     }
     __syncthreads();   // the shared scratch may be reused by the next call
 }
 
-__device__ __forceinline__ void segmented_block_add(double value, int segment, double* out) {
-    segmented_block_reduce<AddOp>(value, segment, out);
+// After the block's segment_sum_partial calls (all threads): the segments whose last part this
+// block wrote are added up, outs[j][s] (plus outs[j][s] if add) for the n_sums sums.
+__device__ void segment_sum_finish(const SegmentSum& sums, double* const* outs, int n_sums, bool add)
+{
+    __shared__ int finishing[2];
+    __threadfence();   // this block's parts are visible before its tickets are taken
+    __syncthreads();
+    long tile = blockDim.x;
+    if (threadIdx.x < 2) {
+        int s = segment_sum_crossing[threadIdx.x];
+        finishing[threadIdx.x] = -1;
+        if (s >= 0) {
+            long t0 = sums.start[s] / tile, t1 = (sums.start[s + 1] - 1) / tile;
+            if (atomicAdd(sums.count + s, 1u) == (unsigned int)(t1 - t0)) finishing[threadIdx.x] = s;
+        }
+    }
+    __syncthreads();
+    // one warp per (finishing segment, sum); lane l adds the segment's tiles l, l + 32, ... after
+    // its first (four loads in flight, the additions in tile order), then a fixed butterfly
+    int lane = threadIdx.x & 31, n_warps = (blockDim.x + 31) >> 5;
+    for (int task = threadIdx.x >> 5; task < 2 * n_sums; task += n_warps) {
+        int s = finishing[task / n_sums], j = task % n_sums;
+        if (s < 0) continue;
+        long t0 = sums.start[s] / tile, t1 = (sums.start[s + 1] - 1) / tile;
+        const double* head = sums.scratch + (long)j * (gridDim.x + sums.n_segments);
+        double v = lane == 0 ? __ldcg(head + gridDim.x + s) : 0.0;
+        long t = t0 + 1 + lane;
+        for (; t + 96 <= t1; t += 128) {
+            double a = __ldcg(head + t), b = __ldcg(head + t + 32), c = __ldcg(head + t + 64), d = __ldcg(head + t + 96);
+            v += a; v += b; v += c; v += d;
+        }
+        for (; t <= t1; t += 32) v += __ldcg(head + t);
+        for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_xor_sync(0xffffffffu, v, offset);
+        if (lane == 0) outs[j][s] = add ? outs[j][s] + v : v;
+    }
+    __syncthreads();
+    if (threadIdx.x < 2 && finishing[threadIdx.x] >= 0) sums.count[finishing[threadIdx.x]] = 0u;
 }
 
+// One sum in a kernel: out[s] = the sum of value over segment s (out[s] += it if add).
+__device__ void segment_sum(double value, int segment, const SegmentSum& sums, double* out, bool add = false)
+{
+    segment_sum_partial(value, segment, sums, 0, out, add);
+    segment_sum_finish(sums, &out, 1, add);
+}

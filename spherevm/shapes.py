@@ -10,6 +10,7 @@ import numpy as np
 
 from .constraints import PeriodicPlane, Sphere
 from .constraints.plane import _wrap
+from .device import weighted_bincount
 
 CENTROID_METHODS = ("area", "vertex")
 
@@ -132,7 +133,7 @@ def cell_centroids(state, method: str = "area"):
     n = state.n_cells
 
     def per_cell(w):                                  # w: (V, 3 corners, 3 components)
-        return xp.stack([xp.bincount(cells, weights=w[..., i].reshape(-1), minlength=n) for i in range(3)],
+        return xp.stack([weighted_bincount(cells, weights=w[..., i].reshape(-1), minlength=n) for i in range(3)],
                         axis=1)
 
     vertex_centroid = state.constraint.cell_centers(state)

@@ -87,7 +87,7 @@ def test_scheduler_and_workers_started_like_the_slurm_recipe(tmp_path, reference
             c.wait_for_workers(2, timeout=60)
         out = tmp_path / "sweep"
         rc = cli.main(["rigidity", "--cells", *map(str, SWEEP["cells"]), "--p0", *map(str, SWEEP["p0"]), "--replicas", "2",
-                       "--seed", "3", "--scheduler", address, "--batch-cells", "40", "--out", str(out),
+                       "--seed", "3", "--scheduler", address, "--device", "cpu", "--batch-cells", "40", "--out", str(out),
                        "--no-plots", "--quiet"])
         assert rc == 0, capsys.readouterr().err
         resumed = sweeps.run_sweep(sweeps.RigiditySweep(**SWEEP), out, executor=sweeps.InProcessExecutor(),
@@ -113,3 +113,32 @@ def test_gpus_without_dask_cuda_is_a_clean_error(tmp_path, capsys):
     assert rc == 2 and "dask-cuda" in err and "cluster-cuda" in err
     with pytest.raises(ValueError, match="exactly one of scheduler"):
         sweeps.cluster.client(scheduler="local", gpus=1)
+
+
+def test_tilings_prefetched_for_a_cluster_give_the_same_tables(tmp_path, reference):
+    """``prefetch=True`` (the default for GPU workers): this machine builds the tilings in a process
+    pool and sends each chunk its State, at most two chunks per worker in flight."""
+    with sweeps.cluster.client(scheduler="local", workers=2) as client:
+        result = sweeps.run_sweep(sweeps.RigiditySweep(**SWEEP), tmp_path / "sweep", executor=client, device="cpu",
+                                  batch_cells=40, prefetch=True, workers=2)
+    assert len(result.computed) > 4                  # more chunks than the four in flight at once
+    same(result.records, reference)
+
+
+def test_prefetch_must_be_a_bool(tmp_path):
+    with pytest.raises(TypeError, match="prefetch must be True, False or None"):
+        sweeps.run_sweep(sweeps.RigiditySweep(**SWEEP), tmp_path / "s", device="cpu", prefetch="yes")
+
+
+@pytest.mark.gpu
+def test_one_worker_per_gpu_gives_the_one_gpu_tables(tmp_path):
+    """``--gpus N`` (dask-cuda, N = every GPU of this host, at most 2): the same records as the
+    in-process GPU sweep."""
+    pytest.importorskip("dask_cuda")
+    cupy = pytest.importorskip("cupy")
+    n = min(2, cupy.cuda.runtime.getDeviceCount())
+    sweep = sweeps.RigiditySweep(cells=[48, 64], p0=[3.7, 3.85, 4.0], replicas=24, seed=5)
+    one = sweeps.run_sweep(sweep, tmp_path / "one", device="gpu", batch_cells=2000, prefetch=True, workers=2)
+    with sweeps.cluster.client(gpus=n) as client:
+        many = sweeps.run_sweep(sweep, tmp_path / "many", executor=client, device="gpu", batch_cells=2000, workers=2)
+    same(many.records, one.records)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..device import array_module
+from ..device import array_module, weighted_bincount
 from ..geometry import sphere as geo
 from .base import Constraint
 from .corners import corner_index, in_parallel
@@ -127,7 +127,7 @@ class Sphere(Constraint):
                     a = xa / xp.take(rv, block["apex"]).reshape(3, -1)
                 e = xp.subtract(xd, xb, out=xd)                         # x_d - x_b
                 r = xp.subtract(xb, xa, out=xa)                         # x_b - x_a
-                sums["area_vector"] = xp.bincount(block["components"], weights=_cross(r, e).reshape(-1),
+                sums["area_vector"] = weighted_bincount(block["components"], weights=_cross(r, e).reshape(-1),
                                                   minlength=3 * n)
                 part["e"] = e
             elif metric:
@@ -145,8 +145,8 @@ class Sphere(Constraint):
             num = _dot((a - ub).reshape(3, -1), x)                      # a.(b x d) = (a - b).(b x d)
             den = 0.5 * q + _dot(a.reshape(3, -1), (ub + d).reshape(3, -1))   # (1 + b.d) + a.(b + d)
             cells = block["cells"]
-            sums.update(perimeter=xp.bincount(cells, weights=half, minlength=n),
-                        area=xp.bincount(cells, weights=xp.arctan2(num, den), minlength=n))
+            sums.update(perimeter=weighted_bincount(cells, weights=half, minlength=n),
+                        area=weighted_bincount(cells, weights=xp.arctan2(num, den), minlength=n))
             part.update(m=m.reshape(3, -1), x=x, q=q, two_sin=sm * sp)
             return part, sums
 
@@ -177,7 +177,7 @@ class Sphere(Constraint):
             unit = self._unit_components(state)[1]
         cells = state.vertex_cells.reshape(-1)
         corner_unit = xp.repeat(unit, 3, axis=1)
-        summed = xp.stack([xp.bincount(cells, weights=c, minlength=state.n_cells) for c in corner_unit])
+        summed = xp.stack([weighted_bincount(cells, weights=c, minlength=state.n_cells) for c in corner_unit])
         return (summed / xp.sqrt(_dot(summed, summed))).T
 
     def cell_normals(self, state):

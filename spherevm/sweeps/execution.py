@@ -181,6 +181,14 @@ def default_executor(device="auto", workers=None):
                                   initializer=_ignore_interrupts), dev.name, True
 
 
+def executor_slots(executor) -> int:
+    """How many chunks ``executor`` runs at once: a Dask client's worker threads, a pool's workers."""
+    client = getattr(executor, "_client", executor)          # a Client, or the executor it gives
+    if hasattr(client, "nthreads"):
+        return max(1, sum(client.nthreads().values()))
+    return max(1, int(getattr(executor, "_max_workers", 1)))
+
+
 def _ignore_interrupts():
     """In a pool worker: Ctrl-C is the main process's business (it stops the workers), so a worker
     neither prints a traceback nor reports a chunk as failed when the terminal sends SIGINT to all."""
@@ -293,16 +301,20 @@ def _drop_chunks_without_states(sweep, path, done, parts):
 
 
 def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=None, batch_cells=None,
-              progress=None, save_states=False) -> SweepResult:
+              progress=None, save_states=False, prefetch=None) -> SweepResult:
     """Run (or resume) a rigidity sweep, writing each chunk to ``<out>/chunks/`` as it finishes.
 
     ``executor``: any :class:`concurrent.futures.Executor` (or a ``distributed.Client``, whose
     ``get_executor()`` is used); None picks :func:`default_executor` (in-process on a GPU, a
     process pool of ``workers`` processes on the CPU). ``device``: where each chunk is minimised
     (``"cpu"``, ``"gpu"`` or ``"auto"``; with your own executor it is resolved on the worker).
-    On a GPU with the default executor, a sweep of at least :data:`PREFETCH_MIN_CELLS` cells builds
-    its tilings in a process pool of ``workers`` processes (default: the CPU count less one) ahead of
-    the GPU (:class:`TilingPrefetch`); the results are the same.
+    ``prefetch``: build the tilings in a process pool on this machine, ahead of the workers
+    (:class:`TilingPrefetch`), and send each chunk its State; the results are the same. None (the
+    default) does so for GPU sweeps of at least :data:`PREFETCH_MIN_CELLS` cells on a machine of
+    three or more cores, where the host's tilings would otherwise starve the GPU (also for a Dask
+    cluster of GPU workers on this host, ``cluster.client(gpus=N)``, whose workers are one thread
+    each). The pool has ``workers`` processes (default: the CPU count less one per GPU worker); at
+    most two chunks per worker are then in flight, so tilings are built only just ahead of use.
     ``batch_cells``: cells per chunk (default :data:`CPU_BATCH_CELLS` or :data:`GPU_BATCH_CELLS`);
     it changes how the work is cut, never the results. ``progress``: called with a
     :class:`SweepProgress` after every chunk. ``save_states``: also keep each chunk's minimised
@@ -326,6 +338,9 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
     if progress is not None and not callable(progress):
         raise TypeError("progress must be callable")
     open_sweep_folder(sweep, out, create=False)          # bad folder or mismatch: errors before anything is made
+
+    if prefetch is not None and not isinstance(prefetch, bool):
+        raise TypeError(f"prefetch must be True, False or None, got {prefetch!r}")
 
     owned = False
     if executor is None:
@@ -363,14 +378,18 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         params = sweep.parameters()
         states = {"save_states": True} if save_states else {}     # the call stays the same without them
         in_process = isinstance(executor, InProcessExecutor)
-        # bounded submission for the in-process executor (it runs at submit time, so each chunk is
-        # written before the next starts); everything at once otherwise, largest N first
-        todo = sorted(chunks, key=lambda c: -c.n_cells * c.size)
-        limit = 1 if in_process else len(todo)
+        slots = executor_slots(executor)
+        todo = sorted(chunks, key=lambda c: -c.n_cells * c.size)        # largest N first
         cpus = os.cpu_count() or 1
-        if (in_process and device_name == "gpu" and cpus > 2 and len(todo) > 1
-                and sum(c.n_cells * c.size for c in todo) >= PREFETCH_MIN_CELLS):
-            prefetch = TilingPrefetch(sweep, todo, cpus - 1 if workers is None else workers)
+        if prefetch is None:
+            prefetch = (device_name == "gpu" and cpus > 2 and len(todo) > 1
+                        and sum(c.n_cells * c.size for c in todo) >= PREFETCH_MIN_CELLS)
+        # bounded submission: the in-process executor runs at submit time (each chunk is written
+        # before the next starts); with prefetched tilings two chunks per worker, so the pool works
+        # just ahead of them; else everything at once
+        limit = 1 if in_process else 2 * slots if prefetch else len(todo)
+        prefetch = TilingPrefetch(sweep, todo, max(1, cpus - slots) if workers is None else workers,
+                                  ahead=limit + 1) if prefetch else None
         pending = {}
         computed = []
         folder = os.path.join(path, CHUNK_DIR)

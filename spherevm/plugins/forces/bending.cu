@@ -74,7 +74,7 @@ __device__ __forceinline__ void bending_cell_terms_body(
     const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ cell_vertices,
     const int* __restrict__ cell_sides, const int* __restrict__ vertex_cells, int n_cells, int max_sides,
     const int* __restrict__ cell_replica, const double* __restrict__ B, double* __restrict__ w,
-    double* __restrict__ cell_energy, double* __restrict__ replica_energy)
+    double* __restrict__ cell_energy, double* __restrict__ replica_energy, SegmentSum sums)
 {
     long c = (long)blockIdx.x * blockDim.x + threadIdx.x;
     int rep = -1;
@@ -101,27 +101,31 @@ __device__ __forceinline__ void bending_cell_terms_body(
         vec3 t = s - dot3(s, ni) * ni;
         store3(w, c, (Br * inv_area[c]) * t);
     }
-    segmented_block_add(e, rep, replica_energy);
+    segment_sum(e, rep, sums, replica_energy, ADD);
 }
 
 extern "C" __global__ void bending_cell_terms(
     const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ cell_vertices,
     const int* __restrict__ cell_sides, const int* __restrict__ vertex_cells, int n_cells, int max_sides,
     const int* __restrict__ cell_replica, const double* __restrict__ B, double* __restrict__ w,
-    double* __restrict__ cell_energy, double* __restrict__ replica_energy)
+    double* __restrict__ cell_energy, double* __restrict__ replica_energy, const int* __restrict__ cell_start, int n_replicas, double* __restrict__ scratch,
+    unsigned int* __restrict__ count)
 {
     bending_cell_terms_body<false>(normal, inv_area, cell_vertices, cell_sides, vertex_cells, n_cells, max_sides,
-                                   cell_replica, B, w, cell_energy, replica_energy);
+                                cell_replica, B, w, cell_energy, replica_energy,
+                                SegmentSum{cell_start, n_replicas, scratch, count});
 }
 
 extern "C" __global__ void bending_cell_terms_add(
     const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ cell_vertices,
     const int* __restrict__ cell_sides, const int* __restrict__ vertex_cells, int n_cells, int max_sides,
     const int* __restrict__ cell_replica, const double* __restrict__ B, double* __restrict__ w,
-    double* __restrict__ cell_energy, double* __restrict__ replica_energy)
+    double* __restrict__ cell_energy, double* __restrict__ replica_energy, const int* __restrict__ cell_start, int n_replicas, double* __restrict__ scratch,
+    unsigned int* __restrict__ count)
 {
     bending_cell_terms_body<true>(normal, inv_area, cell_vertices, cell_sides, vertex_cells, n_cells, max_sides,
-                                  cell_replica, B, w, cell_energy, replica_energy);
+                                cell_replica, B, w, cell_energy, replica_energy,
+                                SegmentSum{cell_start, n_replicas, scratch, count});
 }
 
 // One thread per vertex, no atomics: minus the gradient through its three cells, projected on the
@@ -148,11 +152,14 @@ extern "C" __global__ void vm_bending_cell_geometry(
     const int* __restrict__ cell_replica, const double* __restrict__ radius, int n_cells, int max_sides,
     const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
     const double* __restrict__ P0, double* __restrict__ coef, double* __restrict__ cell_energy,
-    double* __restrict__ replica_energy, double* __restrict__ normal, double* __restrict__ inv_area)
+    double* __restrict__ replica_energy, double* __restrict__ normal, double* __restrict__ inv_area,
+    const int* __restrict__ cell_start, int n_replicas, double* __restrict__ scratch,
+    unsigned int* __restrict__ count)
 {
     BendingTerms terms = {normal, inv_area, nullptr};
     vm_cell_geometry_body(pos, cell_vertices, cell_sides, cell_replica, radius, n_cells, max_sides, kA, kP, A0, P0,
-                          coef, cell_energy, replica_energy, terms);
+                          coef, cell_energy, replica_energy, SegmentSum{cell_start, n_replicas, scratch, count},
+                          terms);
 }
 
 extern "C" __global__ void vm_bending_vertex_forces(

@@ -17,7 +17,7 @@ import numpy as np
 
 from ...constraints import Sphere
 from ...constraints.corners import blocks, in_parallel
-from ...device import array_module, launch, load_module
+from ...device import array_module, launch, load_module, segment_sums, weighted_bincount
 from ..base import Force, ForceResult
 from .vertex_model import VertexModel
 
@@ -107,10 +107,10 @@ def _cell_terms(state, B_cell, area_vector):
         ends = xp.take(n, b["both"], axis=1)
         d = ends[:, :m] - ends[:, m:]
         squares = _dot(d, d)
-        return (xp.bincount(b["first"], weights=squares, minlength=nc) +
-                xp.bincount(b["second"], weights=squares, minlength=nc),
-                xp.bincount(b["first_components"], weights=d.reshape(-1), minlength=3 * nc) -
-                xp.bincount(b["second_components"], weights=d.reshape(-1), minlength=3 * nc))
+        return (weighted_bincount(b["first"], weights=squares, minlength=nc) +
+                weighted_bincount(b["second"], weights=squares, minlength=nc),
+                weighted_bincount(b["first_components"], weights=d.reshape(-1), minlength=3 * nc) -
+                weighted_bincount(b["second_components"], weights=d.reshape(-1), minlength=3 * nc))
 
     parts = in_parallel(pairs, _topology(state)["pair_blocks"])
     squares, s = parts[0]
@@ -193,7 +193,7 @@ class Bending(Force):
         xp = state.device.xp
         geometry = state.constraint.cell_geometry(state, area_vectors=True, metric=False)
         cell_energy, d_area_vector = _cell_terms(state, self._device_B(state)[1], geometry.area_vector)
-        energy = xp.bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)
+        energy = weighted_bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)
         forces = -state.constraint.shape_gradient(state, geometry, None, None, d_area_vector.T)
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
 
@@ -203,7 +203,7 @@ class Bending(Force):
         cell_energy, d_area, d_perimeter = model.cell_terms(state, geometry)
         bending_energy, d_area_vector = _cell_terms(state, self._device_B(state)[1], geometry.area_vector)
         cell_energy = cell_energy + bending_energy
-        energy = xp.bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)
+        energy = weighted_bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)
         forces = -state.constraint.shape_gradient(state, geometry, d_area, d_perimeter, d_area_vector.T)
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
 
@@ -217,7 +217,7 @@ class Bending(Force):
         launch(module.get_function("bending_cell_normals"), nc,
                (state.positions, state.cell_vertices, state.cell_sides, np.int32(nc), np.int32(state.max_sides),
                 normal, inv_area))
-        cell_energy, energy = cp.empty(nc), cp.zeros(state.n_replicas)
+        cell_energy, energy = cp.empty(nc), cp.empty(state.n_replicas)
         w = self._cell_terms_gpu(state, module, normal, inv_area, cell_energy, energy, "bending_cell_terms")
         forces = cp.empty_like(state.positions)
         launch(module.get_function("bending_vertex_forces"), nv,
@@ -232,11 +232,12 @@ class Bending(Force):
         kA, kP, A0, P0 = model.device_parameters(state)
         module = load_module(_KERNELS)
         nc, nv = state.n_cells, state.n_vertices
-        coef, cell_energy, energy = cp.empty((nc, 2)), cp.empty(nc), cp.zeros(state.n_replicas)
+        coef, cell_energy, energy = cp.empty((nc, 2)), cp.empty(nc), cp.empty(state.n_replicas)
         normal, inv_area = cp.empty((nc, 3)), cp.empty(nc)
         launch(module.get_function("vm_bending_cell_geometry"), nc,
                (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, state.radius,
-                np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, cell_energy, energy, normal, inv_area))
+                np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, cell_energy, energy, normal, inv_area,
+                *segment_sums(state, "cells")))
         w = self._cell_terms_gpu(state, module, normal, inv_area, cell_energy, energy, "bending_cell_terms_add")
         forces = cp.empty_like(state.positions)
         launch(module.get_function("vm_bending_vertex_forces"), nv,
@@ -253,7 +254,8 @@ class Bending(Force):
         w = cp.empty((nc, 3))
         launch(module.get_function(kernel), nc,
                (normal, inv_area, state.cell_vertices, state.cell_sides, state.vertex_cells, np.int32(nc),
-                np.int32(state.max_sides), state.cell_replica, self._device_B(state)[0], w, cell_energy, energy))
+                np.int32(state.max_sides), state.cell_replica, self._device_B(state)[0], w, cell_energy, energy,
+                *segment_sums(state, "cells")))
         return w
 
     @property

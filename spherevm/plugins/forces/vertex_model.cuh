@@ -9,7 +9,7 @@
 #include "device_common.cuh"
 
 // One thread per cell: area and perimeter (Surface::cell_measures), the cell's energy, the
-// per-replica energy sum, and the two coefficients the vertex kernel needs:
+// per-replica energy sum (device_common.cuh: `sums` over the cells), and the two coefficients the vertex kernel needs:
 // coef = (2 kA (A - A0) area_unit, 2 kP (P - P0) length_unit) (R^2 and R on the sphere, 1 on the plane).
 // size: the State's radius (n_replicas,) or box (n_replicas, 2).
 template <class Extra>
@@ -18,7 +18,7 @@ __device__ __forceinline__ void vm_cell_geometry_body(
     const int* __restrict__ cell_replica, const double* __restrict__ size, int n_cells, int max_sides,
     const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
     const double* __restrict__ P0, double* __restrict__ coef, double* __restrict__ cell_energy,
-    double* __restrict__ replica_energy, Extra extra)
+    double* __restrict__ replica_energy, SegmentSum sums, Extra extra)
 {
     long c = (long)blockIdx.x * blockDim.x + threadIdx.x;
     int rep = -1;
@@ -37,7 +37,7 @@ __device__ __forceinline__ void vm_cell_geometry_body(
         coef[2 * c + 1] = 2.0 * kP[c] * dP * Surface::length_unit(s);
         cell_energy[c] = e;
     }
-    segmented_block_add(e, rep, replica_energy);
+    segment_sum(e, rep, sums, replica_energy);
 }
 
 // One thread per vertex, no atomics: minus the surface gradient of the energy from the vertex's

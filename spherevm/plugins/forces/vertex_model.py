@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...device import launch
+from ...device import launch, segment_sums, weighted_bincount
 from ..base import KERNEL_SURFACES, Force, ForceResult, surface_kernels
 
 _KERNELS = Path(__file__).with_suffix(".cu")
@@ -159,7 +159,7 @@ class VertexModel(Force):
         xp = state.device.xp
         geometry = state.constraint.cell_geometry(state)
         cell_energy, d_area, d_perimeter = self.cell_terms(state, geometry)
-        energy = xp.bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)
+        energy = weighted_bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)
         forces = -state.constraint.shape_gradient(state, geometry, d_area, d_perimeter)
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
 
@@ -177,10 +177,11 @@ class VertexModel(Force):
         module, size = surface_kernels(_KERNELS, state)
         nc, nv = state.n_cells, state.n_vertices
         coef, cell_energy = cp.empty((nc, 2)), cp.empty(nc)
-        energy = cp.zeros(state.n_replicas)
+        energy = cp.empty(state.n_replicas)
         launch(module.get_function("vm_cell_geometry"), nc,
                (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, size,
-                np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, cell_energy, energy))
+                np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, cell_energy, energy,
+                *segment_sums(state, "cells")))
         forces = cp.empty_like(state.positions)
         launch(module.get_function("vm_vertex_forces"), nv,
                (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, size,

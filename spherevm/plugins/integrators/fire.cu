@@ -3,11 +3,13 @@
 #include "geometry/surface.cuh"
 #include "device_common.cuh"
 
-// Per vertex: F.v, v.v, F.F summed per replica.
+// Per vertex: F.v, v.v, F.F summed per replica (device_common.cuh: the same bits on every run).
 extern "C" __global__ void fire_reduce(
     const double* __restrict__ forces, const double* __restrict__ vel, const int* __restrict__ vertex_replica,
-    int n_vertices, double* __restrict__ power, double* __restrict__ vnorm2, double* __restrict__ fnorm2)
+    int n_vertices, double* __restrict__ power, double* __restrict__ vnorm2, double* __restrict__ fnorm2,
+    const int* __restrict__ vertex_start, int n_replicas, double* __restrict__ scratch, unsigned int* __restrict__ count)
 {
+    SegmentSum sums = {vertex_start, n_replicas, scratch, count};
     long v = (long)blockIdx.x * blockDim.x + threadIdx.x;
     int rep = -1;
     double p = 0.0, vv = 0.0, ff = 0.0;
@@ -18,9 +20,11 @@ extern "C" __global__ void fire_reduce(
         vv = dot3(w, w);
         ff = dot3(f, f);
     }
-    segmented_block_add(p, rep, power);
-    segmented_block_add(vv, rep, vnorm2);
-    segmented_block_add(ff, rep, fnorm2);
+    segment_sum_partial(p, rep, sums, 0, power, false);
+    segment_sum_partial(vv, rep, sums, 1, vnorm2, false);
+    segment_sum_partial(ff, rep, sums, 2, fnorm2, false);
+    double* outs[3] = {power, vnorm2, fnorm2};
+    segment_sum_finish(sums, outs, 3, false);
 }
 
 // Per replica: the FIRE control (mixing, dt, alpha, counter) from the summed power.

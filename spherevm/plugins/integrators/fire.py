@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...device import launch
+from ...device import launch, segment_sums, weighted_bincount
 from ...validation import integer, positive
 from ..base import KERNEL_SURFACES, Minimizer, raise_flagged_step, surface_kernels
 
@@ -118,7 +118,7 @@ class FIRE(Minimizer):
         v = self.velocities
 
         def per_replica(a, b):                 # sum over each replica's vertices of the row dots a.b
-            return xp.bincount(rep, weights=xp.einsum("ij,ij->i", a, b), minlength=n)
+            return weighted_bincount(rep, weights=xp.einsum("ij,ij->i", a, b), minlength=n)
 
         power = per_replica(forces, v)
         v_norm = xp.sqrt(per_replica(v, v))
@@ -187,9 +187,10 @@ class FIRE(Minimizer):
         module, size = surface_kernels(_KERNELS, state)
         nv, nr = state.n_vertices, state.n_replicas
         active = self.active_on_device()
-        sums = cp.zeros((3, nr))
+        sums = cp.empty((3, nr))
         launch(module.get_function("fire_reduce"), nv,
-               (forces, self.velocities, state.vertex_replica, np.int32(nv), sums[0], sums[1], sums[2]))
+               (forces, self.velocities, state.vertex_replica, np.int32(nv), sums[0], sums[1], sums[2],
+                *segment_sums(state, "vertices", 3)))
         keep, scale, step = cp.empty(nr), cp.empty(nr), cp.empty(nr)
         launch(module.get_function("fire_control"), nr,
                (np.int32(nr), sums[0], sums[1], sums[2], active, self.replica_dt, self.alpha,

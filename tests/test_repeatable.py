@@ -1,0 +1,91 @@
+"""The per-replica sums of the GPU kernels (device_common.cuh: no floating-point atomics) are right
+for every way a replica's cells and vertices fall on the GPU's thread blocks, and have the same bits
+on every run, so a GPU run repeats exactly (restarts, sweeps on several GPUs)."""
+import numpy as np
+import pytest
+from conftest import to_numpy
+
+import spherevm as svm
+from spherevm.device import BLOCK
+from spherevm.plugins.forces import VertexModel
+from spherevm.plugins.integrators import FIRE
+from spherevm.plugins.updaters import T1
+
+# replicas inside one block of cells, across a few, and one whose vertices cover more than 32
+# blocks (the finishing warp's lanes then take several blocks each); ragged offsets throughout
+SIZES = [12, 300, 40, 4500, 20, 700, 33]
+
+
+@pytest.fixture(scope="module")
+def ragged():
+    state = svm.State.concatenate([svm.init.random_tiling(n, seed=k) for k, n in enumerate(SIZES)])
+    assert state.vertices_per_replica.max() > 32 * BLOCK
+    return state
+
+
+def model():
+    return VertexModel.dimensionless(kr=1.0, p0=3.8)
+
+
+@pytest.mark.gpu
+def test_energy_sums_on_ragged_replicas_match_numpy(ragged):
+    cpu = model().compute(ragged)
+    gpu = model().compute(ragged.to("gpu"))
+    e = to_numpy(gpu.energy)
+    assert np.abs(e - cpu.energy).max() <= 1e-12 * np.abs(cpu.energy).max()
+    # the sums are of the per-cell energies the kernel wrote
+    per_replica = np.bincount(ragged.cell_replica_np(), weights=to_numpy(gpu.cell_energy))
+    assert np.abs(e - per_replica).max() <= 1e-12 * np.abs(per_replica).max()
+
+
+@pytest.mark.gpu
+def test_fire_sums_on_ragged_replicas_match_numpy(ragged):
+    """FIRE's per-replica F.v, v.v, F.F (three sums in one kernel) against NumPy, through one step
+    of the GPU path from given velocities."""
+    import cupy as cp
+    from spherevm.device import launch, segment_sums
+    from spherevm.plugins.base import surface_kernels
+    from spherevm.plugins.integrators import fire
+    state = ragged.to("gpu")
+    rng = np.random.default_rng(1)
+    f, v = rng.normal(size=(2, state.n_vertices, 3))
+    module, _ = surface_kernels(fire._KERNELS, state)
+    sums = cp.empty((3, state.n_replicas))
+    launch(module.get_function("fire_reduce"), state.n_vertices,
+           (cp.asarray(f), cp.asarray(v), state.vertex_replica, np.int32(state.n_vertices), sums[0], sums[1], sums[2],
+            *segment_sums(state, "vertices", 3)))
+    rep = ragged.vertex_replica_np()
+    want = [np.bincount(rep, weights=np.einsum("ij,ij->i", a, b)) for a, b in ((f, v), (v, v), (f, f))]
+    for got, ref in zip(to_numpy(sums), want):
+        assert np.abs(got - ref).max() <= 1e-12 * np.abs(ref).max()
+
+
+def minimised(state, device):
+    sim = svm.Simulation(device=device, seed=2)
+    sim.state = state
+    sim.operations.forces.append(model())
+    sim.operations.updaters.append(T1())
+    sim.operations.integrator = FIRE(dt=0.02)
+    result = sim.minimize(force_tol=1e-10, max_steps=1500)
+    return sim, result
+
+
+def test_two_runs_have_the_same_bits(device):
+    state = svm.init.random_tiling(300, replicas=5, seed=9)
+    (a, ra), (b, rb) = minimised(state, device), minimised(state, device)
+    assert to_numpy(a.state.positions).tobytes() == to_numpy(b.state.positions).tobytes()
+    assert np.array_equal(ra.steps, rb.steps) and ra.energy.tobytes() == rb.energy.tobytes()
+    assert a.log("t1_total_flips").sum() > 0 and np.array_equal(a.log("t1_total_flips"), b.log("t1_total_flips"))
+
+
+@pytest.mark.gpu
+def test_weighted_bincount_on_the_gpu_is_numpys():
+    """spherevm.device.weighted_bincount (the GPU's per-cell sums outside the kernels) adds in
+    NumPy's order: the same weights give NumPy's bits."""
+    import cupy as cp
+    from spherevm.device import weighted_bincount
+    rng = np.random.default_rng(3)
+    index = rng.integers(0, 500, size=20000)
+    w = rng.normal(size=20000) * 10.0 ** rng.integers(-8, 8, size=20000)
+    got = to_numpy(weighted_bincount(cp.asarray(index), cp.asarray(w), 600))
+    assert got.tobytes() == np.bincount(index, weights=w, minlength=600).tobytes()

@@ -82,23 +82,33 @@ __device__ void segment_sum_finish(const SegmentSum& sums, double* const* outs, 
         }
     }
     __syncthreads();
-    // one warp per (finishing segment, sum); lane l adds the segment's tiles l, l + 32, ... after
-    // its first (four loads in flight, the additions in tile order), then a fixed butterfly
-    int lane = threadIdx.x & 31, n_warps = (blockDim.x + 31) >> 5;
-    for (int task = threadIdx.x >> 5; task < 2 * n_sums; task += n_warps) {
+    // the whole block per (finishing segment, sum): thread i adds the segment's tiles i, i + blockDim.x,
+    // ... after its first (four loads in flight, the additions in tile order), then fixed butterflies
+    // in each warp and over the warps
+    __shared__ double warp_total[32];
+    int lane = threadIdx.x & 31, warp = threadIdx.x >> 5, n_warps = (blockDim.x + 31) >> 5;
+    for (int task = 0; task < 2 * n_sums; ++task) {
         int s = finishing[task / n_sums], j = task % n_sums;
-        if (s < 0) continue;
-        long t0 = sums.start[s] / tile, t1 = (sums.start[s + 1] - 1) / tile;
+        if (s < 0) continue;                      // the same s in every thread
+        long t0 = sums.start[s] / tile, t1 = (sums.start[s + 1] - 1) / tile, stride = blockDim.x;
         const double* head = sums.scratch + (long)j * (gridDim.x + sums.n_segments);
-        double v = lane == 0 ? __ldcg(head + gridDim.x + s) : 0.0;
-        long t = t0 + 1 + lane;
-        for (; t + 96 <= t1; t += 128) {
-            double a = __ldcg(head + t), b = __ldcg(head + t + 32), c = __ldcg(head + t + 64), d = __ldcg(head + t + 96);
+        double v = threadIdx.x == 0 ? __ldcg(head + gridDim.x + s) : 0.0;
+        long t = t0 + 1 + threadIdx.x;
+        for (; t + 3 * stride <= t1; t += 4 * stride) {
+            double a = __ldcg(head + t), b = __ldcg(head + t + stride), c = __ldcg(head + t + 2 * stride),
+                   d = __ldcg(head + t + 3 * stride);
             v += a; v += b; v += c; v += d;
         }
-        for (; t <= t1; t += 32) v += __ldcg(head + t);
+        for (; t <= t1; t += stride) v += __ldcg(head + t);
         for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_xor_sync(0xffffffffu, v, offset);
-        if (lane == 0) outs[j][s] = add ? outs[j][s] + v : v;
+        if (lane == 0) warp_total[warp] = v;
+        __syncthreads();
+        if (warp == 0) {
+            v = lane < n_warps ? warp_total[lane] : 0.0;
+            for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_xor_sync(0xffffffffu, v, offset);
+            if (lane == 0) outs[j][s] = add ? outs[j][s] + v : v;
+        }
+        __syncthreads();
     }
     __syncthreads();
     if (threadIdx.x < 2 && finishing[threadIdx.x] >= 0) sums.count[finishing[threadIdx.x]] = 0u;

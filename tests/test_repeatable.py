@@ -12,7 +12,7 @@ from spherevm.plugins.integrators import FIRE
 from spherevm.plugins.updaters import T1
 
 # replicas inside one block of cells, across a few, and one whose vertices cover more than 32
-# blocks (the finishing warp's lanes then take several blocks each); ragged offsets throughout
+# blocks; ragged offsets throughout
 SIZES = [12, 300, 40, 4500, 20, 700, 33]
 
 
@@ -38,25 +38,34 @@ def test_energy_sums_on_ragged_replicas_match_numpy(ragged):
     assert np.abs(e - per_replica).max() <= 1e-12 * np.abs(per_replica).max()
 
 
+@pytest.mark.parametrize("sizes", [[5, 300, 40, 1], [3, 300_000, 700, 33, 256, 512]])
 @pytest.mark.gpu
-def test_fire_sums_on_ragged_replicas_match_numpy(ragged):
-    """FIRE's per-replica F.v, v.v, F.F (three sums in one kernel) against NumPy, through one step
-    of the GPU path from given velocities."""
+def test_fire_sums_match_numpy_for_any_replica_sizes(sizes):
+    """FIRE's per-replica F.v, v.v, F.F (three sums in one kernel) against NumPy, on vertex ranges
+    from one item to more than 4 x 256 blocks (the finishing block's unrolled loop), repeated."""
     import cupy as cp
-    from spherevm.device import launch, segment_sums
+    from spherevm.device import BLOCK, launch
     from spherevm.plugins.base import surface_kernels
     from spherevm.plugins.integrators import fire
-    state = ragged.to("gpu")
+    start = np.concatenate([[0], np.cumsum(sizes)])
+    n, nr = int(start[-1]), len(sizes)
+    rep = np.repeat(np.arange(nr), sizes)
     rng = np.random.default_rng(1)
-    f, v = rng.normal(size=(2, state.n_vertices, 3))
-    module, _ = surface_kernels(fire._KERNELS, state)
-    sums = cp.empty((3, state.n_replicas))
-    launch(module.get_function("fire_reduce"), state.n_vertices,
-           (cp.asarray(f), cp.asarray(v), state.vertex_replica, np.int32(state.n_vertices), sums[0], sums[1], sums[2],
-            *segment_sums(state, "vertices", 3)))
-    rep = ragged.vertex_replica_np()
+    f, v = rng.normal(size=(2, n, 3))
+    module, _ = surface_kernels(fire._KERNELS, svm.init.random_tiling(8))
+    n_tiles = (n + BLOCK - 1) // BLOCK
+    args = (cp.asarray(start.astype(np.int32)), np.int32(nr), cp.empty(3 * (n_tiles + nr)), cp.zeros(nr, dtype=np.uint32))
+    runs = []
+    for _ in range(2):
+        sums = cp.empty((3, nr))
+        launch(module.get_function("fire_reduce"), n,
+               (cp.asarray(f), cp.asarray(v), cp.asarray(rep.astype(np.int32)), np.int32(n), sums[0], sums[1], sums[2],
+                *args))
+        runs.append(to_numpy(sums))
+    assert runs[0].tobytes() == runs[1].tobytes()
+    assert not to_numpy(args[3]).any()                    # the tickets are back at zero
     want = [np.bincount(rep, weights=np.einsum("ij,ij->i", a, b)) for a, b in ((f, v), (v, v), (f, f))]
-    for got, ref in zip(to_numpy(sums), want):
+    for got, ref in zip(runs[0], want):
         assert np.abs(got - ref).max() <= 1e-12 * np.abs(ref).max()
 
 

@@ -127,7 +127,7 @@ def main(argv=None):
     print(f"# spherevm GPU benchmark, {datetime.date.today()}, GPU: {facts.get('gpus')}, CuPy {facts.get('cupy')}, "
           f"CUDA runtime {facts.get('cuda_runtime')}")
     print(f"# device-to-device copy bandwidth: {bw:.0f} GB/s")
-    print("# launches per step: force 2 kernels + 1 memset; FIRE iteration = force + 3 kernels + 1 memset; "
+    print("# launches per step: force 2 kernels; FIRE iteration = force + 3 kernels; "
           "Brownian step with T1 check = T1 pass (1 memset + 1 kernel + 1 read-back of 8 bytes) + force + 1 kernel")
     print("# GB/s: bytes each kernel must move at least (every array once) over the measured time")
     head = (f"{'system':>12} {'force ms':>9} {'GB/s':>6} {'FIRE it ms':>11} {'GB/s':>6} {'of copy':>8} "

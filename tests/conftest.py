@@ -134,6 +134,19 @@ def t1_simulations(state, **t1):
     return sims
 
 
+def dynamics_simulation(state, device, integrator, seed=11):
+    """A Simulation of the vertex model (kr = 1, p0 = 3.75) with T1 and ``integrator`` on ``device``:
+    the pair the CPU/GPU dynamics comparisons run (test_gpu, test_plane_gpu)."""
+    from spherevm.plugins.forces import VertexModel
+    from spherevm.plugins.updaters import T1
+    sim = svm.Simulation(device=device, seed=seed)
+    sim.state = state
+    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.75))
+    sim.operations.updaters.append(T1())
+    sim.operations.integrator = integrator
+    return sim
+
+
 def kick_on_surface(sim, kick):
     """Move every vertex by the tangent part of ``kick`` (NumPy, (V, 3)) and back onto the surface."""
     st = sim.state

@@ -4,7 +4,7 @@ These are the CPU-vs-GPU agreement tests; the behavioural tests (forces, FIRE, T
 Brownian/Active, GSD, ...) run on the GPU too, through the ``device`` fixture of conftest.py."""
 import numpy as np
 import pytest
-from conftest import kick_on_surface, t1_simulations
+from conftest import dynamics_simulation, kick_on_surface, t1_simulations
 
 import spherevm as svm
 from spherevm.plugins.forces import VertexModel
@@ -135,19 +135,10 @@ def test_t1_passes_match_numpy_flip_for_flip():
     assert np.array_equal(sims["gpu"].log("t1_flip_backs"), sims["cpu"].log("t1_flip_backs"))
 
 
-def _dyn_sim(state, device, integrator, seed=11):
-    sim = svm.Simulation(device=device, seed=seed)
-    sim.state = state
-    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.75))
-    sim.operations.updaters.append(T1())
-    sim.operations.integrator = integrator
-    return sim
-
-
 def test_brownian_with_t1_matches_numpy_for_1000_steps():
     state = svm.init.random_tiling(128, replicas=2, seed=12)
-    cpu = _dyn_sim(state, "cpu", Brownian(dt=0.01, T=2e-3))
-    gpu = _dyn_sim(state, "gpu", Brownian(dt=0.01, T=2e-3))
+    cpu = dynamics_simulation(state, "cpu", Brownian(dt=0.01, T=2e-3))
+    gpu = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=2e-3))
     cpu.run(1000)
     gpu.run(1000)
     flips = cpu.log("t1_total_flips")
@@ -161,7 +152,7 @@ def test_brownian_with_t1_matches_numpy_for_1000_steps():
 def test_active_matches_numpy(directors):
     state = svm.init.random_tiling(100, replicas=2, seed=13)
     make = lambda: Active(dt=0.01, v0=0.1, Dr=1.0, T=1e-4, directors=directors)  # noqa: E731
-    cpu, gpu = _dyn_sim(state, "cpu", make()), _dyn_sim(state, "gpu", make())
+    cpu, gpu = dynamics_simulation(state, "cpu", make()), dynamics_simulation(state, "gpu", make())
     cpu.run(300)
     gpu.run(300)
     assert np.abs(gpu.state.positions.get() - cpu.state.positions).max() <= 1e-9
@@ -169,7 +160,7 @@ def test_active_matches_numpy(directors):
 
 
 def test_gsd_written_on_gpu_restores_on_cpu(tmp_path):
-    sim = _dyn_sim(svm.init.random_tiling(64, replicas=2, seed=14), "gpu", Brownian(dt=0.01, T=1e-3))
+    sim = dynamics_simulation(svm.init.random_tiling(64, replicas=2, seed=14), "gpu", Brownian(dt=0.01, T=1e-3))
     sim.operations.writers.append(svm.plugins.writers.GSD(50, tmp_path / "g.gsd"))
     sim.run(200)
     back = svm.init.from_gsd(tmp_path / "g.gsd", device="cpu")

@@ -104,29 +104,22 @@ __device__ __forceinline__ void bending_cell_terms_body(
     segment_sum(e, rep, sums, replica_energy, ADD);
 }
 
-extern "C" __global__ void bending_cell_terms(
-    const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ cell_vertices,
-    const int* __restrict__ cell_sides, const int* __restrict__ vertex_cells, int n_cells, int max_sides,
-    const int* __restrict__ cell_replica, const double* __restrict__ B, double* __restrict__ w,
-    double* __restrict__ cell_energy, double* __restrict__ replica_energy, const int* __restrict__ cell_start, int n_replicas, double* __restrict__ scratch,
-    unsigned int* __restrict__ count)
-{
-    bending_cell_terms_body<false>(normal, inv_area, cell_vertices, cell_sides, vertex_cells, n_cells, max_sides,
-                                cell_replica, B, w, cell_energy, replica_energy,
-                                SegmentSum{cell_start, n_replicas, scratch, count});
-}
-
-extern "C" __global__ void bending_cell_terms_add(
-    const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ cell_vertices,
-    const int* __restrict__ cell_sides, const int* __restrict__ vertex_cells, int n_cells, int max_sides,
-    const int* __restrict__ cell_replica, const double* __restrict__ B, double* __restrict__ w,
-    double* __restrict__ cell_energy, double* __restrict__ replica_energy, const int* __restrict__ cell_start, int n_replicas, double* __restrict__ scratch,
-    unsigned int* __restrict__ count)
-{
-    bending_cell_terms_body<true>(normal, inv_area, cell_vertices, cell_sides, vertex_cells, n_cells, max_sides,
-                                cell_replica, B, w, cell_energy, replica_energy,
-                                SegmentSum{cell_start, n_replicas, scratch, count});
-}
+// The cell kernel, storing (bending alone) or adding to the vertex model's energies (fused).
+#define BENDING_CELL_TERMS_KERNEL(NAME, ADD)                                                                  \
+    extern "C" __global__ void NAME(                                                                          \
+        const double* __restrict__ normal, const double* __restrict__ inv_area,                               \
+        const int* __restrict__ cell_vertices, const int* __restrict__ cell_sides,                            \
+        const int* __restrict__ vertex_cells, int n_cells, int max_sides, const int* __restrict__ cell_replica, \
+        const double* __restrict__ B, double* __restrict__ w, double* __restrict__ cell_energy,               \
+        double* __restrict__ replica_energy, const int* __restrict__ cell_start, int n_replicas,              \
+        double* __restrict__ scratch, unsigned int* __restrict__ count)                                       \
+    {                                                                                                         \
+        bending_cell_terms_body<ADD>(normal, inv_area, cell_vertices, cell_sides, vertex_cells, n_cells,      \
+                                     max_sides, cell_replica, B, w, cell_energy, replica_energy,              \
+                                     SegmentSum{cell_start, n_replicas, scratch, count});                     \
+    }
+BENDING_CELL_TERMS_KERNEL(bending_cell_terms, false)
+BENDING_CELL_TERMS_KERNEL(bending_cell_terms_add, true)
 
 // One thread per vertex, no atomics: minus the gradient through its three cells, projected on the
 // tangent plane at v (bending alone).
@@ -153,8 +146,7 @@ extern "C" __global__ void vm_bending_cell_geometry(
     const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
     const double* __restrict__ P0, double* __restrict__ coef, double* __restrict__ cell_energy,
     double* __restrict__ replica_energy, double* __restrict__ normal, double* __restrict__ inv_area,
-    const int* __restrict__ cell_start, int n_replicas, double* __restrict__ scratch,
-    unsigned int* __restrict__ count)
+    const int* __restrict__ cell_start, int n_replicas, double* __restrict__ scratch, unsigned int* __restrict__ count)
 {
     BendingTerms terms = {normal, inv_area, nullptr};
     vm_cell_geometry_body(pos, cell_vertices, cell_sides, cell_replica, radius, n_cells, max_sides, kA, kP, A0, P0,

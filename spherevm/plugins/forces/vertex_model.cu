@@ -8,8 +8,8 @@ extern "C" __global__ void vm_cell_geometry(
     const int* __restrict__ cell_replica, const double* __restrict__ size, int n_cells, int max_sides,
     const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
     const double* __restrict__ P0, double* __restrict__ coef, double* __restrict__ cell_energy,
-    double* __restrict__ replica_energy, const int* __restrict__ cell_start, int n_replicas, double* __restrict__ scratch,
-    unsigned int* __restrict__ count)
+    double* __restrict__ replica_energy, const int* __restrict__ cell_start, int n_replicas,
+    double* __restrict__ scratch, unsigned int* __restrict__ count)
 {
     vm_cell_geometry_body(pos, cell_vertices, cell_sides, cell_replica, size, n_cells, max_sides, kA, kP, A0, P0,
                           coef, cell_energy, replica_energy, SegmentSum{cell_start, n_replicas, scratch, count},

@@ -7,7 +7,8 @@
 extern "C" __global__ void fire_reduce(
     const double* __restrict__ forces, const double* __restrict__ vel, const int* __restrict__ vertex_replica,
     int n_vertices, double* __restrict__ power, double* __restrict__ vnorm2, double* __restrict__ fnorm2,
-    const int* __restrict__ vertex_start, int n_replicas, double* __restrict__ scratch, unsigned int* __restrict__ count)
+    const int* __restrict__ vertex_start, int n_replicas, double* __restrict__ scratch,
+    unsigned int* __restrict__ count)
 {
     SegmentSum sums = {vertex_start, n_replicas, scratch, count};
     long v = (long)blockIdx.x * blockDim.x + threadIdx.x;

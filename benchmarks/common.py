@@ -40,3 +40,9 @@ def median_times(fns, device=None, repeat=11, warmup=2, clock=time.perf_counter)
                 device.synchronize()
             t.append(clock() - t0)
     return [statistics.median(t) for t in times]
+
+
+def run_step_time(sim, device, steps=1000, repeat=5):
+    """Median seconds per step of ``sim.run(steps, graphs=True)`` (CUDA graphs, checks every 100
+    steps as by default; each run captures its graphs again, so the capture is in the time)."""
+    return median_time(lambda: sim.run(steps, graphs=True), device, repeat=repeat, warmup=1) / steps

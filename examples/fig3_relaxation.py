@@ -39,7 +39,10 @@ def main(argv=None):
     ap.add_argument("--prefix", default="fig3")
     ap.add_argument("--separate", action="store_true", help="one ensemble per size (default: all sizes in one "
                     "ensemble, which a GPU steps in about the time of the largest alone)")
+    ap.add_argument("--step-by-step", action="store_true", help="no CUDA graphs on the GPU (the same numbers, "
+                    "slower; to check that they are)")
     args = ap.parse_args(argv)
+    graphs = False if args.step_by_step else None
     if args.full:
         sizes, temps, reps, steps, msd_total, msd_steps = [32, 128, 1024], [0.02, 0.01, 0.007, 0.005, 0.004], 8, \
             200_000, 8192, 100_000
@@ -55,7 +58,7 @@ def main(argv=None):
         # main panel: every size and temperature of the group in one ensemble (tilings seeded by N)
         T = np.tile(np.repeat(temps, reps), len(group))
         res = glassy_dynamics(None, 3.775, 0.0, T=T, dt=dt, steps=steps, seed=group[0], device=args.device,
-                              relax_steps=5000, equilibrate_steps=steps // 10,
+                              relax_steps=5000, equilibrate_steps=steps // 10, graphs=graphs,
                               initial_state=tilings(group, len(temps) * reps, seed_of=lambda n: n))
         per_size = len(temps) * reps
         for g, n in enumerate(group):
@@ -70,7 +73,8 @@ def main(argv=None):
         # inset: msd_total / N tissues of each size, one ensemble
         counts = [max(1, msd_total // n) for n in group]
         inset = glassy_dynamics(None, 3.75, 1.0, T=5e-4, dt=dt, steps=msd_steps, seed=group[0] + 1, device=args.device,
-                                relax_steps=5000, initial_state=tilings(group, counts, seed_of=lambda n: n + 1))
+                                relax_steps=5000, graphs=graphs,
+                                initial_state=tilings(group, counts, seed_of=lambda n: n + 1))
         start = np.cumsum([0] + counts)
         for g, n in enumerate(group):
             m = inset.msd_per_replica[:, start[g]:start[g + 1]].mean(axis=1)   # tissues of one size: equal weights

@@ -47,7 +47,7 @@ class DynamicsResult:
 def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=0, device="auto",
                     relax_steps=10_000, equilibrate_steps=None, b=0.5, points_per_decade=10, out=None,
                     frames=50, t1=True, progress=None, surface: str = "sphere",
-                    extra_forces=(), restart=None, initial_state=None) -> DynamicsResult:
+                    extra_forces=(), restart=None, initial_state=None, graphs=None) -> DynamicsResult:
     """Overdamped Brownian dynamics of random tilings, measured as in the paper (Fig. 3).
 
     1. **relax**: FIRE (+ T1) from a random tiling for at most ``relax_steps`` steps, so the run
@@ -60,6 +60,8 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
        tau_alpha where Q_s reaches 1/e (NaN if it does not within the run).
 
     ``T`` may hold one temperature per replica: a whole temperature series runs as one ensemble.
+    ``graphs``: passed to :meth:`Simulation.run` for the Brownian stages (None: CUDA graphs on a GPU,
+    the same trajectories several times faster for small tissues; False: step by step).
     ``out``: GSD trajectory of the production run (``frames`` frames, log-spaced); its first frame
     is at the end of relaxation and equilibration, not at step 0 (``configuration/step`` counts
     every step of the run, so the Philox noise never repeats and a restart goes on bitwise): the
@@ -113,7 +115,7 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
                      progress=None if progress is None else lambda k, d, n: progress("relax", k, relax_steps))
     sim.operations.integrator = Brownian(dt=dt, T=T)
     if equilibrate_steps:
-        sim.run(equilibrate_steps, check_every=100,
+        sim.run(equilibrate_steps, check_every=100, graphs=graphs,
                 progress=None if progress is None else lambda i, n: progress("equilibrate", i, n))
     start = sim.timestep
     recorder = analysis.Recorder.log_spaced(steps, points_per_decade, start=start)
@@ -121,7 +123,8 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
     if out is not None:
         shots = (start + analysis.log_spaced_times(steps, max(1, frames // 4))).tolist()
         sim.operations.writers.append(GSD(shots, out))
-    sim.run(steps, check_every=100, progress=None if progress is None else lambda i, n: progress("production", i, n))
+    sim.run(steps, check_every=100, graphs=graphs,
+            progress=None if progress is None else lambda i, n: progress("production", i, n))
     traj = analysis.Trajectory.from_recording(recorder, dt=dt)
     traj.times = traj.times - traj.times[0]
     m = analysis.msd(traj)

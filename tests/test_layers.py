@@ -20,6 +20,7 @@ LAYERS = [
     ["state"],
     ["shapes", "gsdio", "init", "init_plane"],
     ["plugins", "testing"],
+    ["operations", "graphs"],
     ["simulation"],
     ["analysis", "protocols", "sweeps", "export", "render", "ovito"],
     ["cli", "__main__"],

@@ -9,6 +9,7 @@ from ..constraints import PeriodicPlane, Sphere
 from ..device import load_module
 from ..trigger import Always, as_trigger
 from ..validation import integer, non_negative
+from .rows import _host, _index_like, _restored, follow_rows
 
 #: The surfaces with CUDA kernels and the macros that compile geometry/surface.cuh for each: one
 #: kernel source per operation serves them all (``gpu_surfaces`` of the built-in operations).
@@ -143,60 +144,26 @@ class Operation:
             full[_index_like(full, getattr(selection, axis))] = getattr(self, name)
             setattr(self, name, full)
 
+    # CUDA graphs (spherevm.graphs): on the GPU, Simulation.run captures a stretch of steps once and
+    # replays it, when every operation that runs in those steps is ready for it.
+    def capture_ready(self, simulation, steps):
+        """Prepare to run the next ``steps`` steps inside a CUDA graph, and return a key (hashable:
+        what the captured launches depend on beyond the State's arrays; a new key means a new
+        capture), or None where this operation cannot: it reads something back each step, or
+        passes its kernels host values that change from step to step (a timestep goes through
+        ``Simulation.kernel_timestep``). Default: None."""
+        return None
+
+    def capture_done(self, simulation):
+        """Steps in graphs pause here (a writer, a callback or the end of the run follows): leave
+        what the host sees as the step-by-step path would."""
+
     def resized(self, change):
         """The State gained or lost cells and vertices (:mod:`spherevm.growth`; ``change`` is a
         :class:`spherevm.growth.Change`). The default makes the ``per_cell`` and ``per_vertex``
         arrays follow their rows (see :func:`follow_rows`); one with other per-cell or per-vertex
         data overrides it."""
         follow_rows(self, change)
-
-
-def follow_rows(op, change):
-    """Rebuild ``op``'s ``per_cell`` arrays through ``change.cell_source`` (a daughter cell takes
-    its mother's row) and its ``per_vertex`` arrays through ``change.vertex_source`` (a created
-    vertex gets a zero row); ``per_replica`` rows stay (replicas are neither added nor removed)."""
-    for name, axis in op._rows():
-        full = getattr(op, name)
-        if axis == "replicas" or full is None:
-            continue
-        source = change.cell_source if axis == "cells" else change.vertex_source
-        out = full[_index_like(full, np.maximum(source, 0))]
-        if axis == "vertices":
-            out[_index_like(full, np.flatnonzero(source < 0))] = 0
-        setattr(op, name, out)
-
-
-def _host(value):
-    """A NumPy copy of a NumPy array, a CuPy array or a scalar."""
-    value = value.get() if hasattr(value, "get") else value
-    return np.array(value, copy=True)
-
-
-def _restored(op, name, data):
-    """Saved field ``name`` of ``op`` as the attribute it replaces: same shape, dtype and device."""
-    if name not in data:
-        raise ValueError(f"{type(op).__name__}: the checkpoint lacks field {name!r}; it was written by another "
-                         f"version of the operation")
-    current = getattr(op, name)
-    value = np.asarray(data[name])
-    if current is None:
-        return value
-    if tuple(value.shape) != tuple(current.shape):
-        raise ValueError(f"{type(op).__name__}: saved {name!r} has shape {value.shape}, but the operation "
-                         f"needs {tuple(current.shape)} for this State; the checkpoint belongs to another State")
-    value = value.astype(current.dtype)
-    if isinstance(current, np.ndarray):
-        return value
-    import cupy
-    return cupy.asarray(value)
-
-
-def _index_like(array, index):
-    """``index`` (NumPy) on the device of ``array``."""
-    if isinstance(array, np.ndarray):
-        return index
-    import cupy
-    return cupy.asarray(index)
 
 
 @dataclass

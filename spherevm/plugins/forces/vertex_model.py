@@ -169,6 +169,10 @@ class VertexModel(Force):
             return f"VertexModel.dimensionless(kr={kr}, p0={p0}, a0={a0}, kP={self.kP})"
         return f"VertexModel(kA={self.kA}, kP={self.kP}, A0={self.A0}, P0={self.P0})"
 
+    def capture_ready(self, simulation, steps):
+        """Its two kernels take nothing that changes from step to step: CUDA graphs may hold them."""
+        return ()
+
     def _compute_gpu(self, state) -> ForceResult:
         """Two fused kernels (vertex_model.cu, compiled for the State's surface): cell geometry and
         energy, then vertex forces."""

@@ -23,16 +23,18 @@ __device__ vec3 transport_and_rotate(vec3 d, vec3 m, double rot_amp, unsigned in
 }
 
 // mode: 0 no self-propulsion, 1 cell directors, 2 vertex directors. size: the State's radius or box.
+// The timestep is step0 + *step_add (Simulation.kernel_timestep: inside a CUDA graph it lives on the device).
 // error: earliest (timestep << 32 | vertex) whose step was not finite or above max_step.
 extern "C" __global__ void brownian_move(
     double* __restrict__ pos, const double* __restrict__ forces, const int* __restrict__ vertex_replica,
     const int* __restrict__ vertex_cells, const double* __restrict__ size, const double* __restrict__ amp,
     const double* __restrict__ length_unit, double* __restrict__ directors, int mode, double mu, double dt,
-    double v0, double rot_amp, double max_step, unsigned int seed, unsigned long long timestep, int n_vertices,
-    unsigned long long* __restrict__ error)
+    double v0, double rot_amp, double max_step, unsigned int seed, unsigned long long step0,
+    const unsigned long long* __restrict__ step_add, int n_vertices, unsigned long long* __restrict__ error)
 {
     long i = (long)blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n_vertices) return;
+    unsigned long long timestep = step0 + *step_add;
     int r = vertex_replica[i];
     vec3 x = load3(pos, i);
     vec3 n = Surface::normal(x);
@@ -68,10 +70,11 @@ extern "C" __global__ void brownian_move(
 extern "C" __global__ void active_cell_directors(
     const double* __restrict__ pos, const int* __restrict__ cell_vertices, const int* __restrict__ cell_sides,
     double* __restrict__ directors, int n_cells, int max_sides, double rot_amp, unsigned int seed,
-    unsigned long long timestep)
+    unsigned long long step0, const unsigned long long* __restrict__ step_add)
 {
     long c = (long)blockIdx.x * blockDim.x + threadIdx.x;
     if (c >= n_cells) return;
+    unsigned long long timestep = step0 + *step_add;
     vec3 m = Surface::cell_normal(pos, cell_vertices + c * max_sides, cell_sides[c]);
     store3(directors, c, transport_and_rotate(load3(directors, c), m, rot_amp, seed, timestep, (unsigned int)c));
 }

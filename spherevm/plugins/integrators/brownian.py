@@ -76,20 +76,23 @@ class Brownian(Integrator):
             self._error = cp.full(1, np.iinfo(np.uint64).max, dtype=cp.uint64)
         module, size = surface_kernels(_KERNELS, state)
         unit, amp = self._per_replica(state)
-        directors = self.directors if self._mode else cp.zeros((1, 3))
+        directors = self.directors if self._mode else self._error   # mode 0 reads no directors
         rot_amp = float(np.sqrt(2.0 * self.Dr * self.dt)) if self._mode else 0.0
+        step0, step_add = simulation.kernel_timestep()
         launch(module.get_function("brownian_move"), state.n_vertices,
                (state.positions, forces, state.vertex_replica, state.vertex_cells, size, amp, unit,
                 directors, np.int32(self._mode), np.float64(self.mu), np.float64(self.dt),
                 np.float64(getattr(self, "v0", 0.0)), np.float64(rot_amp), np.float64(self.max_step),
-                np.uint32(simulation.seed), np.uint64(simulation.timestep), np.int32(state.n_vertices),
-                self._error))
+                np.uint32(simulation.seed), step0, step_add, np.int32(state.n_vertices), self._error))
         if self._mode == 1:
             launch(module.get_function("active_cell_directors"), state.n_cells,
                    (state.positions, state.cell_vertices, state.cell_sides, self.directors, np.int32(state.n_cells),
-                    np.int32(state.max_sides), np.float64(rot_amp), np.uint32(simulation.seed),
-                    np.uint64(simulation.timestep)))
+                    np.int32(state.max_sides), np.float64(rot_amp), np.uint32(simulation.seed), step0, step_add))
         simulation.state_changed()
+
+    def capture_ready(self, simulation, steps):
+        """Its kernels take the timestep through ``Simulation.kernel_timestep``: CUDA graphs may hold them."""
+        return ()
 
     def _per_replica(self, state):
         """sqrt(<A>) and the noise amplitude sqrt(2 mu T dt) per replica, on the device (computed

@@ -12,7 +12,9 @@
 #define CAND_INTS 13   // u, k, v, a, b, c, d, C1, C2, C3, C4, replica, turn
 #define LOG_INTS 6     // pass, C1, C2, C3, C4, replica
 
-// counters: [0] candidates, [1] a C3/C4 row is full (widen the table). size: the State's radius or box.
+// counters: [0] candidates, [1] a C3/C4 row has width[0] entries (widen the table). width[0]: the table's
+// width as the step-by-step path holds it (inside a CUDA graph the table has spare columns beyond it,
+// max_sides is the stride). size: the State's radius or box.
 // new_length[r] > 0: absolute new length per replica; else length_factor times the old length.
 extern "C" __global__ void t1_detect(
     const double* __restrict__ pos, const int* __restrict__ vn, const int* __restrict__ vc,
@@ -20,7 +22,8 @@ extern "C" __global__ void t1_detect(
     const double* __restrict__ size, const double* __restrict__ chord2, const double* __restrict__ new_length,
     double length_factor, const bool* __restrict__ active, int n_vertices, int max_sides,
     int* __restrict__ claim, int* __restrict__ refused, unsigned long long* __restrict__ total_refused,
-    int* __restrict__ counters, int* __restrict__ cand, double* __restrict__ cand_len, int capacity)
+    int* __restrict__ counters, int* __restrict__ cand, double* __restrict__ cand_len, int capacity,
+    const int* __restrict__ width)
 {
     int u = blockIdx.x * blockDim.x + threadIdx.x;
     if (u >= n_vertices) return;
@@ -65,7 +68,7 @@ extern "C" __global__ void t1_detect(
         atomicMin(claim + C2, index);
         atomicMin(claim + C3, index);
         atomicMin(claim + C4, index);
-        if (sides[C3] >= max_sides || sides[C4] >= max_sides) counters[1] = 1;
+        if (sides[C3] >= *width || sides[C4] >= *width) counters[1] = 1;
         int i = atomicAdd(counters, 1);
         if (i < capacity) {
             int* e = cand + (long)i * CAND_INTS;
@@ -98,25 +101,30 @@ __device__ void split_in_row(int* row, int* n, int x, int first, int second) {
     *n += 1;
 }
 
+// One thread per slot of `moved` (n_slots: the candidate count after the read-back, or the whole
+// capacity inside a CUDA graph, where the count is read here: counters[0]). grow_width: inside a graph
+// the width the host widens step by step grows here.
 // new_length[r] > 0: absolute new length per replica; else length_factor times the old length.
 extern "C" __global__ void t1_apply(
     double* __restrict__ pos, int* __restrict__ vn, int* __restrict__ vc, int* __restrict__ cell_vertices,
     int* __restrict__ sides, const int* __restrict__ claim, const int* __restrict__ cand,
-    const double* __restrict__ cand_len, int n_cand, int max_sides, const double* __restrict__ size,
-    const double* __restrict__ new_length, double length_factor, int* __restrict__ flips,
-    unsigned long long* __restrict__ total_flips, int* __restrict__ moved, int* __restrict__ log_count,
-    int* __restrict__ log, int pass_id)
+    const double* __restrict__ cand_len, const int* __restrict__ counters, int n_slots, int max_sides,
+    const double* __restrict__ size, const double* __restrict__ new_length, double length_factor,
+    int* __restrict__ flips, unsigned long long* __restrict__ total_flips, int* __restrict__ moved,
+    int* __restrict__ log_count, int* __restrict__ log, int pass_id, int* __restrict__ width, int grow_width)
 {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
-    if (i >= n_cand) return;
+    if (i >= n_slots) return;
+    if (grow_width && i == 0 && counters[1]) *width += 1;
     moved[2 * i] = -1;
     moved[2 * i + 1] = -1;
+    if (i >= counters[0]) return;
     const int* e = cand + (long)i * CAND_INTS;
     int u = e[0], k = e[1], v = e[2], a = e[3], b = e[4], c = e[5], d = e[6];
     int C1 = e[7], C2 = e[8], C3 = e[9], C4 = e[10], r = e[11];
     int index = 3 * u + k;
     if (claim[C1] != index || claim[C2] != index || claim[C3] != index || claim[C4] != index) return;
-    if (sides[C3] >= max_sides || sides[C4] >= max_sides) return;   // cannot happen: the host widened
+    if (sides[C3] >= max_sides || sides[C4] >= max_sides) return;   // cannot happen: the table was widened
     int X = v, Y = u;   // counter-clockwise rotation: v ends up on the C1 side
     vn[3 * X] = Y; vn[3 * X + 1] = d; vn[3 * X + 2] = a;
     vc[3 * X] = C4; vc[3 * X + 1] = C1; vc[3 * X + 2] = C3;
@@ -148,10 +156,11 @@ extern "C" __global__ void t1_apply(
 
 // After t1_apply: give the candidates' cells back (claims stay at INT_MAX between passes, so a
 // pass costs no sweep over all cells).
-extern "C" __global__ void t1_release(int* __restrict__ claim, const int* __restrict__ cand, int n_cand)
+extern "C" __global__ void t1_release(int* __restrict__ claim, const int* __restrict__ cand,
+                                      const int* __restrict__ counters, int n_slots)
 {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
-    if (i >= n_cand) return;
+    if (i >= n_slots || i >= counters[0]) return;
     const int* e = cand + (long)i * CAND_INTS;
     for (int j = 7; j < 11; ++j) claim[e[j]] = 0x7fffffff;
 }

@@ -1,17 +1,12 @@
 """T1 neighbour exchanges: short edges are rotated so that four cells swap neighbours."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from ... import folding, topology
-from ...device import launch
-from ..base import KERNEL_SURFACES, Minimizer, Updater, surface_kernels
+from ..base import KERNEL_SURFACES, Minimizer, Updater
 from ...validation import integer, positive
-
-_KERNELS = Path(__file__).with_suffix(".cu")
-_CAND_INTS, _LOG_INTS = 13, 6
+from .t1_device import DevicePass
 
 PRESETS = {
     # The rules of the paper's own code: threshold 0.1, new edge twice the old length.
@@ -19,7 +14,7 @@ PRESETS = {
 }
 
 
-class T1(Updater):
+class T1(DevicePass, Updater):
     """Flip every edge shorter than ``threshold`` (units of sqrt(<A>) of its replica).
 
     The flip rotates the edge by 90 degrees about the surface normal at its midpoint: the two cells
@@ -218,121 +213,6 @@ class T1(Updater):
         if self.reset_velocities and integrator is not None:
             integrator.reset_vertices(state.device.asarray(moved))
         simulation.state_changed()
-
-    # ------------------------------------------------------------------ the pass on the GPU
-    def _gpu_buffers(self, state):
-        import cupy as cp
-        buf = getattr(self, "_gpu", None)
-        if buf is None or buf["n_cells"] != state.n_cells or buf["state"] is not state:
-            cap, r = max(1024, state.n_vertices // 4), state.n_replicas
-            # per-pass counters in one buffer, zeroed by one memset: [candidates, widen | flips | refused]
-            scratch = cp.zeros(2 + 2 * r, dtype=cp.int32)
-            buf = dict(state=state, n_cells=state.n_cells, capacity=cap,
-                       claim=cp.full(state.n_cells, np.iinfo(np.int32).max, dtype=cp.int32), scratch=scratch,
-                       counters=scratch[:2], flips=scratch[2:2 + r], refused=scratch[2 + r:],
-                       log_count=cp.zeros(1, dtype=cp.int32), log_bound=0,
-                       cand=cp.empty((cap, _CAND_INTS), dtype=cp.int32), cand_len=cp.empty(cap),
-                       log=cp.empty((cap, _LOG_INTS), dtype=cp.int32), moved=cp.empty(2 * cap, dtype=cp.int32), passes=0,
-                       all_active=cp.ones(r, dtype=bool),
-                       total_flips=cp.asarray(self._host_totals("total_flips", r)),
-                       total_refused=cp.asarray(self._host_totals("total_refused", r)))
-            self._gpu = buf
-        return buf
-
-    def _device_lengths(self, state):
-        """Squared threshold chords and new edge lengths per replica, on the device: cached with
-        the State, so a new radius (``State.clear_cache``) or a resize renews them."""
-        def build():
-            import cupy as cp
-            unit = np.sqrt(state.mean_cell_area)
-            new = self.new_length * unit if self.length_factor is None else np.full(state.n_replicas, -1.0)
-            return cp.asarray(self.chord_threshold2(state)), cp.asarray(new)
-        return state.cached((self, "lengths"), build)
-
-    def _host_totals(self, name, n_replicas):
-        """A running total to continue on the device (zeros if it belongs to another State)."""
-        total = getattr(self, name)
-        return total.astype(np.uint64) if len(total) == n_replicas else np.zeros(n_replicas, np.uint64)
-
-    def _update_gpu(self, simulation):
-        """Detect, one small read-back (candidate count, full rows), apply, release: see t1.cu."""
-        import cupy as cp
-        state = simulation.state
-        buf = self._gpu_buffers(state)
-        chord2, new_length = self._device_lengths(state)
-        module, size = surface_kernels(_KERNELS, state)
-        integrator = simulation.operations.integrator
-        active = integrator.active_on_device() if integrator is not None else buf["all_active"]
-        while True:
-            scratch = buf["scratch"]
-            cp.cuda.runtime.memsetAsync(scratch.data.ptr, 0, scratch.nbytes, cp.cuda.get_current_stream().ptr)
-            launch(module.get_function("t1_detect"), state.n_vertices,
-                   (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_sides,
-                    state.cell_vertices, state.vertex_replica, size, chord2, new_length,
-                    np.float64(self.length_factor or 0.0), active, np.int32(state.n_vertices),
-                    np.int32(state.max_sides), buf["claim"], buf["refused"], buf["total_refused"], buf["counters"],
-                    buf["cand"], buf["cand_len"], np.int32(buf["capacity"])))
-            n_cand, widen = (int(x) for x in buf["counters"].get())   # the one read-back
-            if n_cand <= buf["capacity"]:
-                break
-            cap = 2 * n_cand   # rare: more candidates than room; undo this pass's claims, grow, redo
-            launch(module.get_function("t1_release"), buf["capacity"],
-                   (buf["claim"], buf["cand"], np.int32(buf["capacity"])))
-            buf["claim"].fill(np.iinfo(np.int32).max)
-            buf["total_refused"] -= buf["refused"].astype(cp.uint64)
-            buf.update(capacity=cap, cand=cp.empty((cap, _CAND_INTS), cp.int32), cand_len=cp.empty(cap))
-        if n_cand == 0:
-            return
-        if widen:
-            pad = cp.full((state.n_cells, 1), -1, dtype=cp.int32)
-            state.cell_vertices = cp.ascontiguousarray(cp.concatenate([state.cell_vertices, pad], axis=1))
-        counting = self.counting(simulation)
-        if counting and buf["log_bound"] + n_cand > len(buf["log"]):   # the log might overflow: replay it first
-            self._flush_log(state)
-            if n_cand > len(buf["log"]):
-                buf["log"] = cp.empty((2 * n_cand, _LOG_INTS), cp.int32)
-        buf["log_bound"] += n_cand if counting else 0
-        if len(buf["moved"]) < 2 * n_cand:
-            buf["moved"] = cp.empty(4 * n_cand, dtype=cp.int32)
-        moved = buf["moved"][:2 * n_cand]
-        buf["passes"] += 1
-        launch(module.get_function("t1_apply"), n_cand,
-               (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_vertices, state.cell_sides,
-                buf["claim"], buf["cand"], buf["cand_len"], np.int32(n_cand), np.int32(state.max_sides),
-                size, new_length, np.float64(self.length_factor or 0.0), buf["flips"],
-                buf["total_flips"], moved, buf["log_count"], buf["log"], np.int32(buf["passes"] if counting else -1)))
-        launch(module.get_function("t1_release"), n_cand, (buf["claim"], buf["cand"], np.int32(n_cand)))
-        if self.reset_velocities and integrator is not None:
-            integrator.reset_vertices(moved)
-        state.topology_version += 1
-        simulation.state_changed()
-
-    def _flush_log(self, state):
-        """Replay the device's flip log, pass by pass, into the flip-back bookkeeping."""
-        buf = getattr(self, "_gpu", None)
-        if buf is None:
-            return
-        n = int(buf["log_count"].get()[0])
-        buf["log_bound"] = 0
-        if n == 0:
-            return
-        log = buf["log"][:n].get()
-        buf["log_count"].fill(0)
-        order = np.argsort(log[:, 0], kind="stable")
-        log = log[order]
-        for pass_rows in np.split(log, np.flatnonzero(np.diff(log[:, 0])) + 1):  # passes, not flips
-            self._count_flip_backs(state, pass_rows[:, 1:5].astype(np.int64), pass_rows[:, 5], buf["n_cells"])
-
-    def _sync_counters(self):
-        """Bring the GPU counters to the host attributes (for logging and halting)."""
-        buf = getattr(self, "_gpu", None)
-        if buf is None:
-            return
-        self._flush_log(buf["state"])
-        self.last_flips = buf["flips"].get().astype(np.int64)
-        self.last_refused = buf["refused"].get().astype(np.int64)
-        self.total_flips = buf["total_flips"].get().astype(np.int64)
-        self.total_refused = buf["total_refused"].get().astype(np.int64)
 
     def _count_flip_backs(self, state, cells, rep, n_cells=None):
         """Count re-joins: a flip making two cells neighbours again that an earlier flip separated.

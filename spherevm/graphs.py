@@ -1,0 +1,181 @@
+"""Many steps per launch on the GPU: stretches of ``Simulation.run`` captured into CUDA graphs.
+
+A small tissue's step is a handful of short kernels. Launched one at a time from Python, with T1's
+read-back of its candidate count each pass, the GPU waits on the host: about 0.13 ms per step below
+~1e5 cells whatever the size. Captured once into a CUDA graph and replayed, the same kernels run
+back to back with no host work between them.
+
+The trajectory is the step-by-step path's, bit for bit: the kernels and their arguments are the
+same, and what changes from step to step lives on the device: the timestep
+(:meth:`Simulation.kernel_timestep`: a device counter the graph advances once per replay, plus
+each step's place in the graph), T1's candidate count and the width of
+its cell table (:meth:`T1.capture_ready`). Every operation says whether it can run inside a graph
+(:meth:`~spherevm.plugins.base.Operation.capture_ready`); one that cannot keeps the run step by step.
+"""
+from __future__ import annotations
+
+from .trigger import Always, Periodic
+
+#: steps per captured graph; the rest of a stretch replays a one-step graph
+GRAPH_STEPS = 8
+#: auto mode: graphs for runs of at least this many steps (a capture costs about ten steps)...
+MIN_STEPS = 64
+#: ... and for States of at most this many vertices (graphs hold about 400 more bytes per cell:
+#: T1's room for a candidate per edge and spare cell-table columns)
+MAX_VERTICES = 1 << 22
+#: most steps between two looks of the host (T1 pads its cell table by this many columns)
+MAX_STRETCH = 64
+
+
+def _every_step(trigger, timestep):
+    return isinstance(trigger, Always) or (isinstance(trigger, Periodic) and trigger.period == 1
+                                           and trigger.phase <= timestep)
+
+
+def _end_quietly(stream):
+    """End a capture that failed (its own error is the one to report)."""
+    try:
+        stream.end_capture()
+    except Exception:       # noqa: BLE001 - the capture is invalid either way
+        pass
+
+
+def why_not(simulation) -> str | None:
+    """Why ``simulation.run`` cannot use CUDA graphs now (None if it can, as far as triggers tell:
+    each operation is asked when the first stretch starts)."""
+    if not simulation.device.is_gpu:
+        return "CUDA graphs need the GPU; this Simulation runs on the CPU"
+    ops = list(simulation.operations.updaters) + [simulation.operations.integrator]
+    for op in ops:
+        if not _every_step(op.trigger, simulation.timestep):
+            return (f"{type(op).__name__} runs on a trigger ({op.trigger!r}) that does not fire every step; a graph "
+                    "replays the same steps")
+    return None
+
+
+class StepGraphs:
+    """The CUDA graphs of one ``Simulation.run``: ``advance(n)`` runs n steps (a stretch between
+    checks and writes) as replays; ``pause()`` before anything on the host looks at the State."""
+
+    def __init__(self, simulation, required: bool):
+        import cupy as cp
+        self.sim, self.required = simulation, required
+        self.stream = cp.cuda.Stream()          # blocking: ordered with the default stream both ways
+        self.pool = cp.cuda.MemoryPool()        # the graphs' temporaries, never lent to anything else
+        self.counter = cp.zeros(1, dtype=cp.uint64)
+        self.graphs = {}
+
+    @classmethod
+    def for_run(cls, simulation, steps, graphs):
+        """The runner for ``run(steps, graphs=...)``: None where graphs are off (``graphs=None``:
+        on the GPU for runs of at least MIN_STEPS steps on at most MAX_VERTICES vertices)."""
+        if graphs is False:
+            return None
+        reason = why_not(simulation)
+        if graphs is None:
+            small = simulation.state.n_vertices <= MAX_VERTICES
+            return cls(simulation, False) if reason is None and small and steps >= MIN_STEPS else None
+        if graphs is not True:
+            raise ValueError(f"graphs must be None (auto), True or False, got {graphs!r}")
+        if reason is not None:
+            raise ValueError(f"run(graphs=True): {reason}")
+        return cls(simulation, True)
+
+    def stretch(self, done, steps, check_every):
+        """How many steps to run before the host must look: the next check, the end of the run, or
+        the next timestep at which a writer is due (evaluated ahead on the host)."""
+        n = min(steps - done, check_every - done % check_every, MAX_STRETCH)
+        t = self.sim.timestep
+        writers = self.sim.operations.writers
+        for i in range(1, n):
+            if any(w.trigger(t + i) for w in writers):
+                return i
+        return n
+
+    def _ready(self, steps):
+        """Every operation's key for the next ``steps`` steps, or None (naming the one that refused)."""
+        ops = list(self.sim.operations.updaters) + list(self.sim.operations.forces) + \
+            [self.sim.operations.integrator]
+        keys = []
+        for op in ops:
+            key = op.capture_ready(self.sim, steps)
+            if key is None:
+                return None, type(op).__name__
+            keys.append((id(op), key))
+        state = self.sim.state
+        arrays = (state.positions, state.cell_vertices, state.cell_sides, state.vertex_neighbors,
+                  state.vertex_cells, getattr(state, state.constraint.size_name))
+        return (id(state), tuple(a.data.ptr for a in arrays), tuple(keys)), None
+
+    def advance(self, steps) -> bool:
+        """Run ``steps`` steps through graphs; False (nothing run) where an operation cannot."""
+        sim = self.sim
+        if sim._updated_at == sim.timestep:     # the updaters ran at this timestep already (a minimize)
+            self.pause()
+            sim._update_once()
+            sim._integrate()
+            steps -= 1
+        if steps == 0:
+            return True
+        key, refused = self._ready(steps)
+        if key is None:
+            self.pause()
+            if self.required:
+                raise ValueError(f"run(graphs=True): {refused} cannot run inside a CUDA graph now")
+            return False
+        self.counter.fill(sim.timestep)
+        if key not in self.graphs:
+            self._steps(1, capture=False)          # one step at once: builds caches, fills the pool
+            steps -= 1
+            self.graphs = {key: {k: self._steps(k, capture=True) for k in (GRAPH_STEPS, 1)}}
+        big, rest = divmod(steps, GRAPH_STEPS)
+        for k, repeats in ((GRAPH_STEPS, big), (1, rest)):
+            for _ in range(repeats):
+                self.graphs[key][k].launch(self.stream)
+        sim.timestep += steps
+        sim._updated_at, sim._held_back = sim.timestep - 1, False
+        sim.state.topology_changed()
+        sim.state_changed()
+        return True
+
+    def _steps(self, k, capture):
+        """``k`` steps in graph mode: run at once, or captured into a graph (returned; the host's
+        timestep is then put back, the graph has not run yet)."""
+        import cupy as cp
+        sim = self.sim
+        t0 = sim.timestep
+        sim._step_counter = self.counter
+        try:
+            with cp.cuda.using_allocator(self.pool.malloc), self.stream:
+                if capture:
+                    self.stream.begin_capture()
+                try:
+                    for i in range(k):
+                        sim._step_offset = i
+                        sim._update()
+                        sim._integrate()
+                    self.counter += k
+                except Exception as exc:
+                    if not capture:
+                        raise
+                    _end_quietly(self.stream)
+                    raise RuntimeError("capturing steps into a CUDA graph failed: an operation whose capture_ready "
+                                       "said yes read something back or copied from the host; run(graphs=False) "
+                                       "runs step by step") from exc
+                graph = self.stream.end_capture() if capture else None
+        finally:
+            sim._step_counter, sim._step_offset = None, 0
+            sim.state_changed()
+        if capture:
+            sim.timestep = t0
+        return graph
+
+    def pause(self):
+        """Before the host looks at the State: each operation leaves it as the step-by-step path would."""
+        for op in list(self.sim.operations.updaters) + list(self.sim.operations.forces) + \
+                [self.sim.operations.integrator]:
+            op.capture_done(self.sim)
+
+    def forget(self):
+        """Drop the graphs (after user code ran: it may have changed what they hold)."""
+        self.graphs = {}

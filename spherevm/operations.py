@@ -1,0 +1,108 @@
+"""The operations of a Simulation: forces, one integrator, updaters and writers, kept in lists that
+type-check and attach what joins them."""
+from __future__ import annotations
+
+from collections.abc import MutableSequence
+
+from .plugins.base import Force, Integrator, Updater, Writer
+
+
+class Operations:
+    """The operations of a Simulation: forces, one integrator, updaters and writers.
+
+    Order inside a step: updaters, force computation, integrator, writers.
+    """
+
+    def __init__(self, simulation):
+        self._sim = simulation
+        self.forces = _OperationList(simulation, Force)
+        self.updaters = _OperationList(simulation, Updater)
+        self.writers = _OperationList(simulation, Writer)
+        self._integrator = None
+
+    @property
+    def integrator(self):
+        return self._integrator
+
+    @integrator.setter
+    def integrator(self, value):
+        if value is not None and not isinstance(value, Integrator):
+            raise TypeError(f"integrator must be a spherevm.plugins.Integrator, got {type(value).__name__}")
+        if value is not None and self._sim._state is not None:
+            value.attach(self._sim)             # a refused integrator leaves the old one in place
+            self._sim._restore_pending(value, "integrator")
+        if self._integrator is not None:
+            self._integrator.detach()
+        self._integrator = value
+
+    def __iter__(self):
+        yield from self.updaters
+        yield from self.forces
+        if self._integrator is not None:
+            yield self._integrator
+        yield from self.writers
+
+    def keyed(self):
+        """``(checkpoint key, operation)`` for every operation (see ``Operation.checkpoint_key``)."""
+        for kind in ("updaters", "forces"):
+            for i, op in enumerate(getattr(self, kind)):
+                yield op.checkpoint_key(f"{kind}.{i}"), op
+        if self._integrator is not None:
+            yield self._integrator.checkpoint_key("integrator"), self._integrator
+        for i, op in enumerate(self.writers):
+            yield op.checkpoint_key(f"writers.{i}"), op
+
+
+class _OperationList(MutableSequence):
+    """A list of operations of one kind: every mutation (append, insert, ``+=``, slice and item
+    assignment) type-checks the operations and attaches them; removal detaches."""
+
+    def __init__(self, simulation, kind):
+        self._sim, self._kind, self._items = simulation, kind, []
+
+    def _check(self, op):
+        if not isinstance(op, self._kind):
+            raise TypeError(f"expected a spherevm.plugins.{self._kind.__name__}, got {type(op).__name__}")
+        return op
+
+    def _attach(self, ops, start=0):
+        if self._sim._state is not None:
+            kind = next(k for k in ("forces", "updaters", "writers")
+                        if getattr(self._sim.operations, k, None) is self)
+            for i, op in enumerate(ops):
+                op.attach(self._sim)
+                self._sim._restore_pending(op, f"{kind}.{start + i}")
+
+    def __getitem__(self, i):
+        return self._items[i]
+
+    def __len__(self):
+        return len(self._items)
+
+    def __setitem__(self, i, value):
+        new = [self._check(op) for op in value] if isinstance(i, slice) else [self._check(value)]
+        start = range(len(self._items))[i][0] if isinstance(i, slice) and range(len(self._items))[i] \
+            else (i % max(len(self._items), 1) if not isinstance(i, slice) else len(self._items))
+        self._attach(new, start)                # a refused operation never joins the list
+        old = self._items[i] if isinstance(i, slice) else [self._items[i]]
+        self._items[i] = new if isinstance(i, slice) else value
+        for op in old:
+            if not any(op is n for n in new):
+                op.detach()
+
+    def __delitem__(self, i):
+        old = self._items[i] if isinstance(i, slice) else [self._items[i]]
+        del self._items[i]
+        for op in old:
+            op.detach()
+
+    def insert(self, i, op):
+        n = len(self._items)
+        self._attach([self._check(op)], min(max(i if i >= 0 else n + i, 0), n))
+        self._items.insert(i, op)
+
+    def __eq__(self, other):
+        return list(self) == list(other)
+
+    def __repr__(self):
+        return repr(self._items)

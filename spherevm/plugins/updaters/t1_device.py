@@ -1,0 +1,202 @@
+"""T1's pass on the GPU (t1.cu): detect, one small read-back, apply, release; inside a CUDA graph
+(:mod:`spherevm.graphs`) the same kernels with no read-back at all."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ...device import launch
+from ..base import surface_kernels
+
+_KERNELS = Path(__file__).with_name("t1.cu")
+_CAND_INTS, _LOG_INTS = 13, 6
+#: spare cell-table columns added beyond what a stretch of graph steps needs (fewer re-paddings)
+SPARE_COLUMNS = 16
+
+
+class DevicePass:
+    """The GPU half of :class:`~spherevm.plugins.updaters.T1` (T1 holds the rules, the counters and
+    the flip-back memory; this the device buffers and the kernel launches)."""
+
+    def _gpu_buffers(self, state, capacity=0):
+        """The device buffers for ``state``, with room for at least ``capacity`` candidates."""
+        import cupy as cp
+        buf = getattr(self, "_gpu", None)
+        if buf is None or buf["n_cells"] != state.n_cells or buf["state"] is not state:
+            cap, r = max(1024, state.n_vertices // 4, capacity), state.n_replicas
+            # per-pass counters in one buffer, zeroed by one memset: [candidates, widen | flips | refused]
+            scratch = cp.zeros(2 + 2 * r, dtype=cp.int32)
+            buf = dict(state=state, n_cells=state.n_cells, capacity=cap,
+                       claim=cp.full(state.n_cells, np.iinfo(np.int32).max, dtype=cp.int32), scratch=scratch,
+                       counters=scratch[:2], flips=scratch[2:2 + r], refused=scratch[2 + r:],
+                       log_count=cp.zeros(1, dtype=cp.int32), log_bound=0,
+                       cand=cp.empty((cap, _CAND_INTS), dtype=cp.int32), cand_len=cp.empty(cap),
+                       log=cp.empty((cap, _LOG_INTS), dtype=cp.int32), moved=cp.empty(2 * cap, dtype=cp.int32), passes=0,
+                       all_active=cp.ones(r, dtype=bool), width=cp.zeros(1, dtype=cp.int32), width_host=-1,
+                       width_bound=0, table=None, total_flips=cp.asarray(self._host_totals("total_flips", r)),
+                       total_refused=cp.asarray(self._host_totals("total_refused", r)))
+            self._gpu = buf
+        elif capacity > buf["capacity"]:
+            buf.update(capacity=capacity, cand=cp.empty((capacity, _CAND_INTS), cp.int32), cand_len=cp.empty(capacity))
+        if len(buf["moved"]) < 2 * capacity:
+            buf["moved"] = cp.empty(2 * capacity, dtype=cp.int32)
+        return buf
+
+    def _device_lengths(self, state):
+        """Squared threshold chords and new edge lengths per replica, on the device: cached with
+        the State, so a new radius (``State.clear_cache``) or a resize renews them."""
+        def build():
+            import cupy as cp
+            unit = np.sqrt(state.mean_cell_area)
+            new = self.new_length * unit if self.length_factor is None else np.full(state.n_replicas, -1.0)
+            return cp.asarray(self.chord_threshold2(state)), cp.asarray(new)
+        return state.cached((self, "lengths"), build)
+
+    def _host_totals(self, name, n_replicas):
+        """A running total to continue on the device (zeros if it belongs to another State)."""
+        total = getattr(self, name)
+        return total.astype(np.uint64) if len(total) == n_replicas else np.zeros(n_replicas, np.uint64)
+
+    def _detect(self, simulation, buf):
+        """Zero the pass counters and launch t1_detect; returns what t1_apply takes besides."""
+        import cupy as cp
+        state = simulation.state
+        chord2, new_length = self._device_lengths(state)
+        module, size = surface_kernels(_KERNELS, state)
+        integrator = simulation.operations.integrator
+        active = integrator.active_on_device() if integrator is not None else buf["all_active"]
+        scratch = buf["scratch"]
+        cp.cuda.runtime.memsetAsync(scratch.data.ptr, 0, scratch.nbytes, cp.cuda.get_current_stream().ptr)
+        launch(module.get_function("t1_detect"), state.n_vertices,
+               (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_sides,
+                state.cell_vertices, state.vertex_replica, size, chord2, new_length,
+                np.float64(self.length_factor or 0.0), active, np.int32(state.n_vertices),
+                np.int32(state.max_sides), buf["claim"], buf["refused"], buf["total_refused"], buf["counters"],
+                buf["cand"], buf["cand_len"], np.int32(buf["capacity"]), buf["width"]))
+        return module, size, new_length
+
+    def _apply(self, simulation, buf, module, size, new_length, n_slots, pass_id, in_graph):
+        """t1_apply and t1_release over ``n_slots`` candidate slots, then the integrator forgets the
+        moved vertices."""
+        state = simulation.state
+        moved = buf["moved"][:2 * n_slots]
+        launch(module.get_function("t1_apply"), n_slots,
+               (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_vertices, state.cell_sides,
+                buf["claim"], buf["cand"], buf["cand_len"], buf["counters"], np.int32(n_slots),
+                np.int32(state.max_sides), size, new_length, np.float64(self.length_factor or 0.0), buf["flips"],
+                buf["total_flips"], moved, buf["log_count"], buf["log"], np.int32(pass_id), buf["width"],
+                np.int32(in_graph)))
+        launch(module.get_function("t1_release"), n_slots,
+               (buf["claim"], buf["cand"], buf["counters"], np.int32(n_slots)))
+        integrator = simulation.operations.integrator
+        if self.reset_velocities and integrator is not None:
+            integrator.reset_vertices(moved)
+        simulation.state_changed()
+
+    def _update_gpu(self, simulation):
+        """Detect, one small read-back (candidate count, full rows), apply, release: see t1.cu.
+        Inside a CUDA graph: no read-back, see :meth:`capture_ready`."""
+        import cupy as cp
+        state = simulation.state
+        buf = self._gpu_buffers(state)
+        if simulation.capturing:
+            module, size, new_length = self._detect(simulation, buf)
+            self._apply(simulation, buf, module, size, new_length, buf["capacity"], -1, True)
+            return
+        if buf["width_host"] != state.max_sides:
+            buf["width"].fill(state.max_sides)
+            buf["width_host"] = state.max_sides
+        while True:
+            module, size, new_length = self._detect(simulation, buf)
+            n_cand, widen = (int(x) for x in buf["counters"].get())   # the one read-back
+            if n_cand <= buf["capacity"]:
+                break
+            cap = 2 * n_cand   # rare: more candidates than room; undo this pass's claims, grow, redo
+            launch(module.get_function("t1_release"), buf["capacity"],
+                   (buf["claim"], buf["cand"], buf["counters"], np.int32(buf["capacity"])))
+            buf["claim"].fill(np.iinfo(np.int32).max)
+            buf["total_refused"] -= buf["refused"].astype(cp.uint64)
+            self._gpu_buffers(state, cap)
+        if n_cand == 0:
+            return
+        if widen:
+            pad = cp.full((state.n_cells, 1), -1, dtype=cp.int32)
+            state.cell_vertices = cp.ascontiguousarray(cp.concatenate([state.cell_vertices, pad], axis=1))
+            buf["width"].fill(state.max_sides)
+            buf["width_host"] = state.max_sides
+        counting = self.counting(simulation)
+        if counting and buf["log_bound"] + n_cand > len(buf["log"]):   # the log might overflow: replay it first
+            self._flush_log(state)
+            if n_cand > len(buf["log"]):
+                buf["log"] = cp.empty((2 * n_cand, _LOG_INTS), cp.int32)
+        buf["log_bound"] += n_cand if counting else 0
+        buf["passes"] += 1
+        self._apply(simulation, buf, module, size, new_length, n_cand, buf["passes"] if counting else -1, False)
+        state.topology_version += 1
+
+    # ------------------------------------------------------------------ CUDA graphs
+    def capture_ready(self, simulation, steps):
+        """Passes inside a CUDA graph read nothing back, so nothing may need to grow there: room for a
+        candidate per edge, and the cell table padded with ``steps`` spare columns (a cell gains at
+        most one side per pass); the width the step-by-step path would give it is kept on the device
+        (t1_apply grows it) and :meth:`capture_done` trims the table to it. Not with the flip-back
+        bookkeeping (``counting``), whose log the host replays. The width is read back only when
+        the bound ``width_bound`` (last known width plus the passes since) nears the table's edge."""
+        if self.counting(simulation):
+            return None
+        import cupy as cp
+        state = simulation.state
+        buf = self._gpu_buffers(state, 3 * state.n_vertices // 2)
+        table = buf["table"]
+        if table is not None and state.cell_vertices is table:
+            if buf["width_bound"] + steps > table.shape[1]:       # the width may be near the edge: look
+                buf["width_bound"] = int(buf["width"].get()[0])
+            if buf["width_bound"] + steps <= table.shape[1]:
+                buf["width_bound"] += steps
+                return table.data.ptr
+            self.capture_done(simulation)
+        width = state.max_sides
+        if table is None or table.shape[1] - width < steps:
+            table = buf["table"] = cp.full((state.n_cells, width + steps + SPARE_COLUMNS), -1, dtype=cp.int32)
+        table[:, :width] = state.cell_vertices
+        state.cell_vertices = table
+        buf["width"].fill(width)
+        buf["width_bound"] = width + steps   # at most one more column per pass
+        buf["width_host"] = -1               # the step-by-step path sets it again
+        return table.data.ptr
+
+    def capture_done(self, simulation):
+        """The cell table back to the width the step-by-step path would have (one small read-back)."""
+        buf = getattr(self, "_gpu", None)
+        state = simulation.state
+        if buf is not None and buf["table"] is not None and state.cell_vertices is buf["table"]:
+            import cupy as cp
+            state.cell_vertices = cp.ascontiguousarray(buf["table"][:, :int(buf["width"].get()[0])])
+
+    def _flush_log(self, state):
+        """Replay the device's flip log, pass by pass, into the flip-back bookkeeping."""
+        buf = getattr(self, "_gpu", None)
+        if buf is None:
+            return
+        n = int(buf["log_count"].get()[0])
+        buf["log_bound"] = 0
+        if n == 0:
+            return
+        log = buf["log"][:n].get()
+        buf["log_count"].fill(0)
+        order = np.argsort(log[:, 0], kind="stable")
+        log = log[order]
+        for pass_rows in np.split(log, np.flatnonzero(np.diff(log[:, 0])) + 1):  # passes, not flips
+            self._count_flip_backs(state, pass_rows[:, 1:5].astype(np.int64), pass_rows[:, 5], buf["n_cells"])
+
+    def _sync_counters(self):
+        """Bring the GPU counters to the host attributes (for logging and halting)."""
+        buf = getattr(self, "_gpu", None)
+        if buf is None:
+            return
+        self._flush_log(buf["state"])
+        self.last_flips = buf["flips"].get().astype(np.int64)
+        self.last_refused = buf["refused"].get().astype(np.int64)
+        self.total_flips = buf["total_flips"].get().astype(np.int64)
+        self.total_refused = buf["total_refused"].get().astype(np.int64)

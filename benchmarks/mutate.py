@@ -123,7 +123,7 @@ def main(argv=None):
             copies.put(_work_copy(root))
         cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *args.tests]
         work = copies.queue[0]
-        env = dict(os.environ, PYTHONPATH=work, PYTHONDONTWRITEBYTECODE="1")
+        env = _env(work)
         rc = subprocess.run(cmd, cwd=work, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode
         if rc != 0:   # a kill means something only if the tests pass without a mutation
             sys.exit(f"the tests fail (rc={rc}) on the unmutated module: fix that first: {' '.join(cmd[1:])}")
@@ -134,7 +134,7 @@ def main(argv=None):
             try:
                 with open(os.path.join(work, args.module), "w") as fh:
                     fh.write(mutant_source(source, index, how))
-                env = dict(os.environ, PYTHONPATH=work, PYTHONDONTWRITEBYTECODE="1")
+                env = _env(work)
                 t0 = time.time()
                 try:
                     rc = subprocess.run(cmd, cwd=work, env=env, stdout=subprocess.DEVNULL,
@@ -159,6 +159,13 @@ def main(argv=None):
     finally:
         while not copies.empty():
             shutil.rmtree(copies.get(), ignore_errors=True)
+
+
+def _env(work):
+    """The tests' environment: the mutated copy first on the path, then what the caller's path holds
+    (dependencies installed into a folder, as on the GPU machine)."""
+    path = os.pathsep.join(p for p in (work, os.environ.get("PYTHONPATH", "")) if p)
+    return dict(os.environ, PYTHONPATH=path, PYTHONDONTWRITEBYTECODE="1")
 
 
 def _line_set(text):

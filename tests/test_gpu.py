@@ -111,18 +111,25 @@ def _table(state):
     return cv[:, :int(state.device.to_numpy(state.cell_sides).max())]
 
 
-def test_t1_passes_match_numpy_flip_for_flip():
-    # random kicks then a T1 pass, many times: the GPU kernels must pick and perform the same flips
+@pytest.mark.parametrize("rules, radius", [(dict(threshold=0.3, new_length=0.45), None),
+                                           (dict(preset="reference"), 7.0)])
+def test_t1_passes_match_numpy_flip_for_flip(rules, radius):
+    # random kicks then a T1 pass, many times: the GPU kernels must pick and perform the same flips,
+    # with an absolute new length and with the reference preset's factor, at <A> = 1 and <A> != 1
     rng = np.random.default_rng(3)
-    state = svm.init.random_tiling(300, replicas=3, seed=15)
-    sims = t1_simulations(state, threshold=0.3, new_length=0.45, max_flip_backs=10 ** 6)
+    state = svm.init.random_tiling(300, replicas=3, seed=15, radius=radius)
+    scale = float(np.sqrt(state.mean_cell_area[0]))
+    sims = t1_simulations(state, max_flip_backs=10 ** 6, **rules)
     refused = 0
     for _ in range(40):
-        kick = rng.normal(scale=0.06, size=state.positions.shape)
+        kick = rng.normal(scale=0.06 * scale, size=state.positions.shape)
+        version = sims["gpu"].state.topology_version
         for sim in sims.values():
             kick_on_surface(sim, kick)
             sim._update()
         c, g = sims["cpu"], sims["gpu"]
+        if c.log("t1_flips").sum():
+            assert g.state.topology_version > version, "a pass that flips makes topology caches stale"
         assert np.array_equal(g.log("t1_flips"), c.log("t1_flips"))
         assert np.array_equal(g.log("t1_refused"), c.log("t1_refused"))
         refused += int(c.log("t1_refused").sum())
@@ -141,6 +148,7 @@ def test_brownian_with_t1_matches_numpy_for_1000_steps():
     gpu = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=2e-3))
     cpu.run(1000)
     gpu.run(1000)
+    assert int(gpu.operations.updaters[0]._gpu["log_count"].get()[0]) == 0, "no flip log under dynamics"
     flips = cpu.log("t1_total_flips")
     assert flips.sum() > 0 and np.array_equal(gpu.log("t1_total_flips"), flips)
     assert np.array_equal(_table(gpu.state), _table(cpu.state))

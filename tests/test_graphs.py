@@ -151,3 +151,23 @@ def test_an_operation_that_reads_back_inside_a_graph_gets_a_clear_error():
         sim.run(20, graphs=True)
     sim.run(20, graphs=False)                   # the device works on, step by step
     assert sim.timestep >= 20
+
+
+@pytest.mark.gpu
+def test_a_pass_with_more_candidates_than_the_step_by_step_room():
+    """Inside a graph T1 has room for a candidate per edge: a first pass with more candidates than
+    the step-by-step path's first room (max(1024, V/4)) is the same pass."""
+    from spherevm.plugins.updaters import T1
+    state = svm.init.random_tiling(2500, seed=8)
+    rules = dict(threshold=0.55, new_length=0.8)   # about 2,500 candidates, 600 refused
+    u, _, _ = T1(**rules).short_edges(state)
+    assert len(u) - 700 > max(1024, state.n_vertices // 4), "more candidates than the first room"
+    out = []
+    for use in (True, False):
+        sim = dynamics_simulation(state, "gpu", Brownian(dt=0.001, T=1e-4))
+        sim.operations.updaters[0] = T1(**rules)
+        sim.run(20, graphs=use)
+        out.append((snapshot(sim.state), sim.log("t1_total_flips")))
+    for key in out[1][0]:
+        assert out[0][0][key].tobytes() == out[1][0][key].tobytes(), key
+    assert np.array_equal(out[0][1], out[1][1]) and out[1][1].sum() > 100

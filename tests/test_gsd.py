@@ -87,7 +87,9 @@ def test_restore_every_frame_exactly(written, device):
     assert svm.gsdio.n_frames(path) == len(refs)
     for i, ref in enumerate(refs):
         assert_same_state(read_state(path, frame=i), ref)
-        assert_same_state(svm.init.from_gsd(path, frame=i - len(refs), device=device), ref)
+        restored = svm.init.from_gsd(path, frame=i - len(refs), device=device)
+        assert restored.device.name == device
+        assert_same_state(restored, ref)
     # a Simulation on the device restores a frame onto its device
     sim.create_state_from_gsd(path, frame=4)
     assert sim.state.device.name == device

@@ -174,3 +174,22 @@ def test_gsd_written_on_gpu_restores_on_cpu(tmp_path):
     back = svm.init.from_gsd(tmp_path / "g.gsd", device="cpu")
     assert np.array_equal(back.positions, sim.state.positions.get())
     assert np.array_equal(back.cell_vertices, sim.state.cell_vertices.get())
+
+
+def test_flip_back_memory_matches_numpy_across_passes():
+    """Many passes between two reads: the GPU's flip log, replayed pass by pass, gives NumPy's
+    separated pairs and re-join counts exactly."""
+    rng = np.random.default_rng(5)
+    state = svm.init.random_tiling(300, replicas=2, seed=16)
+    sims = t1_simulations(state, threshold=0.3, new_length=0.45, max_flip_backs=10 ** 6)
+    for _ in range(60):
+        kick = rng.normal(scale=0.08, size=state.positions.shape)
+        for sim in sims.values():
+            kick_on_surface(sim, kick)
+            sim._update()
+    c, g = (sims[d].operations.updaters[0] for d in ("cpu", "gpu"))
+    g._sync_counters()
+    assert np.array_equal(g.total_flips, c.total_flips)
+    assert c._rejoins.sum() > 0, "some pairs were joined again"
+    assert np.array_equal(g._separated, c._separated) and np.array_equal(g._rejoins, c._rejoins)
+    assert np.array_equal(g.flip_backs, c.flip_backs)

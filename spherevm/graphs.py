@@ -87,17 +87,20 @@ class StepGraphs:
         n = min(steps - done, check_every - done % check_every, MAX_STRETCH)
         t = self.sim.timestep
         writers = self.sim.operations.writers
-        for i in range(1, n):
+        for i in range(1, n if writers else 1):
             if any(w.trigger(t + i) for w in writers):
                 return i
         return n
 
+    def _ops(self):
+        """The operations that run inside the steps (writers run between stretches)."""
+        ops = self.sim.operations
+        return [*ops.updaters, *ops.forces, ops.integrator]
+
     def _ready(self, steps):
         """Every operation's key for the next ``steps`` steps, or None (naming the one that refused)."""
-        ops = list(self.sim.operations.updaters) + list(self.sim.operations.forces) + \
-            [self.sim.operations.integrator]
         keys = []
-        for op in ops:
+        for op in self._ops():
             key = op.capture_ready(self.sim, steps)
             if key is None:
                 return None, type(op).__name__
@@ -172,8 +175,7 @@ class StepGraphs:
 
     def pause(self):
         """Before the host looks at the State: each operation leaves it as the step-by-step path would."""
-        for op in list(self.sim.operations.updaters) + list(self.sim.operations.forces) + \
-                [self.sim.operations.integrator]:
+        for op in self._ops():
             op.capture_done(self.sim)
 
     def forget(self):

@@ -36,6 +36,21 @@ def device(request):
     return request.param
 
 
+def relative_gap(a, b):
+    """Largest difference of ``a`` from ``b`` over the largest magnitude of ``b`` (NumPy arrays)."""
+    return np.abs(a - b).max() / max(np.abs(b).max(), 1e-300)
+
+
+def assert_gpu_force_matches_numpy(model, cpu):
+    """``model`` on the CPU State ``cpu`` and on its GPU copy: forces, energies and cell energies
+    agree to 1e-12 relative. Returns the GPU result for further checks."""
+    rc, rg = model.compute(cpu), model.compute(cpu.to("gpu"))
+    assert relative_gap(rg.forces.get(), rc.forces) <= 1e-12
+    assert relative_gap(rg.energy.get(), rc.energy) <= 1e-12
+    assert relative_gap(rg.cell_energy.get(), rc.cell_energy) <= 1e-12
+    return rg
+
+
 def to_numpy(a):
     """A NumPy copy of a NumPy or CuPy array."""
     return a.get() if hasattr(a, "get") else np.asarray(a)

@@ -4,7 +4,8 @@ These are the CPU-vs-GPU agreement tests; the behavioural tests (forces, FIRE, T
 Brownian/Active, GSD, ...) run on the GPU too, through the ``device`` fixture of conftest.py."""
 import numpy as np
 import pytest
-from conftest import dynamics_simulation, kick_on_surface, t1_simulations
+from conftest import (assert_gpu_force_matches_numpy, dynamics_simulation, kick_on_surface, relative_gap,
+                      t1_simulations)
 
 import spherevm as svm
 from spherevm.plugins.forces import VertexModel
@@ -14,28 +15,19 @@ from spherevm.plugins.updaters import T1
 pytestmark = pytest.mark.gpu
 
 
-def _rel(a, b):
-    return np.abs(a - b).max() / max(np.abs(b).max(), 1e-300)
-
-
 @pytest.mark.parametrize("n_cells, replicas", [(200, 1), (64, 16), (1000, 3)])
 @pytest.mark.parametrize("model", [VertexModel.dimensionless(kr=1.0, p0=3.7),
                                    VertexModel.dimensionless(kr=0.0, p0=3.9),
                                    VertexModel(kA=0.3, kP=1.7, A0=1.1, P0=3.4)])
 def test_forces_and_energies_match_numpy(n_cells, replicas, model):
-    cpu = svm.init.random_tiling(n_cells, replicas=replicas, seed=n_cells)
-    gpu = cpu.to("gpu")
-    rc, rg = model.compute(cpu), model.compute(gpu)
-    assert _rel(rg.forces.get(), rc.forces) <= 1e-12
-    assert _rel(rg.energy.get(), rc.energy) <= 1e-12
-    assert _rel(rg.cell_energy.get(), rc.cell_energy) <= 1e-12
+    assert_gpu_force_matches_numpy(model, svm.init.random_tiling(n_cells, replicas=replicas, seed=n_cells))
 
 
 def test_per_cell_parameters_on_gpu():
     cpu = svm.init.random_tiling(300, seed=2)
     rng = np.random.default_rng(0)
     model = VertexModel(kA=rng.uniform(0, 2, 300), kP=1.0, A0=rng.uniform(0.5, 1.5, 300), P0=3.8)
-    assert _rel(model.forces(cpu.to("gpu")), model.forces(cpu)) <= 1e-12
+    assert relative_gap(model.forces(cpu.to("gpu")), model.forces(cpu)) <= 1e-12
 
 
 def _fire_sim(state, device, t1=False, p0=3.7):
@@ -57,7 +49,7 @@ def test_fire_steps_match_numpy():
     gpu.run(200)
     assert np.array_equal(gpu.log("t1_total_flips"), cpu.log("t1_total_flips"))
     assert np.abs(gpu.state.positions.get() - cpu.state.positions).max() <= 1e-9
-    assert _rel(gpu.log("energy"), cpu.log("energy")) <= 1e-9
+    assert relative_gap(gpu.log("energy"), cpu.log("energy")) <= 1e-9
     assert np.allclose(gpu.log("fire_dt"), cpu.log("fire_dt"), rtol=1e-12)
 
 

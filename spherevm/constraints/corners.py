@@ -33,11 +33,12 @@ def blocks(state, n, size=BLOCK_VERTICES):
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
 
 
-def in_parallel(fn, items):
-    """``[fn(item) for item in items]``, on a thread pool when there are several items."""
+def in_parallel(fn, items, threads=True):
+    """``[fn(item) for item in items]``, on a thread pool when there are several items (and
+    ``threads``: a small state's passes run in turn, a pool's hand-over costing tens of us)."""
     global _POOL
-    if len(items) == 1:
-        return [fn(items[0])]
+    if len(items) == 1 or not threads:
+        return [fn(item) for item in items]
     if _POOL is None:
         from concurrent.futures import ThreadPoolExecutor
         _POOL = ThreadPoolExecutor(max_workers=os.cpu_count(), thread_name_prefix="spherevm")

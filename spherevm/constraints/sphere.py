@@ -6,6 +6,7 @@ import numpy as np
 from ..device import array_module, weighted_bincount
 from ..geometry import sphere as geo
 from .base import Constraint
+from .cell_rows import fan_rows, fold
 from .corners import corner_index, in_parallel
 
 
@@ -105,36 +106,36 @@ class Sphere(Constraint):
         Perimeter: half-angles ``atan2(|b - d|, |b + d|)`` of the edges ``b -> d``. Area: the fan
         of signed triangles ``(a, b, d)`` about the cell's first vertex ``a``, each
         ``2 atan2(a.(b x d), 1 + a.b + a.d + b.d)`` (the area does not depend on the apex). Area
-        vector, ``(n_cells, 3)``: ``1/2 sum over the corners (x_b - x_a) x (x_d - x_b)`` of the vertex
-        positions (the vector area ``1/2 sum x_b x x_d``), from differences of the positions
-        themselves: small cells keep full relative accuracy, also in differences of nearby normals
-        (unit directions would add their rounding, about eps R/l relative).
+        vector, ``(n_cells, 3)``: the fan ``1/2 sum (x_j - x_0) x (x_{j+1} - x_0)`` about the cell's
+        first vertex of the vertex positions (the vector area ``1/2 sum x_b x x_d``), from
+        differences of the positions themselves: small cells keep full relative accuracy, also in
+        differences of nearby normals (unit directions would add their rounding, about eps R/l
+        relative). NumPy sums it in cell order (:mod:`spherevm.constraints.cell_rows`, blocks of
+        cells run with the corner blocks); the GPU per corner, ``(x_b - x_0) x (x_d - x_b)`` for
+        the edge ``b -> d``, with ``weighted_bincount``.
         """
         xp = state.device.xp
         n = state.n_cells
         comp, u, rv = self._unit_components(state)
         index = corner_index(state)
+        fans = area_vectors and not state.device.is_gpu
+        area_vector = xp.empty((3, n)) if fans else None
 
         def corners(block):
             lo, hi = block["lo"], block["hi"]
             part, sums = {}, {}
             if area_vectors:
-                xb = comp[:, None, lo:hi]
                 xd = xp.take(comp, block["next"], axis=1).reshape(3, 3, -1)
-                xa = xp.take(comp, block["apex"], axis=1).reshape(3, 3, -1)
-                if metric:                                              # the same numbers as take(u, ...)
-                    d = xd / xp.take(rv, block["next"]).reshape(3, -1)
-                    a = xa / xp.take(rv, block["apex"]).reshape(3, -1)
-                e = xp.subtract(xd, xb, out=xd)                         # x_d - x_b
-                r = xp.subtract(xb, xa, out=xa)                         # x_b - x_a
-                sums["area_vector"] = weighted_bincount(block["components"], weights=_cross(r, e).reshape(-1),
-                                                  minlength=3 * n)
-                part["e"] = e
-            elif metric:
-                d = xp.take(u, block["next"], axis=1).reshape(3, 3, -1)  # the next vertex
-                a = xp.take(u, block["apex"], axis=1).reshape(3, 3, -1)
+                part["f"] = xd[:, :2] - xd[:, 1:]                       # x_{n_k} - x_{n_{k+1}}, k = 0, 1
+                if not fans:
+                    xb = comp[:, None, lo:hi]
+                    r = xb - xp.take(comp, block["apex"], axis=1).reshape(3, 3, -1)
+                    sums["area_vector"] = weighted_bincount(block["components"], weights=_cross(r, xd - xb).reshape(-1),
+                                                            minlength=3 * n)
             if not metric:
                 return part, sums
+            d = xp.take(u, block["next"], axis=1).reshape(3, 3, -1)      # the next vertex
+            a = xp.take(u, block["apex"], axis=1).reshape(3, 3, -1)
             ub = u[:, None, lo:hi]                                      # (3, 1, nb): b, for every slot
             m = ub - d
             m2 = _dot(m.reshape(3, -1), m.reshape(3, -1))
@@ -150,7 +151,15 @@ class Sphere(Constraint):
             part.update(m=m.reshape(3, -1), x=x, q=q, two_sin=sm * sp)
             return part, sums
 
-        parts = in_parallel(corners, index)
+        def fan(rows):
+            x = xp.take(comp, rows["table"], axis=1, mode="clip")       # (3, 1 + width, rows): x_0, ends, middles
+            h = x.shape[1] // 2 - 1
+            # two triangles at a time: y_j x y_{j+1} + y_{j+1} x y_{j+2} = y_{j+1} x (x_{j+2} - x_j), y = x - x_0
+            twice = _cross(x[:, h + 2:] - x[:, :1], x[:, 2:h + 2] - x[:, 1:h + 1]).sum(axis=1)
+            xp.multiply(fold(twice, rows), 0.5, out=area_vector[:, rows["c0"]:rows["c1"]])
+
+        jobs = [(corners, block) for block in index] + ([(fan, rows) for rows in fan_rows(state)] if fans else [])
+        parts = in_parallel(lambda job: job[0](job[1]), jobs, threads=len(index) > 1)[:len(index)]
         R = state.radius[state.cell_replica]
         geometry = CellGeometry(area=None, perimeter=None, unit=u.T, radius=state.radius[state.vertex_replica],
                                 corners=dict(index=index, parts=[p[0] for p in parts], u=u, rv=rv),
@@ -159,7 +168,8 @@ class Sphere(Constraint):
             geometry.perimeter = (2.0 * R) * sum(p[1]["perimeter"] for p in parts)
             geometry.area = (2.0 * R * R) * sum(p[1]["area"] for p in parts)
         if area_vectors:
-            geometry.area_vector = (0.5 * sum(p[1]["area_vector"] for p in parts).reshape(3, n)).T
+            geometry.area_vector = (area_vector if fans else
+                                    0.5 * sum(p[1]["area_vector"] for p in parts).reshape(3, n)).T
         return geometry
 
     @staticmethod
@@ -210,8 +220,9 @@ class Sphere(Constraint):
 
         Per vertex v with edges to n_k: ``sum_k (dA[k-1] - dA[k]) w(v, n_k) + (dP[k] + dP[k-1])
         dtheta(v, n_k)/dv`` on the unit sphere (see :meth:`_edge_factors`), with ``dA`` scaled by
-        R^2 and ``dP`` by R; the area vector of cell k moves with x_v by ``(x_{n_k} - x_{n_{k+1}}) x /
-        2``, which adds ``sum_k e_k x (da[k] - da[k-1]) / 2`` with ``e_k = x_{n_k} - x_v``. Projected
+        R^2 and ``dP`` by R; the area vector of cell k moves with x_v by ``f_k x / 2``, ``f_k =
+        x_{n_k} - x_{n_{k+1}}``, which adds ``sum_k f_k x da[k] / 2``, two cross products since
+        ``f_0 + f_1 + f_2 = 0``: ``(f_0 x (da[0] - da[2]) + f_1 x (da[1] - da[2])) / 2``. Projected
         on the tangent plane (and the unit-sphere terms divided by ``|x_v|``: ``x = |x| u``).
         """
         xp = state.device.xp
@@ -236,11 +247,8 @@ class Sphere(Constraint):
                 s = s[:, 0] + s[:, 1] + s[:, 2]
             if vectors is not None:
                 w = xp.take(vectors, index["cells"], axis=1).reshape(3, 3, -1)
-                dw = xp.empty_like(w)                               # da[k] - da[k-1]
-                xp.subtract(w[:, 1:], w[:, :2], out=dw[:, 1:])
-                xp.subtract(w[:, :1], w[:, 2:], out=dw[:, :1])
-                t = _cross(part["e"], dw)
-                s = s + rv * (t[:, 0] + t[:, 1] + t[:, 2])          # in units of the unit sphere's terms
+                t = _cross(part["f"], w[:, :2] - w[:, 2:])           # f_0 x (da[0] - da[2]) + f_1 x (da[1] - da[2])
+                s = s + rv * (t[:, 0] + t[:, 1])                     # in units of the unit sphere's terms
             u = g["u"][:, lo:hi]
             s -= _dot(s, u) * u                                      # onto the tangent plane
             out[lo:hi] = (s / rv).T

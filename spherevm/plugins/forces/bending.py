@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from ...constraints import Sphere
-from ...constraints.corners import blocks, in_parallel
+from ...constraints.cell_rows import cell_blocks, fold, row_table
+from ...constraints.corners import in_parallel
 from ...device import array_module, launch, load_module, segment_sums, weighted_bincount
 from ..base import Force, ForceResult
 from .vertex_model import VertexModel
@@ -73,15 +74,17 @@ def _build_topology(state):
     keep = lo != hi
     keys = xp.unique(lo[keep] * n + hi[keep])
     pairs = xp.stack((keys // n, keys % n), axis=1)
-    # the NumPy path's pass over the pairs, one block per core: each block sums into whole-length arrays
-    offsets = n * xp.arange(3)[:, None]
-    pair_blocks = []
-    for k0, k1 in blocks(state, len(pairs), size=len(pairs)):
-        first, second = pairs[k0:k1, 0], pairs[k0:k1, 1]
-        pair_blocks.append(dict(both=xp.concatenate((first, second)), first=first, second=second,
-                                first_components=(first[None] + offsets).reshape(-1),
-                                second_components=(second[None] + offsets).reshape(-1)))
-    return dict(pairs=pairs, pair_blocks=pair_blocks)
+    if state.device.is_gpu:
+        return dict(pairs=pairs)
+    # the NumPy path's pass over the pairs: per block of cells, each cell's neighbours as a table
+    # (head the cell itself), each pair seen from both of its cells
+    ends = np.concatenate((pairs, pairs[:, ::-1]))
+    ends = ends[np.argsort(ends[:, 0], kind="stable")]
+    count = np.bincount(ends[:, 0], minlength=n)
+    start = np.concatenate(([0], np.cumsum(count)))
+    rows = [dict(row_table(count[c0:c1], ends[start[c0]:start[c1], 1], np.arange(c0, c1)), c0=c0, c1=c1)
+            for c0, c1 in cell_blocks(state)]
+    return dict(pairs=pairs, rows=rows)
 
 
 def _topology(state):
@@ -90,34 +93,32 @@ def _topology(state):
 
 def _cell_terms(state, B_cell, area_vector):
     """Per cell, from the area vectors ``(n_cells, 3)``: the energy (half of each of its pairs) and
-    ``dE/da_c`` ``(3, n_cells)``, over the neighbour pairs, in blocks on all cores.
+    ``dE/da_c`` ``(3, n_cells)``, over the neighbour pairs, in blocks of cells on all cores.
 
-    Each pair once: ``d = n_i - n_j``, ``E = B sum_pairs |d|^2 / 2``; ``dE/dn_i = B s_i`` with
-    ``s_i = sum_j (n_i - n_j)`` (``d`` added for i, subtracted for j), and through ``n = a/|a|``,
-    ``dE/da_i = B (I - n n^T) s_i / |a_i|``.
+    With ``d = n_i - n_j``, ``E = B sum_pairs |d|^2 / 2``, each pair once; ``dE/dn_i = B s_i`` with
+    ``s_i = sum_j (n_i - n_j)``, and through ``n = a/|a|``, ``dE/da_i = B (I - n n^T) s_i / |a_i|``.
+    Each cell sums over its own row of neighbours (:mod:`spherevm.constraints.cell_rows`), so a
+    pair's ``d`` is worked out by both its cells (``n_j - n_i`` is exactly ``-(n_i - n_j)``).
     """
-    xp = state.device.xp
-    nc = state.n_cells
     a = area_vector.T
-    norm = xp.sqrt(_dot(a, a))
+    norm = np.sqrt(_dot(a, a))
     n = a / norm
+    energy, d_area_vector = np.empty(state.n_cells), np.empty((3, state.n_cells))
 
-    def pairs(b):
-        m = len(b["first"])
-        ends = xp.take(n, b["both"], axis=1)
-        d = ends[:, :m] - ends[:, m:]
-        squares = _dot(d, d)
-        return (weighted_bincount(b["first"], weights=squares, minlength=nc) +
-                weighted_bincount(b["second"], weights=squares, minlength=nc),
-                weighted_bincount(b["first_components"], weights=d.reshape(-1), minlength=3 * nc) -
-                weighted_bincount(b["second_components"], weights=d.reshape(-1), minlength=3 * nc))
+    def cells(rows):
+        c0, c1 = rows["c0"], rows["c1"]
+        ends = np.take(n, rows["table"], axis=1, mode="clip")               # (3, 1 + width, rows): n_i, then its n_j
+        d = ends[:, :1] - ends[:, 1:]
+        sums = np.empty((4, d.shape[2]))
+        d.sum(axis=1, out=sums[:3])
+        np.einsum("ijk,ijk->k", d, d, out=sums[3])
+        s, squares = fold(sums, rows)[:3], sums[3, :c1 - c0]
+        own, B = n[:, c0:c1], B_cell[c0:c1]
+        energy[c0:c1] = (0.25 * B) * squares
+        d_area_vector[:, c0:c1] = (B / norm[c0:c1]) * (s - _dot(s, own) * own)
 
-    parts = in_parallel(pairs, _topology(state)["pair_blocks"])
-    squares, s = parts[0]
-    for more in parts[1:]:
-        squares, s = squares + more[0], s + more[1]
-    s = s.reshape(3, nc)
-    return (0.25 * B_cell) * squares, (B_cell / norm) * (s - _dot(s, n) * n)
+    in_parallel(cells, _topology(state)["rows"])
+    return energy, d_area_vector
 
 
 class Bending(Force):

@@ -1,0 +1,88 @@
+"""The NumPy path's passes over cells: each cell's entries (its vertices, its neighbour cells) as
+columns of a dense table, so that per-cell sums are sums along the table's slot axis, not
+``np.bincount`` over scattered entries (measured on the 2-core VM: a bincount costs about 1.5 ns
+an entry, a take about 1, a sum along a slot axis about 0.4).
+
+A table is ``(1 + width, rows)``: slot 0 holds the row's head (the cell itself, or its first
+vertex), slots 1.. its entries in order, padded with the head. A cell whose entries do not fit
+goes on in continuation rows after the block's cells (each starting ``overlap`` entries back, so a
+pass over consecutive entries misses no pair), whose results :func:`fold` adds to their cell's.
+The width is the one that makes the table smallest. Built per block of cells (cache-sized, one per
+core at least: :func:`spherevm.constraints.corners.blocks`) and cached per topology by the caller.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .corners import BLOCK_VERTICES, blocks
+
+BLOCK_CELLS = BLOCK_VERTICES // 2   # a trivalent network has twice as many vertices as cells
+
+
+def cell_blocks(state):
+    """Contiguous ranges of cells for the cell passes (one range for small states)."""
+    return blocks(state, state.n_cells, size=BLOCK_CELLS)
+
+
+def _continuations(counts, width, overlap):
+    """Per cell, how many rows beyond its first its ``counts`` entries need."""
+    return -(-np.maximum(counts - width, 0) // (width - overlap))
+
+
+def row_table(counts, entries, heads, overlap=0, odd=False):
+    """The table of a block of cells: ``counts`` (nb,) entries per cell, ``entries`` all of them
+    cell after cell, ``heads`` (nb,) each cell's head; ``odd``: an odd width. Returns a dict:
+    ``table`` (1 + width, rows) int64, ``owner`` the cell (0..nb-1) of each continuation row (rows
+    nb..), and ``fold_index`` for :func:`fold`."""
+    counts = np.asarray(counts, dtype=np.int64)
+    nb = len(counts)
+    widths = np.arange(overlap + 1, max(int(counts.max()), overlap + 1) + 2)
+    widths = widths[widths % 2 == 1] if odd else widths[:-1]
+    size = [(1 + w) * (nb + _continuations(counts, w, overlap).sum()) for w in widths]
+    width = int(widths[int(np.argmin(size))])
+    more = _continuations(counts, width, overlap)
+    owner = np.repeat(np.arange(nb), more)
+    row_cell = np.concatenate((np.arange(nb), owner))
+    nth = np.arange(len(owner)) - np.repeat(np.cumsum(more) - more, more)    # 0 for a cell's first continuation
+    first = np.concatenate((np.zeros(nb, np.int64), (width - overlap) * (1 + nth)))
+    slot = first + np.arange(width)[:, None]                                # (width, rows): entry within its cell
+    start = np.cumsum(counts) - counts
+    inside = slot < counts[row_cell]
+    body = np.where(inside, entries[np.where(inside, start[row_cell] + slot, 0)], heads[row_cell])
+    table = np.concatenate((heads[row_cell][None], body)).astype(np.int64)
+    fold_index = (owner + nb * np.arange(4)[:, None]).reshape(-1)
+    return dict(table=np.ascontiguousarray(table), owner=owner, fold_index=fold_index)
+
+
+def fold(values, rows):
+    """``values`` (c, rows) per row (c <= 4) -> (c, nb) per cell: each continuation row's values
+    added to its cell's."""
+    nb = values.shape[1] - len(rows["owner"])
+    head = values[:, :nb]
+    if nb == values.shape[1]:
+        return head
+    c, m = values.shape[0], len(rows["owner"])
+    head += np.bincount(rows["fold_index"][:c * m], weights=values[:, nb:].reshape(-1),
+                        minlength=c * nb).reshape(c, nb)
+    return head
+
+
+def fan_rows(state):
+    """Per block of cells (:func:`cell_blocks`), the table of its cells' vertices: head the first
+    vertex ``x_0`` (the fan's apex), entries ``x_1, x_2, ...``, ``overlap=1`` (a fan's triangles are
+    consecutive pairs of entries), an odd width (an even number of triangles a row, taken two at a
+    time); a row's entries ``e_0, e_2, ...`` (the quads' ends) come first, then ``e_1, e_3, ...``
+    (their middles), so that each operand is a slice (NumPy takes up to twice as long on strided
+    views of arrays of this size); ``c0``, ``c1`` the block's cells. Cached per topology."""
+    def build():
+        sides, cv = state.cell_sides.astype(np.int64), state.cell_vertices
+        out = []
+        for c0, c1 in cell_blocks(state):
+            body = cv[c0:c1, 1:]
+            entries = body[np.arange(body.shape[1]) < sides[c0:c1, None] - 1]   # cell after cell
+            rows = row_table(sides[c0:c1] - 1, entries, cv[c0:c1, 0], overlap=1, odd=True)
+            width = len(rows["table"]) - 1
+            order = np.concatenate(([0], np.arange(1, width + 1, 2), np.arange(2, width + 1, 2)))
+            out.append(dict(rows, table=np.ascontiguousarray(rows["table"][order]), c0=c0, c1=c1))
+        return out
+    return state.cached((fan_rows,), build, topology=True)

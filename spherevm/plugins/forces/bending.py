@@ -101,21 +101,22 @@ def _cell_terms(state, B_cell, area_vector):
     pair's ``d`` is worked out by both its cells (``n_j - n_i`` is exactly ``-(n_i - n_j)``).
     """
     a = area_vector.T
-    norm = np.sqrt(_dot(a, a))
+    norm = np.sqrt(np.einsum("ij,ij->j", a, a))
     n = a / norm
     energy, d_area_vector = np.empty(state.n_cells), np.empty((3, state.n_cells))
 
     def cells(rows):
         c0, c1 = rows["c0"], rows["c1"]
-        ends = np.take(n, rows["table"], axis=1, mode="clip")               # (3, 1 + width, rows): n_i, then its n_j
-        d = ends[:, :1] - ends[:, 1:]
+        ends = np.take(n, rows["table"], axis=1, mode="clip")   # (3, 1 + width, rows): n_i, then its n_j
+        d = np.subtract(ends[:, :1], ends[:, 1:], out=ends[:, 1:])
         sums = np.empty((4, d.shape[2]))
         d.sum(axis=1, out=sums[:3])
         np.einsum("ijk,ijk->k", d, d, out=sums[3])
-        s, squares = fold(sums, rows)[:3], sums[3, :c1 - c0]
-        own, B = n[:, c0:c1], B_cell[c0:c1]
-        energy[c0:c1] = (0.25 * B) * squares
-        d_area_vector[:, c0:c1] = (B / norm[c0:c1]) * (s - _dot(s, own) * own)
+        s, own, B = fold(sums, rows), n[:, c0:c1], B_cell[c0:c1]
+        np.multiply(0.25 * B, s[3], out=energy[c0:c1])
+        s = s[:3]
+        s -= np.einsum("ij,ij->j", s, own) * own
+        np.multiply(B / norm[c0:c1], s, out=d_area_vector[:, c0:c1])
 
     in_parallel(cells, _topology(state)["rows"])
     return energy, d_area_vector

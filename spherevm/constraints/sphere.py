@@ -127,7 +127,7 @@ class Sphere(Constraint):
             lo, hi = block["lo"], block["hi"]
             part, sums = {}, {}
             if area_vectors:
-                xd = xp.take(comp, block["next"], axis=1).reshape(3, 3, -1)
+                xd = comp.take(block["next"], axis=1).reshape(3, 3, -1)
                 part["f"] = xd[:, :2] - xd[:, 1:]                       # x_{n_k} - x_{n_{k+1}}, k = 0, 1
                 if not fans:
                     xb = comp[:, None, lo:hi]
@@ -154,7 +154,7 @@ class Sphere(Constraint):
             return part, sums
 
         def fan(rows):
-            x = xp.take(comp, rows["table"], axis=1, mode="clip")       # (3, 1 + width, rows): x_0, ends, middles
+            x = comp.take(rows["table"], axis=1, mode="clip")           # (3, 1 + width, rows): x_0, ends, middles
             h = x.shape[1] // 2 - 1
             # two triangles at a time: y_j x y_{j+1} + y_{j+1} x y_{j+2} = y_{j+1} x (x_{j+2} - x_j), y = x - x_0
             twice = _cross(x[:, h + 2:] - x[:, :1], x[:, 2:h + 2] - x[:, 1:h + 1]).sum(axis=1)
@@ -251,7 +251,7 @@ class Sphere(Constraint):
                 s = (alpha * part["x"] + beta * part["m"]).reshape(3, 3, -1)
                 s = s[:, 0] + s[:, 1] + s[:, 2]
             if vectors is not None:
-                w = xp.take(vectors, index["cells"], axis=1).reshape(3, 3, -1)
+                w = vectors.take(index["cells"], axis=1).reshape(3, 3, -1)
                 t = _cross(part["f"], w[:, :2] - w[:, 2:])           # f_0 x (da[0] - da[2]) + f_1 x (da[1] - da[2])
                 s = s + rv * (t[:, 0] + t[:, 1])                     # in units of the unit sphere's terms
             u = g["u"][:, lo:hi]

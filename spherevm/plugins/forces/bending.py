@@ -107,7 +107,7 @@ def _cell_terms(state, B_cell, area_vector):
 
     def cells(rows):
         c0, c1 = rows["c0"], rows["c1"]
-        ends = np.take(n, rows["table"], axis=1, mode="clip")   # (3, 1 + width, rows): n_i, then its n_j
+        ends = n.take(rows["table"], axis=1, mode="clip")        # (3, 1 + width, rows): n_i, then its n_j
         d = np.subtract(ends[:, :1], ends[:, 1:], out=ends[:, 1:])
         sums = np.empty((4, d.shape[2]))
         d.sum(axis=1, out=sums[:3])

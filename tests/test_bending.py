@@ -190,6 +190,28 @@ def test_topology_cache_follows_t1_flips():
     assert _rel(a.forces, b.forces) <= 1e-15 and _rel(a.energy, b.energy) <= 1e-15
 
 
+def test_blocks_of_cells_on_all_cores_match_one_block_and_per_corner_sums(monkeypatch):
+    """A tiling large enough for the NumPy path's blocks (of vertices and of cells, on a thread
+    pool) against the same State in one block; the area vectors against a plain per-corner sum."""
+    s = svm.init.random_tiling(17000, seed=3, radius=3.0)
+    from spherevm.constraints import cell_rows, corners
+    assert len(cell_rows.cell_blocks(s)) > 1 and len(corners.corner_index(s)) > 1
+    vm, bend = VertexModel.dimensionless(kr=1.0, p0=3.8), Bending(0.7)
+    blocked, alone = bend.combined(vm, s), bend.compute(s)
+    a = cell_area_vectors(s)
+    x, vc, vn, first = s.positions, s.vertex_cells, s.vertex_neighbors, s.cell_vertices[:, 0]
+    corner = 0.5 * np.cross(x[:, None] - x[first[vc]], x[vn] - x[:, None])
+    ref = np.zeros((s.n_cells, 3))
+    np.add.at(ref, vc.reshape(-1), corner.reshape(-1, 3))
+    assert _rel(a, ref) <= 1e-13
+    monkeypatch.setattr(corners, "PARALLEL_MIN_VERTICES", 10 ** 9)
+    one = s.copy()
+    assert len(cell_rows.cell_blocks(one)) == 1 and len(corners.corner_index(one)) == 1
+    for r, ref in ((blocked, bend.combined(vm, one)), (alone, bend.compute(one))):
+        assert _rel(r.forces, ref.forces) <= 1e-13 and _rel(r.cell_energy, ref.cell_energy) <= 1e-13
+        assert _rel(r.energy, ref.energy) <= 1e-14
+
+
 def test_in_a_simulation_with_the_vertex_model():
     sim = svm.Simulation(device="cpu")
     sim.state = svm.init.random_tiling(64, replicas=2, seed=5)

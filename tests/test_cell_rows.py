@@ -38,4 +38,5 @@ def test_fold_adds_continuation_rows_to_their_cells():
     np.add.at(expected, (slice(None), rows["owner"]), values[:, 50:])
     assert len(rows["owner"]) > 0
     for c in (1, 3, 4):
-        assert np.allclose(fold(values[:c].copy(), rows), expected[:c], rtol=0, atol=1e-14)   # the same sums, another order
+        got = fold(values[:c].copy(), rows)
+        assert np.allclose(got, expected[:c], rtol=0, atol=1e-14)      # the same sums, another order

@@ -192,7 +192,6 @@ class Bending(Force):
         return self.implementation("combined", state)(other, state)
 
     def _compute_cpu(self, state) -> ForceResult:
-        xp = state.device.xp
         geometry = state.constraint.cell_geometry(state, area_vectors=True, metric=False)
         cell_energy, d_area_vector = _cell_terms(state, self._device_B(state)[1], geometry.area_vector)
         energy = weighted_bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)
@@ -200,7 +199,6 @@ class Bending(Force):
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
 
     def _combined_cpu(self, model, state) -> ForceResult:
-        xp = state.device.xp
         geometry = state.constraint.cell_geometry(state, area_vectors=True)
         cell_energy, d_area, d_perimeter = model.cell_terms(state, geometry)
         bending_energy, d_area_vector = _cell_terms(state, self._device_B(state)[1], geometry.area_vector)

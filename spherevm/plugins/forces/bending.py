@@ -182,6 +182,12 @@ class Bending(Force):
     def compute(self, state) -> ForceResult:
         return self.implementation("compute", state)(state)
 
+    def capture_ready(self, simulation, steps):
+        """Its kernels (alone or fused) read nothing back and take nothing that changes from step to
+        step; the neighbours are walked from the State's arrays, so T1 flips need no rebuild: CUDA
+        graphs may hold them."""
+        return ()
+
     def combined(self, other, state):
         """With a :class:`VertexModel`: both forces from one pass over the corners (NumPy: one
         ``cell_geometry`` with area vectors, one ``shape_gradient`` of both forces' terms; CUDA: the

@@ -26,6 +26,7 @@
 
 // What a force fused into the vertex model's kernels adds (nothing): see plugins/forces/vertex_model.cuh.
 struct NoExtra {
+    static constexpr bool sums_energy = false;   // true: the extra's own kernel sums the cells' energies
     __device__ __forceinline__ void cell(const double*, const int*, int, long) const {}
     __device__ __forceinline__ void add_gradient(vec3&, const double*, const int*, const int*, long, vec3) const {}
 };

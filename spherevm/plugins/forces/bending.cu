@@ -15,6 +15,7 @@
 // Sphere.shape_gradient), added as |x| G to the vertex model's unit-sphere terms (which are
 // multiplied by 1/|x| at the end).
 struct BendingTerms {
+    static constexpr bool sums_energy = true;   // the bending cell kernel sums both forces' cell energies
     double* normal;
     double* inv_area;          // 1 / |2 a|
     const double* w;
@@ -34,12 +35,13 @@ struct BendingTerms {
     __device__ __forceinline__ void add_gradient(vec3& g, const double* __restrict__ pos,
                                                  const int* __restrict__ vertex_neighbors,
                                                  const int* __restrict__ vertex_cells, long v, vec3 x) const {
-        vec3 G = v3(0.0, 0.0, 0.0);
-#pragma unroll 1
-        for (int j = 0; j < 3; ++j) {    // not unrolled: 84 registers fused (92 unrolled; the vertex model alone 68)
-            vec3 e = load3(pos, vertex_neighbors[3 * v + j]) - x;
-            G = G + cross3(e, load3(w, vertex_cells[3 * v + j]) - load3(w, vertex_cells[3 * v + (j + 2) % 3]));
-        }
+        // each cell's w loaded once (a loop over j loads each twice: 18 us more at 4,096 x 64 cells)
+        const int* vc = vertex_cells + 3 * v;
+        const int* vn = vertex_neighbors + 3 * v;
+        vec3 w0 = load3(w, vc[0]), w1 = load3(w, vc[1]), w2 = load3(w, vc[2]);
+        vec3 G = cross3(load3(pos, vn[0]) - x, w0 - w2);
+        G = G + cross3(load3(pos, vn[1]) - x, w1 - w0);
+        G = G + cross3(load3(pos, vn[2]) - x, w2 - w1);
         g = g + norm3(x) * G;
     }
 };
@@ -56,19 +58,25 @@ extern "C" __global__ void bending_cell_normals(
 }
 
 // The cell across the edge that leaves vertex v of cell c (counter-clockwise): corner (v, s) with
-// vertex_cells[v, s] == c runs along that edge, which borders vertex_cells[v, s - 1].
+// vertex_cells[v, s] == c runs along that edge, which borders vertex_cells[v, s - 1] (the three
+// loaded at once).
 __device__ __forceinline__ int cell_across(const int* __restrict__ vertex_cells, int v, long c)
 {
     const int* vc = vertex_cells + 3 * (long)v;
-    int s = vc[0] == c ? 0 : (vc[1] == c ? 1 : 2);
-    return vc[(s + 2) % 3];
+    int c0 = vc[0], c1 = vc[1], c2 = vc[2];
+    return c0 == c ? c2 : (c1 == c ? c0 : c1);
 }
+
+// Cells with at most this many sides keep their neighbours in registers (the loops unrolled), so
+// that a neighbour across two edges is found without walking the edges again; larger cells do.
+#define BENDING_REGISTER_SIDES 12
 
 // One thread per cell, over its neighbours, found by walking its edges (from the State's arrays, so
 // nothing to rebuild after T1 flips; a neighbour across two edges counts once, as in bending.py's
 // pair list): the cell's energy (half of each pair, B/4 |n_i - n_j|^2), the per-replica sum, and
-// w_i = (dE/da_i) / 2 = B (s - (s.n_i) n_i) / |2 a_i| with s = sum_j (n_i - n_j). ADD: the energies
-// are added to what the vertex model's cell kernel wrote (fused), else they are stored.
+// w_i = (dE/da_i) / 2 = B (s - (s.n_i) n_i) / |2 a_i| with s = sum_j (n_i - n_j). ADD (fused): the
+// energy is added to what the vertex model's cell kernel wrote and the sum is of both (that kernel
+// leaves it here: one sum, not two, saves 30 us at 1e6 cells on an H200), else it is stored.
 template <bool ADD>
 __device__ __forceinline__ void bending_cell_terms_body(
     const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ cell_vertices,
@@ -87,24 +95,44 @@ __device__ __forceinline__ void bending_cell_terms_body(
         vec3 ni = load3(normal, c);
         vec3 s = v3(0.0, 0.0, 0.0);
         double sq = 0.0;
-        for (int k = 0; k < n; ++k) {
-            int j = cell_across(vertex_cells, row[k], c);
-            bool counted = j == c;
-            for (int i = 0; i < k && !counted; ++i) counted = cell_across(vertex_cells, row[i], c) == j;
-            if (counted) continue;
-            vec3 d = ni - load3(normal, j);
-            sq += dot3(d, d);
-            s = s + d;
+        if (n <= BENDING_REGISTER_SIDES) {
+            int js[BENDING_REGISTER_SIDES];
+#pragma unroll
+            for (int k = 0; k < BENDING_REGISTER_SIDES; ++k) {
+                if (k < n) {
+                    int j = cell_across(vertex_cells, row[k], c);
+                    bool counted = j == c;
+#pragma unroll
+                    for (int i = 0; i < k; ++i) counted = counted || js[i] == j;
+                    js[k] = j;
+                    if (!counted) {
+                        vec3 d = ni - load3(normal, j);
+                        sq += dot3(d, d);
+                        s = s + d;
+                    }
+                }
+            }
+        } else {
+            for (int k = 0; k < n; ++k) {
+                int j = cell_across(vertex_cells, row[k], c);
+                bool counted = j == c;
+                for (int i = 0; i < k && !counted; ++i) counted = cell_across(vertex_cells, row[i], c) == j;
+                if (counted) continue;
+                vec3 d = ni - load3(normal, j);
+                sq += dot3(d, d);
+                s = s + d;
+            }
         }
         e = 0.25 * Br * sq;
-        cell_energy[c] = ADD ? cell_energy[c] + e : e;
+        if (ADD) e += cell_energy[c];
+        cell_energy[c] = e;
         vec3 t = s - dot3(s, ni) * ni;
         store3(w, c, (Br * inv_area[c]) * t);
     }
-    segment_sum(e, rep, sums, replica_energy, ADD);
+    segment_sum(e, rep, sums, replica_energy);
 }
 
-// The cell kernel, storing (bending alone) or adding to the vertex model's energies (fused).
+// The cell kernel, storing (bending alone) or adding to the vertex model's energies and summing both (fused).
 #define BENDING_CELL_TERMS_KERNEL(NAME, ADD)                                                                  \
     extern "C" __global__ void NAME(                                                                          \
         const double* __restrict__ normal, const double* __restrict__ inv_area,                               \
@@ -145,16 +173,16 @@ extern "C" __global__ void vm_bending_cell_geometry(
     const int* __restrict__ cell_replica, const double* __restrict__ radius, int n_cells, int max_sides,
     const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
     const double* __restrict__ P0, double* __restrict__ coef, double* __restrict__ cell_energy,
-    double* __restrict__ replica_energy, double* __restrict__ normal, double* __restrict__ inv_area,
-    const int* __restrict__ cell_start, int n_replicas, double* __restrict__ scratch, unsigned int* __restrict__ count)
+    double* __restrict__ normal, double* __restrict__ inv_area)
 {
-    BendingTerms terms = {normal, inv_area, nullptr};
+    BendingTerms terms = {normal, inv_area, nullptr};   // no sum of energies here (sums_energy)
     vm_cell_geometry_body(pos, cell_vertices, cell_sides, cell_replica, radius, n_cells, max_sides, kA, kP, A0, P0,
-                          coef, cell_energy, replica_energy, SegmentSum{cell_start, n_replicas, scratch, count},
-                          terms);
+                          coef, cell_energy, nullptr, SegmentSum{nullptr, 0, nullptr, nullptr}, terms);
 }
 
-extern "C" __global__ void vm_bending_vertex_forces(
+// At most 80 registers (3 blocks of spherevm.device.BLOCK = 256 threads an SM; 92 unbounded, 2 blocks):
+// 7% faster at 4,096 x 64 cells on an H200 despite a 56-byte spill.
+extern "C" __global__ void __launch_bounds__(256, 3) vm_bending_vertex_forces(
     const double* __restrict__ pos, const int* __restrict__ vertex_neighbors, const int* __restrict__ vertex_cells,
     const int* __restrict__ vertex_replica, const double* __restrict__ radius, int n_vertices,
     const double* __restrict__ coef, const double* __restrict__ w, double* __restrict__ forces)

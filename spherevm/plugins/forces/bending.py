@@ -232,8 +232,9 @@ class Bending(Force):
 
     def _combined_gpu(self, model, state) -> ForceResult:
         """Three kernels where the vertex model alone has two: its cell kernel also writes the
-        normals, the bending cell kernel adds its energies to the vertex model's, and the vertex
-        model's vertex kernel adds the bending gradient before its tangent projection."""
+        normals (and leaves the per-replica sum), the bending cell kernel adds its energies to the
+        vertex model's and sums both, and the vertex model's vertex kernel adds the bending gradient
+        before its tangent projection."""
         import cupy as cp
         kA, kP, A0, P0 = model.device_parameters(state)
         module = load_module(_KERNELS)
@@ -242,8 +243,7 @@ class Bending(Force):
         normal, inv_area = cp.empty((nc, 3)), cp.empty(nc)
         launch(module.get_function("vm_bending_cell_geometry"), nc,
                (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, state.radius,
-                np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, cell_energy, energy, normal, inv_area,
-                *segment_sums(state, "cells")))
+                np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, cell_energy, normal, inv_area))
         w = self._cell_terms_gpu(state, module, normal, inv_area, cell_energy, energy, "bending_cell_terms_add")
         forces = cp.empty_like(state.positions)
         launch(module.get_function("vm_bending_vertex_forces"), nv,

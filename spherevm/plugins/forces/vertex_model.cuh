@@ -9,7 +9,8 @@
 #include "device_common.cuh"
 
 // One thread per cell: area and perimeter (Surface::cell_measures), the cell's energy, the
-// per-replica energy sum (device_common.cuh: `sums` over the cells), and the two coefficients the vertex kernel needs:
+// per-replica energy sum (device_common.cuh: `sums` over the cells; left to a later kernel of the
+// extra's where Extra::sums_energy), and the two coefficients the vertex kernel needs:
 // coef = (2 kA (A - A0) area_unit, 2 kP (P - P0) length_unit) (R^2 and R on the sphere, 1 on the plane).
 // size: the State's radius (n_replicas,) or box (n_replicas, 2).
 template <class Extra>
@@ -37,7 +38,7 @@ __device__ __forceinline__ void vm_cell_geometry_body(
         coef[2 * c + 1] = 2.0 * kP[c] * dP * Surface::length_unit(s);
         cell_energy[c] = e;
     }
-    segment_sum(e, rep, sums, replica_energy);
+    if (!Extra::sums_energy) segment_sum(e, rep, sums, replica_energy);
 }
 
 // One thread per vertex, no atomics: minus the surface gradient of the energy from the vertex's

@@ -169,9 +169,11 @@ def test_gsd_written_on_gpu_restores_on_cpu(tmp_path):
     assert np.array_equal(back.cell_vertices, sim.state.cell_vertices.get())
 
 
-def test_flip_back_memory_matches_numpy_across_passes():
+@pytest.mark.parametrize("read_half_way", [True, False])
+def test_flip_back_memory_matches_numpy_across_passes(read_half_way):
     """Many passes between two reads: the GPU's flip log, replayed pass by pass, gives NumPy's
-    separated pairs and re-join counts exactly."""
+    separated pairs and re-join counts exactly. Without the read half-way more flips are logged
+    than the log has rows, so a pass must replay it before it could overflow."""
     rng = np.random.default_rng(5)
     state = svm.init.random_tiling(300, replicas=2, seed=16)
     sims = t1_simulations(state, threshold=0.3, new_length=0.45, max_flip_backs=10 ** 6)
@@ -181,10 +183,13 @@ def test_flip_back_memory_matches_numpy_across_passes():
         for sim in sims.values():
             kick_on_surface(sim, kick)
             sim._update()
-        if i == 29:
+        if i == 29 and read_half_way:
             g._sync_counters()          # a read half-way: the log starts again from empty
+    rows = len(g._gpu["log"])
     g._sync_counters()
     assert np.array_equal(g.total_flips, c.total_flips)
+    if not read_half_way:
+        assert c.total_flips.sum() > rows, "more flips than the log's rows between two reads"
     assert c._rejoins.sum() > 0, "some pairs were joined again"
     assert np.array_equal(g._separated, c._separated) and np.array_equal(g._rejoins, c._rejoins)
     assert np.array_equal(g.flip_backs, c.flip_backs)

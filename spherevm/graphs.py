@@ -11,6 +11,9 @@ same, and what changes from step to step lives on the device: the timestep
 each step's place in the graph), T1's candidate count and the width of
 its cell table (:meth:`T1.capture_ready`). Every operation says whether it can run inside a graph
 (:meth:`~spherevm.plugins.base.Operation.capture_ready`); one that cannot keeps the run step by step.
+
+``Simulation.minimize`` runs its iterations between two convergence checks the same way; there a
+step is the minimiser's move followed by the updaters of the next timestep (its order step by step).
 """
 from __future__ import annotations
 
@@ -54,12 +57,13 @@ def why_not(simulation) -> str | None:
 
 
 class StepGraphs:
-    """The CUDA graphs of one ``Simulation.run``: ``advance(n)`` runs n steps (a stretch between
-    checks and writes) as replays; ``pause()`` before anything on the host looks at the State."""
+    """The CUDA graphs of one ``Simulation.run`` or ``minimize``: ``advance(n)`` runs n steps (a
+    stretch between checks and writes) as replays; ``pause()`` before anything on the host looks at
+    the State."""
 
-    def __init__(self, simulation, required: bool):
+    def __init__(self, simulation, required: bool, minimizing: bool = False):
         import cupy as cp
-        self.sim, self.required = simulation, required
+        self.sim, self.required, self.minimizing = simulation, required, minimizing
         self.stream = cp.cuda.Stream()          # blocking: ordered with the default stream both ways
         self.pool = cp.cuda.MemoryPool()        # the graphs' temporaries, never lent to anything else
         self.counter = cp.zeros(1, dtype=cp.uint64)
@@ -80,6 +84,24 @@ class StepGraphs:
         if reason is not None:
             raise ValueError(f"run(graphs=True): {reason}")
         return cls(simulation, True)
+
+    @classmethod
+    def for_minimize(cls, simulation, max_steps, graphs):
+        """The runner for ``minimize(max_steps, graphs=...)``: as :meth:`for_run`, and never with a
+        writer attached (a writer sees the State between the move and the updaters)."""
+        if graphs is False:
+            return None
+        reason = why_not(simulation)
+        if reason is None and simulation.operations.writers:
+            reason = "a writer is attached (minimize writes between a move and the next updaters)"
+        if graphs is None:
+            small = simulation.state.n_vertices <= MAX_VERTICES
+            return cls(simulation, False, True) if reason is None and small and max_steps >= MIN_STEPS else None
+        if graphs is not True:
+            raise ValueError(f"graphs must be None (auto), True or False, got {graphs!r}")
+        if reason is not None:
+            raise ValueError(f"minimize(graphs=True): {reason}")
+        return cls(simulation, True, True)
 
     def stretch(self, done, steps, check_every):
         """How many steps to run before the host must look: the next check, the end of the run, or
@@ -113,7 +135,7 @@ class StepGraphs:
     def advance(self, steps) -> bool:
         """Run ``steps`` steps through graphs; False (nothing run) where an operation cannot."""
         sim = self.sim
-        if sim._updated_at == sim.timestep:     # the updaters ran at this timestep already (a minimize)
+        if not self.minimizing and sim._updated_at == sim.timestep:   # the updaters ran at this timestep already
             self.pause()
             sim._update_once()
             sim._integrate()
@@ -124,7 +146,8 @@ class StepGraphs:
         if key is None:
             self.pause()
             if self.required:
-                raise ValueError(f"run(graphs=True): {refused} cannot run inside a CUDA graph now")
+                what = "minimize" if self.minimizing else "run"
+                raise ValueError(f"{what}(graphs=True): {refused} cannot run inside a CUDA graph now")
             return False
         self.counter.fill(sim.timestep)
         if key not in self.graphs:
@@ -136,7 +159,11 @@ class StepGraphs:
             for _ in range(repeats):
                 self.graphs[key][k].launch(self.stream)
         sim.timestep += steps
-        sim._updated_at, sim._held_back = sim.timestep - 1, False
+        self._iterations(steps)
+        if self.minimizing:          # the updaters of the last timestep ran, those not in_minimize held back
+            sim._updated_at, sim._held_back = sim.timestep, True
+        else:
+            sim._updated_at, sim._held_back = sim.timestep - 1, False
         sim.state.topology_changed()
         sim.state_changed()
         return True
@@ -146,8 +173,9 @@ class StepGraphs:
         timestep is then put back, the graph has not run yet)."""
         import cupy as cp
         sim = self.sim
-        t0 = sim.timestep
+        t0, i0 = sim.timestep, self._iterations(0)
         sim._step_counter = self.counter
+        sim.state_changed()                  # the first step computes its forces inside the graph
         try:
             with cp.cuda.using_allocator(self.pool.malloc), self.stream:
                 if capture:
@@ -155,8 +183,13 @@ class StepGraphs:
                 try:
                     for i in range(k):
                         sim._step_offset = i
-                        sim._update()
-                        sim._integrate()
+                        if self.minimizing:   # the move, then the updaters of the next timestep
+                            sim._integrate()
+                            sim._step_offset = i + 1
+                            sim._update(minimizing=True)
+                        else:
+                            sim._update()
+                            sim._integrate()
                     self.counter += k
                 except Exception as exc:
                     if not capture:
@@ -171,7 +204,17 @@ class StepGraphs:
             sim.state_changed()
         if capture:
             sim.timestep = t0
+            self._iterations(i0 - self._iterations(0))
         return graph
+
+    def _iterations(self, steps):
+        """Add ``steps`` to the integrator's own count of iterations (a minimiser's ``iteration``,
+        which its steps advance on the host and a replay does not); returns the count."""
+        integrator = self.sim.operations.integrator
+        if not hasattr(integrator, "iteration"):
+            return 0
+        integrator.iteration += steps
+        return integrator.iteration
 
     def pause(self):
         """Before the host looks at the State: each operation leaves it as the step-by-step path would."""

@@ -344,7 +344,7 @@ class Simulation:
                 w.flush()
 
     def minimize(self, force_tol=None, energy_tol=None, max_steps: int = 100_000, check_every=None,
-                 progress=None, narrow: bool = True, resume: bool = False) -> MinimizeResult:
+                 progress=None, narrow: bool = True, resume: bool = False, graphs=None) -> MinimizeResult:
         """Minimise every replica with the Minimizer integrator (FIRE if none is set) until each
         converges, is halted or ``max_steps`` iterations have passed.
 
@@ -369,7 +369,15 @@ class Simulation:
         same), and put everything back at the end. Done only when no writer is attached and every
         operation is ``narrowable`` (see :class:`spherevm.plugins.base.Operation`). While narrowed,
         ``sim.state`` (and what a ``progress`` callback logs) holds the running replicas only.
+
+        ``graphs``: run the iterations between two convergence checks as CUDA graphs, as
+        :meth:`run` does (:mod:`spherevm.graphs`; the same minimisation bit for bit). None (default):
+        on the GPU when every operation can, no writer is attached, ``max_steps`` is at least
+        ``graphs.MIN_STEPS`` and the State has at most ``graphs.MAX_VERTICES`` vertices; True:
+        always (ValueError naming what cannot); False: never. A ``progress`` callback sees the State
+        as step by step, but must not change the operations' parameters (the graphs hold them).
         """
+        from .graphs import StepGraphs
         from .plugins.integrators import FIRE   # the default minimiser
         self._require_state()
         if not self.operations.forces:
@@ -391,6 +399,7 @@ class Simulation:
         narrow = narrow and not self.operations.writers and all(op.narrowable for op in self.operations)
         n_rep, n_cells = self._state.n_replicas, self._state.cells_per_replica
         narrowed = []
+        runner = StepGraphs.for_minimize(self, max_steps, graphs)
         self._write()
         try:
             while True:
@@ -401,14 +410,24 @@ class Simulation:
                     self.check_finite()   # NaN, or an exploding step the GPU kernel flagged
                     running = int((~fire.stopped).sum())
                     if progress is not None:
+                        if runner is not None:
+                            runner.pause()
                         progress(fire.iteration, n_rep - running, n_rep)
                     if running == 0 or fire.iteration >= limit:
                         break
                     if narrow and 2 * running <= len(fire.stopped):
+                        if runner is not None:
+                            runner.pause()
                         narrowed.append(self._narrow(np.flatnonzero(~fire.stopped)))
+                if runner is not None:   # the iterations up to the next check (or the limit) in graphs
+                    if runner.advance(min(fire.steps_to_check(), limit - fire.iteration)):
+                        continue
+                    runner = None        # an operation cannot: step by step from here
                 self._integrate()
                 self._write()
         finally:
+            if runner is not None:
+                runner.pause()
             while narrowed:
                 self._widen(*narrowed.pop())
             for u in self.operations.updaters:

@@ -193,3 +193,26 @@ def test_flip_back_memory_matches_numpy_across_passes(read_half_way):
     assert c._rejoins.sum() > 0, "some pairs were joined again"
     assert np.array_equal(g._separated, c._separated) and np.array_equal(g._rejoins, c._rejoins)
     assert np.array_equal(g.flip_backs, c.flip_backs)
+
+
+def test_flip_log_is_replayed_before_a_pass_could_write_past_its_end():
+    """A log of four rows, the rows after it watched: a pass whose candidates might not fit must
+    replay the log (and grow it) first, so no flip is ever written past the log's end, and the
+    replayed memory is NumPy's."""
+    import cupy as cp
+    rng = np.random.default_rng(7)
+    state = svm.init.random_tiling(300, replicas=2, seed=16)
+    sims = t1_simulations(state, threshold=0.3, new_length=0.45, max_flip_backs=10 ** 6)
+    c, g = (sims[d].operations.updaters[0] for d in ("cpu", "gpu"))
+    guard = cp.full((64, 6), -7, dtype=cp.int32)
+    g._gpu_buffers(sims["gpu"].state)["log"] = guard[:4]
+    for i in range(6):
+        kick = rng.normal(scale=0.08, size=state.positions.shape)
+        for sim in sims.values():
+            kick_on_surface(sim, kick)
+            sim._update()
+        assert bool((guard[4:] == -7).all()), f"pass {i} wrote past the end of the log"
+        if i == 0:
+            assert c.total_flips.sum() > 4, "the first pass flips more than the small log holds"
+    g._sync_counters()
+    assert np.array_equal(g._separated, c._separated) and np.array_equal(g._rejoins, c._rejoins)

@@ -136,9 +136,10 @@ def test_operations_that_cannot_run_in_graphs_are_named():
     with pytest.raises(ValueError, match="UserForce cannot run inside a CUDA graph"):
         sim.run(10, graphs=True)
     sim = dynamics_simulation(hot_ensemble("sphere"), "gpu", Brownian(dt=0.01, T=0.01))
-    sim.operations.updaters[0] = T1(count_flip_backs=True)
-    with pytest.raises(ValueError, match="T1 cannot run inside a CUDA graph"):
-        sim.run(10, graphs=True)
+    sim.operations.integrator = FIRE(check_every=10)      # a convergence check would fall inside
+    with pytest.raises(ValueError, match="FIRE cannot run inside a CUDA graph"):
+        sim.run(30, graphs=True)
+    sim.operations.integrator = Brownian(dt=0.01, T=0.01)
     sim.operations.updaters[0] = T1(trigger=2)
     with pytest.raises(ValueError, match="does not fire every step"):
         sim.run(10, graphs=True)
@@ -192,3 +193,96 @@ def test_a_pass_with_more_candidates_than_the_step_by_step_room():
     for key in out[1][0]:
         assert out[0][0][key].tobytes() == out[1][0][key].tobytes(), key
     assert np.array_equal(out[0][1], out[1][1]) and out[1][1].sum() > 100
+
+
+# ---------------------------------------------------------------------------------------- minimize
+def sweep_like(state, p0, **t1):
+    """FIRE + T1 (flip-back bookkeeping on, as in every minimisation) at kr = 0 with one p0 per
+    replica, as a rigidity sweep's chunk: replicas converge at different iterations (narrowing)."""
+    sim = svm.Simulation(device="gpu")
+    sim.state = state
+    rep = sim.state.cell_replica_np()
+    sim.operations.forces.append(svm.plugins.forces.VertexModel(kA=0.0, kP=1.0, A0=1.0, P0=np.asarray(p0)[rep]))
+    sim.operations.updaters.append(T1(**t1))
+    sim.operations.integrator = FIRE(dt=0.02)
+    return sim
+
+
+def twin_minimizations(state, p0, calls=({},), t1=None):
+    """The same minimisation(s) with and without graphs: everything each leaves behind."""
+    out = []
+    for use in (True, False):
+        sim = sweep_like(state, p0, **(t1 or {}))
+        results = [sim.minimize(graphs=use, **kw) for kw in calls]
+        t1_op, fire = sim.operations.updaters[0], sim.operations.integrator
+        t1_op._sync_counters()
+        out.append(dict(state=snapshot(sim.state), timestep=sim.timestep, iteration=fire.iteration,
+                        results=[(r.reason.tolist(), r.steps.tolist(), r.energy.tobytes(), r.max_force.tobytes())
+                                 for r in results],
+                        velocities=fire.velocities.get().tobytes(), dt=fire.replica_dt.get().tobytes(),
+                        flips=t1_op.total_flips.copy(), refused=t1_op.total_refused.copy(),
+                        flip_backs=t1_op.flip_backs.copy(), separated=t1_op._separated.copy(),
+                        rejoins=t1_op._rejoins.copy()))
+    return out
+
+
+def assert_same_minimizations(graph, step):
+    for key in step:
+        if key == "state":
+            for k in step["state"]:
+                assert graph["state"][k].shape == step["state"][k].shape, k
+                assert graph["state"][k].tobytes() == step["state"][k].tobytes(), k
+        elif isinstance(step[key], np.ndarray):
+            assert np.array_equal(graph[key], step[key]), key
+        else:
+            assert graph[key] == step[key], key
+
+
+@pytest.mark.gpu
+def test_minimize_in_graphs_is_the_step_by_step_minimisation():
+    """A sweep-like chunk (12 replicas, p0 3.6 to 3.95): replicas stop at different checks, the State
+    narrows twice, T1 flips and logs its flips for the flip-back memory inside the graphs."""
+    state = svm.init.random_tiling(64, replicas=12, seed=5)
+    p0 = np.linspace(3.6, 3.95, 12)
+    graph, step = twin_minimizations(state, p0, calls=({"max_steps": 20_000},))
+    assert_same_minimizations(graph, step)
+    steps = np.array(step["results"][0][1])
+    assert len(set(steps.tolist())) > 3, "replicas stopped at different checks (narrowing)"
+    assert step["flips"].sum() > 0 and len(step["separated"]) > 0, "T1 flipped and kept its memory"
+
+
+@pytest.mark.gpu
+def test_minimize_in_graphs_halts_oscillating_replicas_as_step_by_step():
+    """Long T1 thresholds make pairs of cells flip back and forth: the replicas halted for
+    ``t1_oscillation`` (read from the flip log replayed at checks) are the step-by-step ones."""
+    state = svm.init.random_tiling(80, replicas=6, seed=9)
+    graph, step = twin_minimizations(state, np.full(6, 3.9), calls=({"max_steps": 3_000},),
+                                     t1=dict(threshold=0.3, new_length=0.45, max_flip_backs=3))
+    assert_same_minimizations(graph, step)
+    assert "t1_oscillation" in step["results"][0][0], "some replica was halted"
+    assert step["rejoins"].sum() > 0
+
+
+@pytest.mark.gpu
+def test_minimize_resumed_in_graphs_is_one_minimisation():
+    """``max_steps`` that is no multiple of the check interval, then a resumed call: the stretches
+    end at the limit as step by step."""
+    state = svm.init.random_tiling(100, replicas=4, seed=12)
+    graph, step = twin_minimizations(state, np.array([3.7, 3.8, 3.85, 3.9]),
+                                     calls=({"max_steps": 137}, {"max_steps": 205, "resume": True}))
+    assert_same_minimizations(graph, step)
+    assert "max_steps" in step["results"][0][0], "the first call stopped at its limit, not at a check"
+
+
+@pytest.mark.gpu
+def test_minimize_graphs_refusals():
+    sim = sweep_like(svm.init.random_tiling(64, replicas=2, seed=1), [3.7, 3.9])
+    sim.operations.writers.append(Snapshots([0]))
+    with pytest.raises(ValueError, match="a writer is attached"):
+        sim.minimize(max_steps=100, graphs=True)
+    sim.operations.writers.clear()
+    sim.operations.forces.append(UserForce())
+    with pytest.raises(ValueError, match="UserForce cannot run inside a CUDA graph"):
+        sim.minimize(max_steps=100, graphs=True)
+    result = sim.minimize(max_steps=100)           # auto: step by step from the refusal on
+    assert result.steps.max() <= 100

@@ -266,9 +266,15 @@ class Integrator(Operation):
         self._active_device = None
 
     def active_on_device(self):
-        """``active`` on the State's device (uploaded at most once per change)."""
+        """``active`` on the State's device (uploaded at most once per change, into the same device
+        array while the replica count stays: CUDA graphs hold its address)."""
         if self._active_device is None:
-            self._active_device = self._simulation.state.device.asarray(self.active)
+            held = getattr(self, "_active_held", None)
+            if held is not None and not isinstance(held, np.ndarray) and held.shape == self.active.shape:
+                held.set(self.active)
+            else:
+                held = self._active_held = self._simulation.state.device.asarray(self.active)
+            self._active_device = held
         return self._active_device
 
     def reset_vertices(self, vertices):
@@ -419,8 +425,14 @@ class Minimizer(Integrator):
     def check_due(self) -> bool:
         return self.iteration % self.check_every == 0 and self._checked_at != self.iteration
 
-    def step(self, simulation, forces):
+    def steps_to_check(self) -> int:
+        """Iterations that can run before the next convergence check falls due."""
         if self.check_due():
+            return 0
+        return self.check_every - self.iteration % self.check_every
+
+    def step(self, simulation, forces):
+        if not simulation.capturing and self.check_due():   # inside CUDA graphs checks fall between stretches
             self.check_convergence(simulation)
             forces, _ = simulation.compute_forces()
         self.move(simulation, forces)

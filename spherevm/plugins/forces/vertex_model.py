@@ -68,12 +68,15 @@ class VertexModel(Force):
     def energy_scale(self, state):
         """Per replica, the mean over its cells of ``kP <A>`` (the paper's unit of energy, whatever
         kr; ``kA <A>^2`` would vanish at kr = 0), or ``kA <A>^2`` for a cell without perimeter
-        stiffness. Minimisers measure their tolerances in it."""
-        kA, kP, _, _ = self.parameters(state)
-        rep = state.cell_replica_np()
-        area = state.mean_cell_area[rep]
-        cell = np.where(kP > 0, kP * area, kA * area * area)
-        return np.bincount(rep, weights=cell, minlength=state.n_replicas) / state.cells_per_replica
+        stiffness. Minimisers measure their tolerances in it. Cached for the State, as the device
+        parameters are (a minimiser asks at every convergence check)."""
+        def build():
+            kA, kP, _, _ = self.parameters(state)
+            rep = state.cell_replica_np()
+            area = state.mean_cell_area[rep]
+            cell = np.where(kP > 0, kP * area, kA * area * area)
+            return np.bincount(rep, weights=cell, minlength=state.n_replicas) / state.cells_per_replica
+        return state.cached((self, "energy_scale"), build).copy()
 
     narrowable = True
 

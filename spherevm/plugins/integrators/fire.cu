@@ -64,11 +64,12 @@ extern "C" __global__ void fire_move(
     double* __restrict__ pos, double* __restrict__ vel, const double* __restrict__ forces,
     const int* __restrict__ vertex_replica, const double* __restrict__ size, const bool* __restrict__ active,
     const double* __restrict__ keep, const double* __restrict__ scale, const double* __restrict__ step,
-    int n_vertices, const double* __restrict__ length_unit, double max_step, unsigned long long timestep,
-    unsigned long long* __restrict__ error)
+    int n_vertices, const double* __restrict__ length_unit, double max_step, unsigned long long step0,
+    const unsigned long long* __restrict__ step_add, unsigned long long* __restrict__ error)
 {
     long i = (long)blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n_vertices) return;
+    unsigned long long timestep = step0 + *step_add;   // Simulation.kernel_timestep (CUDA graphs)
     int r = vertex_replica[i];
     if (!active[r]) { store3(vel, i, v3(0.0, 0.0, 0.0)); return; }
     vec3 f = load3(forces, i);

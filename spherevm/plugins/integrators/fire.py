@@ -202,8 +202,22 @@ class FIRE(Minimizer):
         launch(module.get_function("fire_move"), nv,
                (state.positions, self.velocities, forces, state.vertex_replica, size, active,
                 keep, scale, step, np.int32(nv), self._length_unit(state), np.float64(self.max_step),
-                np.uint64(simulation.timestep), self._error))
+                *simulation.kernel_timestep(), self._error))
         simulation.state_changed()
+
+    def capture_ready(self, simulation, steps):
+        """Its kernels read nothing back and take the timestep from ``Simulation.kernel_timestep``;
+        the key holds its per-vertex and per-replica arrays (replaced by a reset, a checkpoint or a
+        narrowing). None where a convergence check (a read-back) would fall due inside the steps:
+        ``Simulation.minimize`` ends each stretch at the next check."""
+        if steps > self.steps_to_check():
+            return None
+        self.active_on_device()
+        if getattr(self, "_error", None) is None:
+            import cupy as cp
+            self._error = cp.full(1, np.iinfo(np.uint64).max, dtype=cp.uint64)
+        return tuple(a.data.ptr for a in (self.velocities, self.replica_dt, self.alpha, self.n_positive,
+                                          self._active_device, self._error))
 
     @property
     def loggables(self):

@@ -1,29 +1,29 @@
 // T1 neighbour exchanges on the device: the CUDA path of t1.py, same rules and same geometry.
-// A pass is two kernels: t1_detect (one thread per vertex, its edges to higher-numbered
-// neighbours) lists the candidates and lets each claim its four cells (lowest edge index wins);
-// after one small read-back of the counters, t1_apply (one thread per candidate) flips the
-// winners. Winners touch disjoint cells and vertices, so they need no locks. Compiled once per
-// surface (geometry/surface.cuh): the short-edge test and the new positions are the surface's. A
-// candidate whose flip would fold the network (t1_fold.cuh) turns the other way if that does not
-// fold it, and is refused otherwise, in t1_detect (folding.t1_placement).
+// A pass is four kernels: t1_detect (one thread per vertex, its edges to higher-numbered
+// neighbours) lists the short edges; t1_check (one thread per listed edge) applies the refusal
+// rules and lets each remaining candidate claim its four cells (lowest edge index wins); after one
+// small read-back of the counters, t1_apply (one thread per candidate) flips the winners and
+// t1_release gives the cells back. Winners touch disjoint cells and vertices, so they need no locks.
+// The checks are a kernel of their own because they are long (t1_fold.cuh): inside t1_detect their
+// registers slowed the short-edge test of every vertex (356 us of a 1e6-cell step on an H200).
+// Compiled once per surface (geometry/surface.cuh): the short-edge test and the new positions are
+// the surface's. A candidate whose flip would fold the network (t1_fold.cuh) turns the other way
+// if that does not fold it, and is refused otherwise (folding.t1_placement).
 #include "geometry/surface.cuh"
 #include "plugins/updaters/t1_fold.cuh"
 
 #define CAND_INTS 13   // u, k, v, a, b, c, d, C1, C2, C3, C4, replica, turn
 #define LOG_INTS 6     // pass, C1, C2, C3, C4, replica
 
-// counters: [0] candidates, [1] a C3/C4 row has width[0] entries (widen the table). width[0]: the table's
-// width as the step-by-step path holds it (inside a CUDA graph the table has spare columns beyond it,
-// max_sides is the stride). size: the State's radius or box.
-// new_length[r] > 0: absolute new length per replica; else length_factor times the old length.
+// counters: [0] short edges listed (candidates), [1] a C3/C4 row of a candidate that was not refused has
+// width[0] entries (widen the table), [2] candidates not refused (claimants; t1_check). width[0]: the table's width as the step-by-step path holds it (inside a
+// CUDA graph the table has spare columns beyond it, max_sides is the stride). size: the State's radius or box.
+// A candidate's entry: u, k, v, a, b, c, d, C1, C2, C3, C4, replica, and (set by t1_check) turn.
 extern "C" __global__ void t1_detect(
     const double* __restrict__ pos, const int* __restrict__ vn, const int* __restrict__ vc,
-    const int* __restrict__ sides, const int* __restrict__ cell_vertices, const int* __restrict__ vertex_replica,
-    const double* __restrict__ size, const double* __restrict__ chord2, const double* __restrict__ new_length,
-    double length_factor, const bool* __restrict__ active, int n_vertices, int max_sides,
-    int* __restrict__ claim, int* __restrict__ refused, unsigned long long* __restrict__ total_refused,
-    int* __restrict__ counters, int* __restrict__ cand, double* __restrict__ cand_len, int capacity,
-    const int* __restrict__ width)
+    const int* __restrict__ vertex_replica, const double* __restrict__ size, const double* __restrict__ chord2,
+    const bool* __restrict__ active, int n_vertices, int* __restrict__ counters, int* __restrict__ cand,
+    double* __restrict__ cand_len, int capacity)
 {
     int u = blockIdx.x * blockDim.x + threadIdx.x;
     if (u >= n_vertices) return;
@@ -36,47 +36,65 @@ extern "C" __global__ void t1_detect(
         if (v <= u) continue;
         vec3 pv = load3(pos, v);
         if (!(Surface::chord2(pu, pv, s) < chord2[r])) continue;   // chord test: no trigonometry for the many long edges
-        double L = Surface::edge_length(pu, pv, s);
-        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
-        int a = vn[3 * u + k1], b = vn[3 * u + k2];
-        int C1 = vc[3 * u + k], C3 = vc[3 * u + k1], C2 = vc[3 * u + k2];
-        int j = vn[3 * v] == u ? 0 : (vn[3 * v + 1] == u ? 1 : 2);
-        int c = vn[3 * v + (j + 1) % 3], d = vn[3 * v + (j + 2) % 3];
-        int C4 = vc[3 * v + (j + 1) % 3];
-        bool distinct = C1 != C2 && C1 != C3 && C1 != C4 && C2 != C3 && C2 != C4 && C3 != C4;
-        bool refuse = sides[C1] <= 3 || sides[C2] <= 3 || !distinct, turn = false;
-        if (!refuse) {      // folding.t1_placement: usual if clean, else turned if clean, else usual unless it folds
-            vec3 px, py;
-            double full = new_length[r] > 0.0 ? new_length[r] : length_factor * L;
-            Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py);
-            int usual = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px,
-                                      py, s);
-            if (usual != T1_CLEAN) {
-                Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py, true);
-                turn = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px,
-                                     py, s) == T1_CLEAN;
-                refuse = usual == T1_FOLDS && !turn;
-            }
-        }
-        if (refuse) {
-            atomicAdd(refused + r, 1);
-            atomicAdd(total_refused + r, 1ull);
-            continue;
-        }
-        int index = 3 * u + k;
-        atomicMin(claim + C1, index);
-        atomicMin(claim + C2, index);
-        atomicMin(claim + C3, index);
-        atomicMin(claim + C4, index);
-        if (sides[C3] >= *width || sides[C4] >= *width) counters[1] = 1;
         int i = atomicAdd(counters, 1);
-        if (i < capacity) {
-            int* e = cand + (long)i * CAND_INTS;
-            e[0] = u; e[1] = k; e[2] = v; e[3] = a; e[4] = b; e[5] = c; e[6] = d;
-            e[7] = C1; e[8] = C2; e[9] = C3; e[10] = C4; e[11] = r; e[12] = turn ? 1 : 0;
-            cand_len[i] = L;
+        if (i >= capacity) continue;
+        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        int j = vn[3 * v] == u ? 0 : (vn[3 * v + 1] == u ? 1 : 2);
+        int* e = cand + (long)i * CAND_INTS;
+        e[0] = u; e[1] = k; e[2] = v; e[3] = vn[3 * u + k1]; e[4] = vn[3 * u + k2];
+        e[5] = vn[3 * v + (j + 1) % 3]; e[6] = vn[3 * v + (j + 2) % 3];
+        e[7] = vc[3 * u + k]; e[8] = vc[3 * u + k2]; e[9] = vc[3 * u + k1]; e[10] = vc[3 * v + (j + 1) % 3];
+        e[11] = r; e[12] = 0;
+        cand_len[i] = Surface::edge_length(pu, pv, s);
+    }
+}
+
+// One thread per slot (n_slots: the room; the candidate count is read here, counters[0]). The rules
+// of T1.select: refuse a flip that leaves a triangle with two sides or joins a cell to itself, place
+// it as folding.t1_placement does (usual, else turned, else refused if it folds), and let each
+// remaining candidate claim its four cells.
+// new_length[r] > 0: absolute new length per replica; else length_factor times the old length.
+extern "C" __global__ void t1_check(
+    const double* __restrict__ pos, const int* __restrict__ vn, const int* __restrict__ sides,
+    const int* __restrict__ cell_vertices, const double* __restrict__ size, const double* __restrict__ new_length,
+    double length_factor, int max_sides, int* __restrict__ claim, int* __restrict__ refused,
+    unsigned long long* __restrict__ total_refused, int* __restrict__ counters, int* __restrict__ cand,
+    const double* __restrict__ cand_len, int n_slots, const int* __restrict__ width)
+{
+    int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n_slots || i >= counters[0]) return;
+    int* e = cand + (long)i * CAND_INTS;
+    int u = e[0], k = e[1], v = e[2], a = e[3], b = e[4], c = e[5], d = e[6];
+    int C1 = e[7], C2 = e[8], C3 = e[9], C4 = e[10], r = e[11];
+    Surface::Size s = Surface::size(size, r);
+    bool distinct = C1 != C2 && C1 != C3 && C1 != C4 && C2 != C3 && C2 != C4 && C3 != C4;
+    bool refuse = sides[C1] <= 3 || sides[C2] <= 3 || !distinct, turn = false;
+    if (!refuse) {      // folding.t1_placement: usual if clean, else turned if clean, else usual unless it folds
+        vec3 px, py;
+        double full = new_length[r] > 0.0 ? new_length[r] : length_factor * cand_len[i];
+        Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py);
+        int usual = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px,
+                                  py, s);
+        if (usual != T1_CLEAN) {
+            Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py, true);
+            turn = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px,
+                                 py, s) == T1_CLEAN;
+            refuse = usual == T1_FOLDS && !turn;
         }
     }
+    if (refuse) {       // a refused candidate claims nothing, so t1_apply passes it by
+        atomicAdd(refused + r, 1);
+        atomicAdd(total_refused + r, 1ull);
+        return;
+    }
+    e[12] = turn ? 1 : 0;
+    atomicAdd(counters + 2, 1);
+    int index = 3 * u + k;
+    atomicMin(claim + C1, index);
+    atomicMin(claim + C2, index);
+    atomicMin(claim + C3, index);
+    atomicMin(claim + C4, index);
+    if (sides[C3] >= *width || sides[C4] >= *width) counters[1] = 1;
 }
 
 __device__ void replace_neighbor(int* vn, int w, int old_v, int new_v) {
@@ -111,7 +129,8 @@ extern "C" __global__ void t1_apply(
     const double* __restrict__ cand_len, const int* __restrict__ counters, int n_slots, int max_sides,
     const double* __restrict__ size, const double* __restrict__ new_length, double length_factor,
     int* __restrict__ flips, unsigned long long* __restrict__ total_flips, int* __restrict__ moved,
-    int* __restrict__ log_count, int* __restrict__ log, int pass_id, int* __restrict__ width, int grow_width)
+    int* __restrict__ log_count, int* __restrict__ log, int logging, const int* __restrict__ log_pass,
+    int* __restrict__ width, int grow_width)
 {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n_slots) return;
@@ -148,18 +167,21 @@ extern "C" __global__ void t1_apply(
     atomicAdd(total_flips + r, 1ull);
     moved[2 * i] = u;              // for Integrator.reset_vertices
     moved[2 * i + 1] = v;
-    if (pass_id < 0) return;       // no flip-back bookkeeping (T1.counting)
+    if (!logging) return;          // no flip-back bookkeeping (T1.counting)
     int slot = atomicAdd(log_count, 1);
     int* entry = log + (long)slot * LOG_INTS;
-    entry[0] = pass_id; entry[1] = C1; entry[2] = C2; entry[3] = C3; entry[4] = C4; entry[5] = r;
+    // the pass, counted since the log was last replayed (t1_release)
+    entry[0] = *log_pass; entry[1] = C1; entry[2] = C2; entry[3] = C3; entry[4] = C4; entry[5] = r;
 }
 
 // After t1_apply: give the candidates' cells back (claims stay at INT_MAX between passes, so a
-// pass costs no sweep over all cells).
+// pass costs no sweep over all cells), and count the pass for the flip log (log_pass: the next
+// pass's name; a kernel after t1_apply, so that every thread of t1_apply read the same one).
 extern "C" __global__ void t1_release(int* __restrict__ claim, const int* __restrict__ cand,
-                                      const int* __restrict__ counters, int n_slots)
+                                      const int* __restrict__ counters, int n_slots, int* __restrict__ log_pass)
 {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i == 0) *log_pass += 1;
     if (i >= n_slots || i >= counters[0]) return;
     const int* e = cand + (long)i * CAND_INTS;
     for (int j = 7; j < 11; ++j) claim[e[j]] = 0x7fffffff;

@@ -1,5 +1,5 @@
-"""T1's pass on the GPU (t1.cu): detect, one small read-back, apply, release; inside a CUDA graph
-(:mod:`spherevm.graphs`) the same kernels with no read-back at all."""
+"""T1's pass on the GPU (t1.cu): detect, check, one small read-back, apply, release; inside a CUDA
+graph (:mod:`spherevm.graphs`) the same kernels with no read-back at all."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -25,14 +25,16 @@ class DevicePass:
         buf = getattr(self, "_gpu", None)
         if buf is None or buf["n_cells"] != state.n_cells or buf["state"] is not state:
             cap, r = max(1024, state.n_vertices // 4, capacity), state.n_replicas
-            # per-pass counters in one buffer, zeroed by one memset: [candidates, widen | flips | refused]
-            scratch = cp.zeros(2 + 2 * r, dtype=cp.int32)
+            # per-pass counters in one buffer, zeroed by one memset:
+            # [candidates (short edges), widen, claimants (candidates not refused) | flips | refused]
+            scratch = cp.zeros(3 + 2 * r, dtype=cp.int32)
             buf = dict(state=state, n_cells=state.n_cells, capacity=cap,
                        claim=cp.full(state.n_cells, np.iinfo(np.int32).max, dtype=cp.int32), scratch=scratch,
-                       counters=scratch[:2], flips=scratch[2:2 + r], refused=scratch[2 + r:],
+                       counters=scratch[:3], flips=scratch[3:3 + r], refused=scratch[3 + r:],
                        log_count=cp.zeros(1, dtype=cp.int32), log_bound=0,
+                       log_pass=cp.zeros(1, dtype=cp.int32),
                        cand=cp.empty((cap, _CAND_INTS), dtype=cp.int32), cand_len=cp.empty(cap),
-                       log=cp.empty((cap, _LOG_INTS), dtype=cp.int32), moved=cp.empty(2 * cap, dtype=cp.int32), passes=0,
+                       log=cp.empty((cap, _LOG_INTS), dtype=cp.int32), moved=cp.empty(2 * cap, dtype=cp.int32),
                        all_active=cp.ones(r, dtype=bool), width=cp.zeros(1, dtype=cp.int32), width_host=-1,
                        width_bound=0, table=None, total_flips=cp.asarray(self._host_totals("total_flips", r)),
                        total_refused=cp.asarray(self._host_totals("total_refused", r)))
@@ -59,7 +61,9 @@ class DevicePass:
         return total.astype(np.uint64) if len(total) == n_replicas else np.zeros(n_replicas, np.uint64)
 
     def _detect(self, simulation, buf):
-        """Zero the pass counters and launch t1_detect; returns what t1_apply takes besides."""
+        """Zero the pass counters, list the short edges (t1_detect) and apply the refusal rules to them
+        (t1_check, over the whole room: the count is read on the device); returns what t1_apply
+        takes besides."""
         import cupy as cp
         state = simulation.state
         chord2, new_length = self._device_lengths(state)
@@ -69,56 +73,61 @@ class DevicePass:
         scratch = buf["scratch"]
         cp.cuda.runtime.memsetAsync(scratch.data.ptr, 0, scratch.nbytes, cp.cuda.get_current_stream().ptr)
         launch(module.get_function("t1_detect"), state.n_vertices,
-               (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_sides,
-                state.cell_vertices, state.vertex_replica, size, chord2, new_length,
-                np.float64(self.length_factor or 0.0), active, np.int32(state.n_vertices),
-                np.int32(state.max_sides), buf["claim"], buf["refused"], buf["total_refused"], buf["counters"],
-                buf["cand"], buf["cand_len"], np.int32(buf["capacity"]), buf["width"]))
+               (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, size, chord2,
+                active, np.int32(state.n_vertices), buf["counters"], buf["cand"], buf["cand_len"],
+                np.int32(buf["capacity"])))
+        launch(module.get_function("t1_check"), buf["capacity"],
+               (state.positions, state.vertex_neighbors, state.cell_sides, state.cell_vertices, size, new_length,
+                np.float64(self.length_factor or 0.0), np.int32(state.max_sides), buf["claim"], buf["refused"],
+                buf["total_refused"], buf["counters"], buf["cand"], buf["cand_len"], np.int32(buf["capacity"]),
+                buf["width"]))
         return module, size, new_length
 
-    def _apply(self, simulation, buf, module, size, new_length, n_slots, pass_id, in_graph):
+    def _apply(self, simulation, buf, module, size, new_length, n_slots, logging, in_graph):
         """t1_apply and t1_release over ``n_slots`` candidate slots, then the integrator forgets the
-        moved vertices."""
+        moved vertices. ``logging``: each flip goes into the flip log, with its pass (numbered on the
+        device since the log was last replayed)."""
         state = simulation.state
         moved = buf["moved"][:2 * n_slots]
         launch(module.get_function("t1_apply"), n_slots,
                (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_vertices, state.cell_sides,
                 buf["claim"], buf["cand"], buf["cand_len"], buf["counters"], np.int32(n_slots),
                 np.int32(state.max_sides), size, new_length, np.float64(self.length_factor or 0.0), buf["flips"],
-                buf["total_flips"], moved, buf["log_count"], buf["log"], np.int32(pass_id), buf["width"],
-                np.int32(in_graph)))
+                buf["total_flips"], moved, buf["log_count"], buf["log"], np.int32(logging), buf["log_pass"],
+                buf["width"], np.int32(in_graph)))
         launch(module.get_function("t1_release"), n_slots,
-               (buf["claim"], buf["cand"], buf["counters"], np.int32(n_slots)))
+               (buf["claim"], buf["cand"], buf["counters"], np.int32(n_slots), buf["log_pass"]))
         integrator = simulation.operations.integrator
         if self.reset_velocities and integrator is not None:
             integrator.reset_vertices(moved)
         simulation.state_changed()
 
     def _update_gpu(self, simulation):
-        """Detect, one small read-back (candidate count, full rows), apply, release: see t1.cu.
+        """Detect and check, one small read-back (candidates, full rows, claimants), apply, release:
+        see t1.cu.
         Inside a CUDA graph: no read-back, see :meth:`capture_ready`."""
         import cupy as cp
         state = simulation.state
         buf = self._gpu_buffers(state)
         if simulation.capturing:
             module, size, new_length = self._detect(simulation, buf)
-            self._apply(simulation, buf, module, size, new_length, buf["capacity"], -1, True)
+            self._apply(simulation, buf, module, size, new_length, buf["capacity"], self.counting(simulation), True)
             return
         if buf["width_host"] != state.max_sides:
             buf["width"].fill(state.max_sides)
             buf["width_host"] = state.max_sides
         while True:
             module, size, new_length = self._detect(simulation, buf)
-            n_cand, widen = (int(x) for x in buf["counters"].get())   # the one read-back
+            n_cand, widen, n_claim = (int(x) for x in buf["counters"].get())   # the one read-back
             if n_cand <= buf["capacity"]:
                 break
             cap = 2 * n_cand   # rare: more candidates than room; undo this pass's claims, grow, redo
             launch(module.get_function("t1_release"), buf["capacity"],
-                   (buf["claim"], buf["cand"], buf["counters"], np.int32(buf["capacity"])))
+                   (buf["claim"], buf["cand"], buf["counters"], np.int32(buf["capacity"]), buf["log_pass"]))
             buf["claim"].fill(np.iinfo(np.int32).max)
             buf["total_refused"] -= buf["refused"].astype(cp.uint64)
             self._gpu_buffers(state, cap)
-        if n_cand == 0:
+        if n_claim == 0:        # no candidate, or every one refused: nothing claimed, nothing flips
             return
         if widen:
             pad = cp.full((state.n_cells, 1), -1, dtype=cp.int32)
@@ -126,36 +135,48 @@ class DevicePass:
             buf["width"].fill(state.max_sides)
             buf["width_host"] = state.max_sides
         counting = self.counting(simulation)
-        if counting and buf["log_bound"] + n_cand > len(buf["log"]):   # the log might overflow: replay it first
+        if counting and buf["log_bound"] + n_claim > len(buf["log"]):   # the log might overflow: replay it first
             self._flush_log(state)
-            if n_cand > len(buf["log"]):
-                buf["log"] = cp.empty((2 * n_cand, _LOG_INTS), cp.int32)
-        buf["log_bound"] += n_cand if counting else 0
-        buf["passes"] += 1
-        self._apply(simulation, buf, module, size, new_length, n_cand, buf["passes"] if counting else -1, False)
+            if n_claim > len(buf["log"]):
+                buf["log"] = cp.empty((2 * n_claim, _LOG_INTS), cp.int32)
+        buf["log_bound"] += n_claim if counting else 0
+        self._apply(simulation, buf, module, size, new_length, n_cand, counting, False)
         state.topology_version += 1
 
     # ------------------------------------------------------------------ CUDA graphs
     def capture_ready(self, simulation, steps):
         """Passes inside a CUDA graph read nothing back, so nothing may need to grow there: room for a
-        candidate per edge, and the cell table padded with ``steps`` spare columns (a cell gains at
-        most one side per pass); the width the step-by-step path would give it is kept on the device
-        (t1_apply grows it) and :meth:`capture_done` trims the table to it. Not with the flip-back
-        bookkeeping (``counting``), whose log the host replays. The width is read back only when
-        the bound ``width_bound`` (last known width plus the passes since) nears the table's edge."""
-        if self.counting(simulation):
-            return None
-        import cupy as cp
+        candidate per edge, the cell table padded for the steps (:meth:`_padded_table`) and, with the
+        flip-back bookkeeping (``counting``), the flip log replayed now if the steps' flips might
+        not fit (a pass flips at most one edge per four cells)."""
         state = simulation.state
         buf = self._gpu_buffers(state, 3 * state.n_vertices // 2)
+        log = None
+        if self.counting(simulation):
+            room = steps * (state.n_cells // 4)
+            if buf["log_bound"] + room > len(buf["log"]):
+                self._flush_log(state)
+                if room > len(buf["log"]):
+                    import cupy as cp
+                    buf["log"] = cp.empty((2 * room, _LOG_INTS), cp.int32)
+            buf["log_bound"] += room
+            log = buf["log"].data.ptr
+        return self._padded_table(state, buf, steps).data.ptr, log
+
+    def _padded_table(self, state, buf, steps):
+        """The cell table padded with ``steps`` spare columns (a cell gains at most one side per
+        pass); the width the step-by-step path would give it is kept on the device (t1_apply grows
+        it) and :meth:`capture_done` trims the table to it. The width is read back only when the
+        bound ``width_bound`` (last known width plus the passes since) nears the table's edge."""
+        import cupy as cp
         table = buf["table"]
         if table is not None and state.cell_vertices is table:
             if buf["width_bound"] + steps > table.shape[1]:       # the width may be near the edge: look
                 buf["width_bound"] = int(buf["width"].get()[0])
             if buf["width_bound"] + steps <= table.shape[1]:
                 buf["width_bound"] += steps
-                return table.data.ptr
-            self.capture_done(simulation)
+                return table
+            self.capture_done(self._simulation)
         width = state.max_sides
         if table is None or table.shape[1] - width < steps:
             table = buf["table"] = cp.full((state.n_cells, width + steps + SPARE_COLUMNS), -1, dtype=cp.int32)
@@ -164,7 +185,7 @@ class DevicePass:
         buf["width"].fill(width)
         buf["width_bound"] = width + steps   # at most one more column per pass
         buf["width_host"] = -1               # the step-by-step path sets it again
-        return table.data.ptr
+        return table
 
     def capture_done(self, simulation):
         """The cell table back to the width the step-by-step path would have (one small read-back)."""
@@ -181,6 +202,7 @@ class DevicePass:
             return
         n = int(buf["log_count"].get()[0])
         buf["log_bound"] = 0
+        buf["log_pass"].fill(0)       # passes are numbered from here
         if n == 0:
             return
         log = buf["log"][:n].get()

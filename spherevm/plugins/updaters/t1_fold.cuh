@@ -27,31 +27,29 @@ __device__ __forceinline__ bool t1_row_inverted(const double* pos, const int* vn
     return t1_inverted(load3(pos, w), n[0], n[1], n[2], s);
 }
 
-// A cell's signed area now: the fan about its first vertex over its edges, in row order.
-__device__ __forceinline__ double t1_area_now(const double* pos, const int* row, int n, Surface::Size s)
+// A cell's signed areas now and after the flip, in one walk of its row (each position loaded once:
+// the check is one thread's chain of dependent loads). Now: the fan about its first vertex over its
+// edges, in row order. After, as the force will measure it: the fan about its first vertex after
+// the flip (`moved` if the row starts with u or v) over its edges that do not touch u or v, in row
+// order, then its new edges along the chain ends[0..m).
+__device__ __forceinline__ void t1_cell_areas(const double* pos, const int* row, int n, int u, int v, vec3 moved,
+                                              const vec3* ends, int m, Surface::Size s, double* now, double* after)
 {
-    vec3 apex = load3(pos, row[0]);
-    double area = 0.0;
-    for (int j = 0; j < n; ++j)
-        area += Surface::triangle_area(apex, load3(pos, row[j]), load3(pos, row[j + 1 < n ? j + 1 : 0]), s);
-    return area;
-}
-
-// The signed area of a cell after the flip, as the force will measure it: the fan about its first
-// vertex after the flip (`moved` if the row starts with u or v) over its edges that do not touch u
-// or v, in row order, then its new edges along the chain ends[0..m).
-__device__ __forceinline__ double t1_area_after(const double* pos, const int* row, int n, int u, int v,
-                                                vec3 moved, const vec3* ends, int m, Surface::Size s)
-{
-    vec3 apex = row[0] == u || row[0] == v ? moved : load3(pos, row[0]);
-    double area = 0.0;
+    int p = row[0];
+    vec3 first = load3(pos, p), xp = first;
+    vec3 apex = p == u || p == v ? moved : first;
+    double a_now = 0.0, a_after = 0.0;
     for (int j = 0; j < n; ++j) {
-        int p = row[j], q = row[j + 1 < n ? j + 1 : 0];
-        if (p == u || p == v || q == u || q == v) continue;
-        area += Surface::triangle_area(apex, load3(pos, p), load3(pos, q), s);
+        int q = row[j + 1 < n ? j + 1 : 0];
+        vec3 xq = j + 1 < n ? load3(pos, q) : first;
+        a_now += Surface::triangle_area(first, xp, xq, s);
+        if (!(p == u || p == v || q == u || q == v)) a_after += Surface::triangle_area(apex, xp, xq, s);
+        p = q;
+        xp = xq;
     }
-    for (int k = 0; k + 1 < m; ++k) area += Surface::triangle_area(apex, ends[k], ends[k + 1], s);
-    return area;
+    for (int k = 0; k + 1 < m; ++k) a_after += Surface::triangle_area(apex, ends[k], ends[k + 1], s);
+    *now = a_now;
+    *after = a_after;
 }
 
 #define T1_CLEAN 0      // folding.CLEAN, INVERTED, FOLDS
@@ -73,13 +71,13 @@ __device__ __forceinline__ int t1_fold_level(const double* pos, const int* vn, c
     const int* row2 = cell_vertices + (long)C2 * max_sides;
     const int* row3 = cell_vertices + (long)C3 * max_sides;
     const int* row4 = cell_vertices + (long)C4 * max_sides;
-    double a1 = t1_area_after(pos, row1, sides[C1], u, v, px, e1, 3, s);
-    double a2 = t1_area_after(pos, row2, sides[C2], u, v, py, e2, 3, s);
-    double a3 = t1_area_after(pos, row3, sides[C3], u, v, py, e3, 4, s);
-    double a4 = t1_area_after(pos, row4, sides[C4], u, v, px, e4, 4, s);
+    double n1, n2, n3, n4, a1, a2, a3, a4;
+    t1_cell_areas(pos, row1, sides[C1], u, v, px, e1, 3, s, &n1, &a1);
+    t1_cell_areas(pos, row2, sides[C2], u, v, py, e2, 3, s, &n2, &a2);
+    t1_cell_areas(pos, row3, sides[C3], u, v, py, e3, 4, s, &n3, &a3);
+    t1_cell_areas(pos, row4, sides[C4], u, v, px, e4, 4, s, &n4, &a4);
     if (!(a1 > 0.0) || !(a2 > 0.0) || !(a3 > 0.0) || !(a4 > 0.0)) return T1_FOLDS;
-    double before = ((t1_area_now(pos, row1, sides[C1], s) + t1_area_now(pos, row2, sides[C2], s))
-                     + t1_area_now(pos, row3, sides[C3], s)) + t1_area_now(pos, row4, sides[C4], s);
+    double before = ((n1 + n2) + n3) + n4;
     if (!(fabs(((a1 + a2) + a3) + a4 - before) < Surface::half_area(s))) return T1_FOLDS;
     bool now[6] = {t1_row_inverted(pos, vn, v, -1, px, s), t1_row_inverted(pos, vn, u, -1, py, s),
                    t1_row_inverted(pos, vn, a, -1, px, s), t1_row_inverted(pos, vn, d, -1, px, s),

@@ -14,6 +14,9 @@ import os
 import numpy as np
 
 _POOL = None
+#: threads for large NumPy states (None: one per CPU core); a process pool's workers set 1, so that
+#: its processes do not each start a thread per core (:func:`single_threaded`)
+THREADS = None
 PARALLEL_MIN_VERTICES = 16384   # below this, one thread; blocks hold at least half as many items
 BLOCK_VERTICES = 16384          # per block: its per-corner vectors (3 x 3 x 16384 doubles, 1.2 MB) stay in cache
 
@@ -25,7 +28,7 @@ def blocks(state, n, size=BLOCK_VERTICES):
     on 2 cores: 28-30 ms in blocks of 16,384 vertices, 32-35 ms in blocks of 32,768 or 65,536; a
     pass whose blocks each add into whole-length sums takes ``size=n``: one block per core). One
     range on the GPU and for small states."""
-    workers = os.cpu_count() or 1
+    workers = THREADS or os.cpu_count() or 1
     if state.device.is_gpu or n < PARALLEL_MIN_VERTICES:
         return [(0, n)]
     count = max(min(workers, n // (PARALLEL_MIN_VERTICES // 2)), -(-n // size))
@@ -37,12 +40,19 @@ def in_parallel(fn, items, threads=True):
     """``[fn(item) for item in items]``, on a thread pool when there are several items (and
     ``threads``: a small state's passes run in turn, a pool's hand-over costing tens of us)."""
     global _POOL
-    if len(items) == 1 or not threads:
+    if len(items) == 1 or not threads or THREADS == 1:
         return [fn(item) for item in items]
     if _POOL is None:
         from concurrent.futures import ThreadPoolExecutor
-        _POOL = ThreadPoolExecutor(max_workers=os.cpu_count(), thread_name_prefix="spherevm")
+        _POOL = ThreadPoolExecutor(max_workers=THREADS or os.cpu_count(), thread_name_prefix="spherevm")
     return [f.result() for f in [_POOL.submit(fn, item) for item in items]]
+
+
+def single_threaded():
+    """From now on this process computes large NumPy states in one thread (for a pool's workers:
+    one process per core, each with a thread per core, would starve the process driving the GPU)."""
+    global THREADS
+    THREADS = 1
 
 
 def corner_index(state):

@@ -230,10 +230,13 @@ class T1(DevicePass, Updater):
         worst = np.zeros(state.n_replicas, dtype=np.int64)
         np.maximum.at(worst, rep[back], self._rejoins[pos[back]])
         self.flip_backs = np.maximum(self.flip_backs, worst)
-        keys = np.concatenate([self._separated, removed])
-        counts = np.concatenate([self._rejoins, np.zeros(len(removed), dtype=np.int64)])
-        self._separated, first = np.unique(keys, return_index=True)
-        self._rejoins = counts[first]
+        new = np.unique(removed)         # merged into the sorted memory (no sort of all of it: a sweep
+        at = np.searchsorted(self._separated, new)      # replays tens of thousands of passes)
+        known = np.zeros(len(new), dtype=bool)
+        inside = at < len(self._separated)
+        known[inside] = self._separated[at[inside]] == new[inside]
+        self._separated = np.insert(self._separated, at[~known], new[~known])
+        self._rejoins = np.insert(self._rejoins, at[~known], 0)
 
     # ------------------------------------------------------------------ narrowing (minimize)
     narrowable = True

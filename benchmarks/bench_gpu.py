@@ -130,7 +130,7 @@ def main(argv=None):
           f"CUDA runtime {facts.get('cuda_runtime')}")
     print(f"# device-to-device copy bandwidth: {bw:.0f} GB/s")
     print("# launches per step: force 2 kernels; FIRE iteration = force + 3 kernels; "
-          "Brownian step with T1 check = T1 pass (1 memset + 1 kernel + 1 read-back of 8 bytes) + force + 1 kernel; "
+          "Brownian step with T1 check = T1 pass (1 memset + 2 kernels + 1 read-back of 12 bytes) + force + 1 kernel; "
           "in graphs: the same steps through Simulation.run(graphs=True), no read-back, per step")
     print("# GB/s: bytes each kernel must move at least (every array once) over the measured time")
     head = (f"{'system':>12} {'force ms':>9} {'GB/s':>6} {'FIRE it ms':>11} {'GB/s':>6} {'of copy':>8} "

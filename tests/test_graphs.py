@@ -286,3 +286,28 @@ def test_minimize_graphs_refusals():
         sim.minimize(max_steps=100, graphs=True)
     result = sim.minimize(max_steps=100)           # auto: step by step from the refusal on
     assert result.steps.max() <= 100
+
+
+@pytest.mark.gpu
+def test_flip_log_in_graphs_has_room_for_each_stretch():
+    """Flip-back bookkeeping in graphs (``count_flip_backs=True`` under Brownian dynamics): with the
+    log cut to four rows, a stretch whose flips might not fit must replay and grow it first, so
+    nothing is written past its end; the flip-back memory is the step-by-step run's."""
+    import cupy as cp
+    out = []
+    for use in (True, False):
+        sim = dynamics_simulation(hot_ensemble("sphere"), "gpu", Brownian(dt=0.01, T=0.3))
+        sim.operations.updaters[0] = t1 = T1(count_flip_backs=True)
+        sim.run(1)                                   # step by step: the device buffers exist
+        guard = cp.full((64, 6), -7, dtype=cp.int32)
+        t1._gpu_buffers(sim.state)["log"] = guard[:4]
+        sim.run(100, check_every=50, graphs=use)
+        assert bool((guard[4:] == -7).all()), "a pass wrote past the end of the flip log"
+        t1._sync_counters()
+        out.append((snapshot(sim.state), t1._separated.copy(), t1._rejoins.copy(), t1.flip_backs.copy()))
+    (a, *memory_a), (b, *memory_b) = out
+    for key in b:
+        assert a[key].tobytes() == b[key].tobytes(), key
+    for x, y in zip(memory_a, memory_b):
+        assert np.array_equal(x, y)
+    assert memory_b[1].sum() > 0, "pairs were joined again"

@@ -159,7 +159,9 @@ class StepGraphs:
             for _ in range(repeats):
                 self.graphs[key][k].launch(self.stream)
         sim.timestep += steps
-        self._iterations(steps)
+        integrator = sim.operations.integrator
+        if hasattr(integrator, "iteration"):   # a minimiser's count, which its steps advance on the host
+            integrator.iteration += steps
         if self.minimizing:          # the updaters of the last timestep ran, those not in_minimize held back
             sim._updated_at, sim._held_back = sim.timestep, True
         else:
@@ -173,7 +175,8 @@ class StepGraphs:
         timestep is then put back, the graph has not run yet)."""
         import cupy as cp
         sim = self.sim
-        t0, i0 = sim.timestep, self._iterations(0)
+        integrator = sim.operations.integrator
+        t0, i0 = sim.timestep, getattr(integrator, "iteration", None)
         sim._step_counter = self.counter
         sim.state_changed()                  # the first step computes its forces inside the graph
         try:
@@ -204,17 +207,9 @@ class StepGraphs:
             sim.state_changed()
         if capture:
             sim.timestep = t0
-            self._iterations(i0 - self._iterations(0))
+            if i0 is not None:
+                integrator.iteration = i0
         return graph
-
-    def _iterations(self, steps):
-        """Add ``steps`` to the integrator's own count of iterations (a minimiser's ``iteration``,
-        which its steps advance on the host and a replay does not); returns the count."""
-        integrator = self.sim.operations.integrator
-        if not hasattr(integrator, "iteration"):
-            return 0
-        integrator.iteration += steps
-        return integrator.iteration
 
     def pause(self):
         """Before the host looks at the State: each operation leaves it as the step-by-step path would."""

@@ -270,7 +270,7 @@ class Integrator(Operation):
         array while the replica count stays: CUDA graphs hold its address)."""
         if self._active_device is None:
             held = getattr(self, "_active_held", None)
-            if held is not None and not isinstance(held, np.ndarray) and held.shape == self.active.shape:
+            if self._simulation.state.device.is_gpu and held is not None and held.shape == self.active.shape:
                 held.set(self.active)
             else:
                 held = self._active_held = self._simulation.state.device.asarray(self.active)

@@ -53,9 +53,8 @@ def _tiling_arrays(surface: str, n_cells: int, seeds):
 
 
 def _tiling_worker():
-    """A tiling worker: one thread (the pool has a process per core; measured on one H200 host,
-    16 cores: with a thread per core in each worker, the process driving the GPU was starved and a
-    0.8 s chunk took 18.6 s), and Ctrl-C is the main process's business."""
+    """A tiling worker: one thread (the pool has a process per core already; a thread per core in
+    each would crowd out the process driving the GPU), and Ctrl-C is the main process's business."""
     from ..constraints.corners import single_threaded
     single_threaded()
     _ignore_interrupts()

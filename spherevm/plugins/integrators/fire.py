@@ -197,12 +197,10 @@ class FIRE(Minimizer):
                 self.n_positive, keep, scale, step, np.int32(self.n_min), np.float64(self.f_inc),
                 np.float64(self.f_dec), np.float64(self.alpha_start), np.float64(self.f_alpha),
                 np.float64(self.dt_max)))
-        if getattr(self, "_error", None) is None:
-            self._error = cp.full(1, np.iinfo(np.uint64).max, dtype=cp.uint64)
         launch(module.get_function("fire_move"), nv,
                (state.positions, self.velocities, forces, state.vertex_replica, size, active,
                 keep, scale, step, np.int32(nv), self._length_unit(state), np.float64(self.max_step),
-                *simulation.kernel_timestep(), self._error))
+                *simulation.kernel_timestep(), self._error_word()))
         simulation.state_changed()
 
     def capture_ready(self, simulation, steps):
@@ -212,12 +210,15 @@ class FIRE(Minimizer):
         ``Simulation.minimize`` ends each stretch at the next check."""
         if steps > self.steps_to_check():
             return None
-        self.active_on_device()
+        return tuple(a.data.ptr for a in (self.velocities, self.replica_dt, self.alpha, self.n_positive,
+                                          self.active_on_device(), self._error_word()))
+
+    def _error_word(self):
+        """The device word fire_move flags an exploding step in (made once; :meth:`check` reads it)."""
         if getattr(self, "_error", None) is None:
             import cupy as cp
             self._error = cp.full(1, np.iinfo(np.uint64).max, dtype=cp.uint64)
-        return tuple(a.data.ptr for a in (self.velocities, self.replica_dt, self.alpha, self.n_positive,
-                                          self._active_device, self._error))
+        return self._error
 
     @property
     def loggables(self):

@@ -15,9 +15,10 @@
 #define CAND_INTS 13   // u, k, v, a, b, c, d, C1, C2, C3, C4, replica, turn
 #define LOG_INTS 6     // pass, C1, C2, C3, C4, replica
 
-// counters: [0] short edges listed (candidates), [1] a C3/C4 row of a candidate that was not refused has
-// width[0] entries (widen the table), [2] candidates not refused (claimants; t1_check). width[0]: the table's width as the step-by-step path holds it (inside a
-// CUDA graph the table has spare columns beyond it, max_sides is the stride). size: the State's radius or box.
+// counters: [0] short edges listed (candidates), [1] a C3/C4 row of a candidate that was not refused
+// has width[0] entries (widen the table), [2] candidates not refused (claimants; t1_check).
+// width[0]: the table's width as the step-by-step path holds it (inside a CUDA graph the table has
+// spare columns beyond it, max_sides is the stride). size: the State's radius or box.
 // A candidate's entry: u, k, v, a, b, c, d, C1, C2, C3, C4, replica, and (set by t1_check) turn.
 extern "C" __global__ void t1_detect(
     const double* __restrict__ pos, const int* __restrict__ vn, const int* __restrict__ vc,

@@ -76,12 +76,6 @@ class Device:
             view[...] = data
         return buffer, view
 
-    def segment_max(self, values, segments, n_segments):
-        """Per-segment maximum of non-negative ``values`` (0 for an empty segment)."""
-        out = self.xp.zeros(n_segments)
-        self.xp.maximum.at(out, segments, values)
-        return out
-
     def synchronize(self):
         if self.is_gpu:
             self.xp.cuda.get_current_stream().synchronize()
@@ -268,3 +262,67 @@ def weighted_bincount(index, weights, minlength):
     out = cupy.empty(minlength)
     launch(_MODULES["ordered_bincount"], minlength, (order.astype(cupy.int64), start, w, np.int64(minlength), out))
     return out
+
+
+_REPLICA_SUMMARY = r"""
+// out (n_replicas + n_replicas + 1 words, zeroed before): per replica the largest |F_v| (its bits:
+// non-negative doubles order as their bits, and a NaN norm, above +inf, wins as in a max that
+// propagates NaN), the energy's bits, then n_vertices - v for the first vertex v whose position is
+// not finite (0: none). |F|^2 summed as NumPy sums a row, without fused multiply-adds.
+extern "C" __global__ void replica_summary(const double* forces, const double* pos, const int* vertex_replica,
+                                           const double* energy, int n_vertices, int n_replicas,
+                                           unsigned long long* out)
+{
+    int v = blockIdx.x * blockDim.x + threadIdx.x;
+    if (energy != nullptr && v < n_replicas) out[n_replicas + v] = (unsigned long long)__double_as_longlong(energy[v]);
+    if (v >= n_vertices) return;
+    if (forces != nullptr) {
+        double fx = forces[3 * v], fy = forces[3 * v + 1], fz = forces[3 * v + 2];
+        double m = sqrt(__dadd_rn(__dadd_rn(__dmul_rn(fx, fx), __dmul_rn(fy, fy)), __dmul_rn(fz, fz)));
+        atomicMax(out + vertex_replica[v], (unsigned long long)__double_as_longlong(m));
+    }
+    if (!(isfinite(pos[3 * v]) && isfinite(pos[3 * v + 1]) && isfinite(pos[3 * v + 2])))
+        atomicMax(out + 2 * n_replicas, (unsigned long long)(n_vertices - v));
+}
+"""
+
+
+def replica_summary(positions, vertex_replica, n_replicas, forces=None, energy=None):
+    """What a convergence check reads, in one array on the positions' device (one read-back on
+    the GPU instead of one per quantity): per replica the largest vertex force norm ``max |F_v|``
+    (0 for a replica without vertices) and the ``energy``, then the first vertex whose position is
+    not finite. ``forces`` and ``energy`` may be None (only the positions are looked at).
+    :func:`read_replica_summary` unpacks it; ``summary[:n_replicas].view(float64)`` is the
+    maximum force on the device. Maximum and finiteness are exact, so both paths give the same
+    bits for the same forces (the norm is summed in NumPy's order, without fused multiply-adds)."""
+    nv, nr = len(positions), n_replicas
+    if isinstance(positions, np.ndarray):
+        out = np.zeros(2 * nr + 1, dtype=np.uint64)
+        if forces is not None:
+            fmax = np.zeros(nr)
+            with np.errstate(invalid="ignore"):   # a NaN force is what a check is there to report
+                np.maximum.at(fmax, vertex_replica, np.sqrt((forces * forces).sum(axis=1)))
+            out[:nr] = fmax.view(np.uint64)
+        if energy is not None:
+            out[nr:2 * nr] = np.asarray(energy, dtype=np.float64).view(np.uint64)
+        bad = np.flatnonzero(~np.isfinite(positions).all(axis=1))
+        out[2 * nr] = nv - bad[0] if len(bad) else 0
+        return out
+    import cupy
+    if "replica_summary" not in _MODULES:
+        _MODULES["replica_summary"] = cupy.RawKernel(_REPLICA_SUMMARY, "replica_summary")
+    out = cupy.zeros(2 * nr + 1, dtype=cupy.uint64)
+    null = np.uintp(0)
+    launch(_MODULES["replica_summary"], max(nv, nr),
+           (null if forces is None else forces, positions, vertex_replica, null if energy is None else energy,
+            np.int32(nv), np.int32(nr), out))
+    return out
+
+
+def read_replica_summary(summary, n_vertices, n_replicas):
+    """``(max_force, energy, first_bad_vertex)`` in NumPy from :func:`replica_summary`'s array (one
+    device-to-host copy); ``first_bad_vertex`` is -1 when every position is finite."""
+    host = summary.get() if not isinstance(summary, np.ndarray) else summary
+    nr = n_replicas
+    last = int(host[2 * nr])
+    return host[:nr].view(np.float64).copy(), host[nr:2 * nr].view(np.float64).copy(), n_vertices - last if last else -1

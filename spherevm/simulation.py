@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import shapes
-from .device import resolve
+from .device import read_replica_summary, replica_summary, resolve
 from .operations import Operations
 from .plugins.base import Minimizer, compute_all
 from .validation import GPU_RUN_BYTES_PER_CELL, check_memory, integer
@@ -169,8 +169,8 @@ class Simulation:
             if not self.operations.forces:   # free vertices: zero force, zero energy
                 xp = self.device.xp
                 zero = xp.zeros(self._state.n_replicas)
-                self._cache = (xp.zeros_like(self._state.positions), zero, xp.zeros(self._state.n_cells))
-                return self._cache[:2]
+                self._cache = [xp.zeros_like(self._state.positions), zero, xp.zeros(self._state.n_cells), None, None]
+                return self._cache[0], self._cache[1]
             results = compute_all(self.operations.forces, self._state)
             forces, energy = results[0].forces, results[0].energy
             for res in results[1:]:
@@ -178,8 +178,8 @@ class Simulation:
                 energy = energy + res.energy
             cells = [res.cell_energy for res in results]
             cell_energy = None if any(c is None for c in cells) else sum(cells[1:], cells[0])
-            self._cache = (forces, energy, cell_energy)
-        return self._cache[:2]
+            self._cache = [forces, energy, cell_energy, None, None]    # then replica_summary's, device and host
+        return self._cache[0], self._cache[1]
 
     def cell_energy(self):
         """Per-cell energy summed over the forces (device array), or None if a force does not report it."""
@@ -188,10 +188,25 @@ class Simulation:
 
     def max_force(self):
         """Largest vertex force magnitude per replica (device array)."""
-        xp = self.device.xp
-        forces, _ = self.compute_forces()
-        mag = xp.sqrt((forces * forces).sum(axis=1))
-        return self.device.segment_max(mag, self._state.vertex_replica, self._state.n_replicas)
+        return self._summary()[:self._state.n_replicas].view(np.float64)
+
+    def replica_summary(self):
+        """``(max_force, energy, first_bad_vertex)`` in NumPy, from one device-to-host copy (a
+        convergence check reads all three): the largest vertex force magnitude and the energy per
+        replica, and the first vertex whose position is not finite (-1 if none). Cached with the
+        forces until the state changes."""
+        summary = self._summary()
+        if self._cache[4] is None:
+            self._cache[4] = read_replica_summary(summary, self._state.n_vertices, self._state.n_replicas)
+        return self._cache[4]
+
+    def _summary(self):
+        """:func:`spherevm.device.replica_summary` of the current forces, cached with them."""
+        forces, energy = self.compute_forces()
+        if self._cache[3] is None:
+            state = self._state
+            self._cache[3] = replica_summary(state.positions, state.vertex_replica, state.n_replicas, forces, energy)
+        return self._cache[3]
 
     @property
     def loggables(self) -> dict:
@@ -315,11 +330,14 @@ class Simulation:
         integrator's own error, such as an exploding step flagged on the GPU)."""
         if self.operations.integrator is not None:
             self.operations.integrator.check(self)
-        xp = self.device.xp
-        pos = self._state.positions
-        if not bool(xp.isfinite(pos).all()):
-            v = int(self.device.to_numpy(xp.flatnonzero(~xp.isfinite(pos).all(axis=1)))[0])
-            r = int(self._state.vertex_replica_np()[v])
+        state = self._state
+        if self._cache is not None and self._cache[3] is not None:   # read with the forces already (a check)
+            v = self.replica_summary()[2]
+        else:
+            v = read_replica_summary(replica_summary(state.positions, state.vertex_replica, state.n_replicas),
+                                     state.n_vertices, state.n_replicas)[2]
+        if v >= 0:
+            r = int(state.vertex_replica_np()[v])
             raise FloatingPointError(f"non-finite position at timestep {self.timestep}: replica {r}, vertex {v}; "
                                      "reduce dt or check the forces (the last good frame is on disk)")
 

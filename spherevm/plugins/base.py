@@ -317,8 +317,12 @@ class Minimizer(Integrator):
         super().__init__(trigger)
         self.configure(force_tol=force_tol, energy_tol=energy_tol, check_every=check_every)
 
+    _units = None    # (State, forces, energy unit, force unit) of the minimisation under way
+
     def configure(self, force_tol=None, energy_tol=None, check_every=None):
-        """Set the stopping rules (None keeps one as it is)."""
+        """Set the stopping rules (None keeps one as it is); ``Simulation.minimize`` calls it first,
+        so each minimisation works out its tolerance units afresh."""
+        self._units = None
         if force_tol is not None:
             self.force_tol = float(non_negative("force_tol", force_tol, per_item="a scalar"))
         if energy_tol is not None:
@@ -400,11 +404,12 @@ class Minimizer(Integrator):
         """Stop the replicas that reached a tolerance now, or that an operation halts."""
         self._checked_at = self.iteration
         state = simulation.state
-        to_np = state.device.to_numpy
-        _, energy = simulation.compute_forces()
-        fmax = to_np(simulation.max_force())
-        epc = to_np(energy) / state.cells_per_replica
-        energy_unit, force_unit = self.tolerance_units(simulation)
+        fmax, energy, _ = simulation.replica_summary()     # one read-back
+        epc = energy / state.cells_per_replica
+        forces = tuple(simulation.operations.forces)
+        if self._units is None or self._units[0] is not state or self._units[1] != forces:
+            self._units = (state, forces, *self.tolerance_units(simulation))   # once per minimisation, State, forces
+        energy_unit, force_unit = self._units[2:]
         running = ~self.stopped
         by_force = running & (fmax < self.force_tol * force_unit)
         by_energy = running & ~by_force & (epc < self.energy_tol * energy_unit)

@@ -312,8 +312,9 @@ class T1(DevicePass, Updater):
 
     # ------------------------------------------------------------------ reporting
     def halted(self):
-        """Per-replica mask of replicas caught flipping back and forth, for Simulation.minimize."""
-        self._sync_counters()
+        """Per-replica mask of replicas caught flipping back and forth, for Simulation.minimize (at
+        every convergence check: only the flip log is read back)."""
+        self._sync_flip_backs()
         return self.flip_backs >= self.max_flip_backs
 
     halt_reason = "t1_oscillation"

@@ -212,8 +212,14 @@ class DevicePass:
         for pass_rows in np.split(log, np.flatnonzero(np.diff(log[:, 0])) + 1):  # passes, not flips
             self._count_flip_backs(state, pass_rows[:, 1:5].astype(np.int64), pass_rows[:, 5], buf["n_cells"])
 
+    def _sync_flip_backs(self):
+        """Bring the flip-back counts up to date (the flip log replayed; halting needs no more)."""
+        buf = getattr(self, "_gpu", None)
+        if buf is not None:
+            self._flush_log(buf["state"])
+
     def _sync_counters(self):
-        """Bring the GPU counters to the host attributes (for logging and halting)."""
+        """Bring the GPU counters to the host attributes (for logging, checkpoints, narrowing)."""
         buf = getattr(self, "_gpu", None)
         if buf is None:
             return

@@ -1,9 +1,9 @@
 // T1 neighbour exchanges on the device: the CUDA path of t1.py, same rules and same geometry.
-// A pass is four kernels: t1_detect (one thread per vertex, its edges to higher-numbered
+// A pass is three kernels: t1_detect (one thread per vertex, its edges to higher-numbered
 // neighbours) lists the short edges; t1_check (one thread per listed edge) applies the refusal
 // rules and lets each remaining candidate claim its four cells (lowest edge index wins); after one
-// small read-back of the counters, t1_apply (one thread per candidate) flips the winners and
-// t1_release gives the cells back. Winners touch disjoint cells and vertices, so they need no locks.
+// small read-back of the counters, t1_apply (one thread per candidate) flips the winners and gives
+// back the cells each candidate holds. Winners touch disjoint cells and vertices, so they need no locks.
 // The checks are a kernel of their own because they are long (t1_fold.cuh): inside t1_detect their
 // registers slowed the short-edge test of every vertex (356 us of a 1e6-cell step on an H200).
 // Compiled once per surface (geometry/surface.cuh): the short-edge test and the new positions are
@@ -20,13 +20,16 @@
 // width[0]: the table's width as the step-by-step path holds it (inside a CUDA graph the table has
 // spare columns beyond it, max_sides is the stride). size: the State's radius or box.
 // A candidate's entry: u, k, v, a, b, c, d, C1, C2, C3, C4, replica, and (set by t1_check) turn.
+// log_pass: the pass's number in the flip log, counted since the log was last replayed (here, so
+// that every thread of t1_apply, a later kernel, reads the same one).
 extern "C" __global__ void t1_detect(
     const double* __restrict__ pos, const int* __restrict__ vn, const int* __restrict__ vc,
     const int* __restrict__ vertex_replica, const double* __restrict__ size, const double* __restrict__ chord2,
     const bool* __restrict__ active, int n_vertices, int* __restrict__ counters, int* __restrict__ cand,
-    double* __restrict__ cand_len, int capacity)
+    double* __restrict__ cand_len, int capacity, int* __restrict__ log_pass)
 {
     int u = blockIdx.x * blockDim.x + threadIdx.x;
+    if (u == 0) *log_pass += 1;
     if (u >= n_vertices) return;
     int r = vertex_replica[u];
     if (!active[r]) return;
@@ -126,7 +129,7 @@ __device__ void split_in_row(int* row, int* n, int x, int first, int second) {
 // new_length[r] > 0: absolute new length per replica; else length_factor times the old length.
 extern "C" __global__ void t1_apply(
     double* __restrict__ pos, int* __restrict__ vn, int* __restrict__ vc, int* __restrict__ cell_vertices,
-    int* __restrict__ sides, const int* __restrict__ claim, const int* __restrict__ cand,
+    int* __restrict__ sides, int* __restrict__ claim, const int* __restrict__ cand,
     const double* __restrict__ cand_len, const int* __restrict__ counters, int n_slots, int max_sides,
     const double* __restrict__ size, const double* __restrict__ new_length, double length_factor,
     int* __restrict__ flips, unsigned long long* __restrict__ total_flips, int* __restrict__ moved,
@@ -142,8 +145,14 @@ extern "C" __global__ void t1_apply(
     const int* e = cand + (long)i * CAND_INTS;
     int u = e[0], k = e[1], v = e[2], a = e[3], b = e[4], c = e[5], d = e[6];
     int C1 = e[7], C2 = e[8], C3 = e[9], C4 = e[10], r = e[11];
-    int index = 3 * u + k;
-    if (claim[C1] != index || claim[C2] != index || claim[C3] != index || claim[C4] != index) return;
+    // the claims decide, then this candidate gives back the cells it holds (claims stay at INT_MAX
+    // between passes, so a pass costs no sweep over all cells): a cell is held by one candidate, whose
+    // thread alone resets it after reading it, so no other thread's decision can change
+    int index = 3 * u + k, cells[4] = {C1, C2, C3, C4};
+    bool mine[4], won = true;
+    for (int j = 0; j < 4; ++j) { mine[j] = claim[cells[j]] == index; won = won && mine[j]; }
+    for (int j = 0; j < 4; ++j) if (mine[j]) claim[cells[j]] = 0x7fffffff;
+    if (!won) return;
     if (sides[C3] >= max_sides || sides[C4] >= max_sides) return;   // cannot happen: the table was widened
     int X = v, Y = u;   // counter-clockwise rotation: v ends up on the C1 side
     vn[3 * X] = Y; vn[3 * X + 1] = d; vn[3 * X + 2] = a;
@@ -171,19 +180,6 @@ extern "C" __global__ void t1_apply(
     if (!logging) return;          // no flip-back bookkeeping (T1.counting)
     int slot = atomicAdd(log_count, 1);
     int* entry = log + (long)slot * LOG_INTS;
-    // the pass, counted since the log was last replayed (t1_release)
+    // the pass, counted since the log was last replayed (t1_detect)
     entry[0] = *log_pass; entry[1] = C1; entry[2] = C2; entry[3] = C3; entry[4] = C4; entry[5] = r;
-}
-
-// After t1_apply: give the candidates' cells back (claims stay at INT_MAX between passes, so a
-// pass costs no sweep over all cells), and count the pass for the flip log (log_pass: the next
-// pass's name; a kernel after t1_apply, so that every thread of t1_apply read the same one).
-extern "C" __global__ void t1_release(int* __restrict__ claim, const int* __restrict__ cand,
-                                      const int* __restrict__ counters, int n_slots, int* __restrict__ log_pass)
-{
-    int i = blockIdx.x * blockDim.x + threadIdx.x;
-    if (i == 0) *log_pass += 1;
-    if (i >= n_slots || i >= counters[0]) return;
-    const int* e = cand + (long)i * CAND_INTS;
-    for (int j = 7; j < 11; ++j) claim[e[j]] = 0x7fffffff;
 }

@@ -1,5 +1,5 @@
-"""T1's pass on the GPU (t1.cu): detect, check, one small read-back, apply, release; inside a CUDA
-graph (:mod:`spherevm.graphs`) the same kernels with no read-back at all."""
+"""T1's pass on the GPU (t1.cu): detect, check, one small read-back, apply (which also gives the
+claimed cells back); inside a CUDA graph (:mod:`spherevm.graphs`) the same kernels with no read-back."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -75,7 +75,7 @@ class DevicePass:
         launch(module.get_function("t1_detect"), state.n_vertices,
                (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, size, chord2,
                 active, np.int32(state.n_vertices), buf["counters"], buf["cand"], buf["cand_len"],
-                np.int32(buf["capacity"])))
+                np.int32(buf["capacity"]), buf["log_pass"]))
         launch(module.get_function("t1_check"), buf["capacity"],
                (state.positions, state.vertex_neighbors, state.cell_sides, state.cell_vertices, size, new_length,
                 np.float64(self.length_factor or 0.0), np.int32(state.max_sides), buf["claim"], buf["refused"],
@@ -84,9 +84,9 @@ class DevicePass:
         return module, size, new_length
 
     def _apply(self, simulation, buf, module, size, new_length, n_slots, logging, in_graph):
-        """t1_apply and t1_release over ``n_slots`` candidate slots, then the integrator forgets the
-        moved vertices. ``logging``: each flip goes into the flip log, with its pass (numbered on the
-        device since the log was last replayed)."""
+        """t1_apply over ``n_slots`` candidate slots (it also gives the claimed cells back), then the
+        integrator forgets the moved vertices. ``logging``: each flip goes into the flip log, with its
+        pass (numbered on the device by t1_detect since the log was last replayed)."""
         state = simulation.state
         moved = buf["moved"][:2 * n_slots]
         launch(module.get_function("t1_apply"), n_slots,
@@ -95,15 +95,13 @@ class DevicePass:
                 np.int32(state.max_sides), size, new_length, np.float64(self.length_factor or 0.0), buf["flips"],
                 buf["total_flips"], moved, buf["log_count"], buf["log"], np.int32(logging), buf["log_pass"],
                 buf["width"], np.int32(in_graph)))
-        launch(module.get_function("t1_release"), n_slots,
-               (buf["claim"], buf["cand"], buf["counters"], np.int32(n_slots), buf["log_pass"]))
         integrator = simulation.operations.integrator
         if self.reset_velocities and integrator is not None:
             integrator.reset_vertices(moved)
         simulation.state_changed()
 
     def _update_gpu(self, simulation):
-        """Detect and check, one small read-back (candidates, full rows, claimants), apply, release:
+        """Detect and check, one small read-back (candidates, full rows, claimants), apply:
         see t1.cu.
         Inside a CUDA graph: no read-back, see :meth:`capture_ready`."""
         import cupy as cp
@@ -122,8 +120,6 @@ class DevicePass:
             if n_cand <= buf["capacity"]:
                 break
             cap = 2 * n_cand   # rare: more candidates than room; undo this pass's claims, grow, redo
-            launch(module.get_function("t1_release"), buf["capacity"],
-                   (buf["claim"], buf["cand"], buf["counters"], np.int32(buf["capacity"]), buf["log_pass"]))
             buf["claim"].fill(np.iinfo(np.int32).max)
             buf["total_refused"] -= buf["refused"].astype(cp.uint64)
             self._gpu_buffers(state, cap)

@@ -24,43 +24,55 @@ struct SegmentSum {
 // The (at most two) segments that cross this block's tile edges, found by segment_sum_partial.
 __shared__ int segment_sum_crossing[2];
 
-// Sum number `which` of this block's items: out[s] (plus out[s] if add) for a segment inside the
-// tile, the parts of the others to the scratch. Every thread of the block calls it (it synchronises);
-// a thread without an item passes segment -1 (only after the last item).
-__device__ void segment_sum_partial(double value, int segment, const SegmentSum& sums, int which, double* out,
-                                    bool add)
+// N sums of this block's items at once (value[j] is the item's term of sum j): out[j][s] (plus
+// out[j][s] if add) for a segment inside the tile, the parts of the others to the scratch. Each sum
+// is added in the same order as if it were summed alone; together they share the segment shuffles
+// and the block's two barriers. Every thread of the block calls it (it synchronises); a thread
+// without an item passes segment -1 (only after the last item).
+template <int N>
+__device__ void segment_sum_partial(const double (&value)[N], int segment, const SegmentSum& sums,
+                                    double* const* out, bool add)
 {
-    __shared__ double warp_first_part[32];
+    __shared__ double warp_first_part[N][32];
     __shared__ int warp_first_segment[32];
     __shared__ int warp_last_segment[32];
     int lane = threadIdx.x & 31, warp = threadIdx.x >> 5, n_warps = (blockDim.x + 31) >> 5;
     if (threadIdx.x < 2) segment_sum_crossing[threadIdx.x] = -1;
-    // segmented suffix sum inside the warp: each lane ends with the sum from itself to the end of
+    // segmented suffix sums inside the warp: each lane ends with the sum from itself to the end of
     // its segment's run in the warp, always in the same order
-    double v = segment >= 0 ? value : 0.0;
+    double v[N];
+    for (int j = 0; j < N; ++j) v[j] = segment >= 0 ? value[j] : 0.0;
     for (int offset = 1; offset < 32; offset <<= 1) {
-        double other = __shfl_down_sync(0xffffffffu, v, offset);
         int other_segment = __shfl_down_sync(0xffffffffu, segment, offset);
-        if (lane + offset < 32 && other_segment == segment) v += other;
+        bool same = lane + offset < 32 && other_segment == segment;
+        for (int j = 0; j < N; ++j) {
+            double other = __shfl_down_sync(0xffffffffu, v[j], offset);
+            if (same) v[j] += other;
+        }
     }
     int previous = __shfl_up_sync(0xffffffffu, segment, 1);
-    if (lane == 0) { warp_first_part[warp] = v; warp_first_segment[warp] = segment; }
+    if (lane == 0) {
+        for (int j = 0; j < N; ++j) warp_first_part[j][warp] = v[j];
+        warp_first_segment[warp] = segment;
+    }
     if (lane == 31) warp_last_segment[warp] = segment;
     __syncthreads();
     if (lane == 0) previous = warp > 0 ? warp_last_segment[warp - 1] : -2;
     if (segment >= 0 && previous != segment) {
-        // the first thread of a run in the tile: the run's total, over the warps it continues into
-        double total = v;
-        for (int w = warp + 1; w < n_warps && warp_first_segment[w] == segment; ++w) total += warp_first_part[w];
+        // the first thread of a run in the tile: the run's totals, over the warps it continues into
         long tile = blockDim.x, t0 = sums.start[segment] / tile, t1 = (sums.start[segment + 1] - 1) / tile;
-        if (t0 == t1) {
-            out[segment] = add ? out[segment] + total : total;
-        } else {
-            double* head = sums.scratch + (long)which * (gridDim.x + sums.n_segments);
-            if (blockIdx.x == t0) head[gridDim.x + segment] = total;
-            else head[blockIdx.x] = total;
-            segment_sum_crossing[threadIdx.x == 0 ? 0 : 1] = segment;
+        for (int j = 0; j < N; ++j) {
+            double total = v[j];
+            for (int w = warp + 1; w < n_warps && warp_first_segment[w] == segment; ++w) total += warp_first_part[j][w];
+            if (t0 == t1) {
+                out[j][segment] = add ? out[j][segment] + total : total;
+            } else {
+                double* head = sums.scratch + (long)j * (gridDim.x + sums.n_segments);
+                if (blockIdx.x == t0) head[gridDim.x + segment] = total;
+                else head[blockIdx.x] = total;
+            }
         }
+        if (t0 != t1) segment_sum_crossing[threadIdx.x == 0 ? 0 : 1] = segment;
     }
     __syncthreads();   // the shared scratch may be reused by the next call
 }
@@ -117,6 +129,7 @@ __device__ void segment_sum_finish(const SegmentSum& sums, double* const* outs, 
 // One sum in a kernel: out[s] = the sum of value over segment s (out[s] += it if add).
 __device__ void segment_sum(double value, int segment, const SegmentSum& sums, double* out, bool add = false)
 {
-    segment_sum_partial(value, segment, sums, 0, out, add);
+    const double values[1] = {value};
+    segment_sum_partial<1>(values, segment, sums, &out, add);
     segment_sum_finish(sums, &out, 1, add);
 }

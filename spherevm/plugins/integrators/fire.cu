@@ -21,10 +21,9 @@ extern "C" __global__ void fire_reduce(
         vv = dot3(w, w);
         ff = dot3(f, f);
     }
-    segment_sum_partial(p, rep, sums, 0, power, false);
-    segment_sum_partial(vv, rep, sums, 1, vnorm2, false);
-    segment_sum_partial(ff, rep, sums, 2, fnorm2, false);
+    const double values[3] = {p, vv, ff};
     double* outs[3] = {power, vnorm2, fnorm2};
+    segment_sum_partial<3>(values, rep, sums, outs, false);   // the three sums share the block's barriers
     segment_sum_finish(sums, outs, 3, false);
 }
 

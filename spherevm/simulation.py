@@ -13,6 +13,17 @@ from .validation import GPU_RUN_BYTES_PER_CELL, check_memory, integer
 
 
 @dataclass
+class _ForceCache:
+    """What :meth:`Simulation.compute_forces` keeps for the current state, and the convergence
+    summary read from it (:meth:`Simulation.replica_summary`: the device array, then its host copy)."""
+    forces: object
+    energy: object
+    cell_energy: object
+    summary: object = None
+    summary_host: tuple = None
+
+
+@dataclass
 class MinimizeResult:
     """Outcome of :meth:`Simulation.minimize`, one entry per replica (NumPy arrays)."""
     converged: np.ndarray
@@ -169,8 +180,8 @@ class Simulation:
             if not self.operations.forces:   # free vertices: zero force, zero energy
                 xp = self.device.xp
                 zero = xp.zeros(self._state.n_replicas)
-                self._cache = [xp.zeros_like(self._state.positions), zero, xp.zeros(self._state.n_cells), None, None]
-                return self._cache[0], self._cache[1]
+                self._cache = _ForceCache(xp.zeros_like(self._state.positions), zero, xp.zeros(self._state.n_cells))
+                return self._cache.forces, self._cache.energy
             results = compute_all(self.operations.forces, self._state)
             forces, energy = results[0].forces, results[0].energy
             for res in results[1:]:
@@ -178,13 +189,13 @@ class Simulation:
                 energy = energy + res.energy
             cells = [res.cell_energy for res in results]
             cell_energy = None if any(c is None for c in cells) else sum(cells[1:], cells[0])
-            self._cache = [forces, energy, cell_energy, None, None]    # then replica_summary's, device and host
-        return self._cache[0], self._cache[1]
+            self._cache = _ForceCache(forces, energy, cell_energy)
+        return self._cache.forces, self._cache.energy
 
     def cell_energy(self):
         """Per-cell energy summed over the forces (device array), or None if a force does not report it."""
         self.compute_forces()
-        return self._cache[2]
+        return self._cache.cell_energy
 
     def max_force(self):
         """Largest vertex force magnitude per replica (device array)."""
@@ -196,17 +207,18 @@ class Simulation:
         replica, and the first vertex whose position is not finite (-1 if none). Cached with the
         forces until the state changes."""
         summary = self._summary()
-        if self._cache[4] is None:
-            self._cache[4] = read_replica_summary(summary, self._state.n_vertices, self._state.n_replicas)
-        return self._cache[4]
+        if self._cache.summary_host is None:
+            self._cache.summary_host = read_replica_summary(summary, self._state.n_vertices, self._state.n_replicas)
+        return self._cache.summary_host
 
     def _summary(self):
         """:func:`spherevm.device.replica_summary` of the current forces, cached with them."""
         forces, energy = self.compute_forces()
-        if self._cache[3] is None:
+        if self._cache.summary is None:
             state = self._state
-            self._cache[3] = replica_summary(state.positions, state.vertex_replica, state.n_replicas, forces, energy)
-        return self._cache[3]
+            self._cache.summary = replica_summary(state.positions, state.vertex_replica, state.n_replicas, forces,
+                                                  energy)
+        return self._cache.summary
 
     @property
     def loggables(self) -> dict:
@@ -331,7 +343,7 @@ class Simulation:
         if self.operations.integrator is not None:
             self.operations.integrator.check(self)
         state = self._state
-        if self._cache is not None and self._cache[3] is not None:   # read with the forces already (a check)
+        if self._cache is not None and self._cache.summary is not None:   # read with the forces already (a check)
             v = self.replica_summary()[2]
         else:
             v = read_replica_summary(replica_summary(state.positions, state.vertex_replica, state.n_replicas),

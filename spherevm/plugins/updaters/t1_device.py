@@ -216,10 +216,10 @@ class DevicePass:
 
     def _sync_counters(self):
         """Bring the GPU counters to the host attributes (for logging, checkpoints, narrowing)."""
+        self._sync_flip_backs()
         buf = getattr(self, "_gpu", None)
         if buf is None:
             return
-        self._flush_log(buf["state"])
         self.last_flips = buf["flips"].get().astype(np.int64)
         self.last_refused = buf["refused"].get().astype(np.int64)
         self.total_flips = buf["total_flips"].get().astype(np.int64)

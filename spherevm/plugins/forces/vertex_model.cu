@@ -3,7 +3,10 @@
 // bodies are in vertex_model.cuh (bending.cu fuses its terms into the same bodies on the sphere).
 #include "plugins/forces/vertex_model.cuh"
 
-extern "C" __global__ void vm_cell_geometry(
+// Both kernels at most 64 registers (4 blocks of spherevm.device.BLOCK = 256 threads an SM; 70 and 68
+// unbounded, 3 blocks): on an H200 at 4,096 x 64 cells 48.7 and 24.9 us against 51.2 and 27.9 (ncu),
+// a Brownian + T1 step at 1e6 cells 0.41 ms against 0.44; the same bits (register allocation only).
+extern "C" __global__ void __launch_bounds__(256, 4) vm_cell_geometry(
     const double* __restrict__ pos, const int* __restrict__ cell_vertices, const int* __restrict__ cell_sides,
     const int* __restrict__ cell_replica, const double* __restrict__ size, int n_cells, int max_sides,
     const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
@@ -16,7 +19,7 @@ extern "C" __global__ void vm_cell_geometry(
                           NoExtra());
 }
 
-extern "C" __global__ void vm_vertex_forces(
+extern "C" __global__ void __launch_bounds__(256, 4) vm_vertex_forces(
     const double* __restrict__ pos, const int* __restrict__ vertex_neighbors, const int* __restrict__ vertex_cells,
     const int* __restrict__ vertex_replica, const double* __restrict__ size, int n_vertices,
     const double* __restrict__ coef, double* __restrict__ forces)

@@ -135,7 +135,7 @@ def test_a_restart_from_the_end_of_a_minimisation_runs_the_held_back_growth(tmp_
     path = tmp_path / "q.gsd"
     a, _, div_a = _rate_sim(rate=0.3)
     a.run(2)
-    a.operations.writers.append(GSD(path, trigger=10 ** 6))     # the final frames only
+    a.operations.writers.append(GSD(trigger=10 ** 6, filename=path))     # the final frames only
     a.minimize(max_steps=60)
     a.operations.writers[0].close()
     b, _, div_b = _rate_sim(rate=0.3)           # per-cell parameters of the tissue before it grew

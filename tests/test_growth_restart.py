@@ -80,7 +80,7 @@ def halves(kind, device, path):
     whole.run(2 * HALF)
     first = make(kind, device)
     first.state = tiling()
-    first.operations.writers.append(GSD(path, trigger=HALF))
+    first.operations.writers.append(GSD(trigger=HALF, filename=path))
     first.run(HALF)
     first.operations.writers[0].close()
     return whole, first

@@ -274,11 +274,11 @@ def test_appending_to_a_one_frame_file_keeps_its_box_and_per_vertex_keys(tmp_pat
     sim = svm.Simulation(device="cpu")
     sim.state = svm.init.random_tiling(16, seed=1, radius=3.0)
     sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=3.8))
-    with GSD(path) as w:
+    with GSD(filename=path) as w:
         w.write(sim, 0)
     sim.operations.forces.clear()
     sim.state = svm.init.random_tiling(24, seed=2, radius=1.0)
-    with GSD(path, mode="ab") as w:
+    with GSD(filename=path, mode="ab") as w:
         w.write(sim, 1)
     with gsd.hoomd.open(path) as t:
         assert t[1].configuration.box[0] == t[0].configuration.box[0] >= 2.2 * 3.0
@@ -294,7 +294,7 @@ def test_one_writer_a_frame_like_the_last_not_the_first(tmp_path):
     sim = svm.Simulation(device="cpu")
     sim.state = svm.init.random_tiling(24, seed=3)
     refs = []
-    with GSD(path, trigger=1) as w:
+    with GSD(trigger=1, filename=path) as w:
         for step in range(3):
             if step == 1:
                 flip_somewhere(sim.state, np.random.default_rng(1))
@@ -345,10 +345,10 @@ def test_reopened_file_leaves_out_topology_equal_to_frame_0(tmp_path):
     path = tmp_path / "aaa.gsd"
     sim = svm.Simulation(device="cpu")
     sim.state = svm.init.random_tiling(16, seed=1)
-    with GSD(path, trigger=1) as w:
+    with GSD(trigger=1, filename=path) as w:
         w.write(sim, 0)
         w.write(sim, 1)
-    with GSD(path, trigger=1, mode="ab") as w:
+    with GSD(trigger=1, filename=path, mode="ab") as w:
         w.write(sim, 2)
     with gsd.hoomd.open(path) as t:
         for name in gsdio.TOPOLOGY:
@@ -360,7 +360,7 @@ def test_reopened_file_takes_the_last_frame_box_and_keys_first_seen_there(tmp_pa
     without forces keeps the last (largest) box and writes the force key, NaN."""
     path = tmp_path / "last.gsd"
     sim = svm.Simulation(device="cpu")
-    with GSD(path, trigger=1) as w:
+    with GSD(trigger=1, filename=path) as w:
         sim.state = svm.init.random_tiling(16, seed=1, radius=1.0)
         w.write(sim, 0)
         sim.state = svm.init.random_tiling(16, seed=1, radius=3.0)
@@ -368,7 +368,7 @@ def test_reopened_file_takes_the_last_frame_box_and_keys_first_seen_there(tmp_pa
         w.write(sim, 1)
     sim.operations.forces.clear()
     sim.state = svm.init.random_tiling(16, seed=1, radius=1.0)
-    with GSD(path, trigger=1, mode="ab") as w:
+    with GSD(trigger=1, filename=path, mode="ab") as w:
         w.write(sim, 2)
     with gsd.hoomd.open(path) as t:
         assert t[0].configuration.box[0] < t[1].configuration.box[0] == t[2].configuration.box[0]

@@ -75,12 +75,14 @@ def fold(values, rows):
 
 
 def fan_rows(state):
-    """Per block of cells (:func:`cell_blocks`), the table of its cells' vertices: head the first
-    vertex ``x_0`` (the fan's apex), entries ``x_1, x_2, ...``, ``overlap=1`` (a fan's triangles are
-    consecutive pairs of entries), an odd width (an even number of triangles a row, taken two at a
-    time); a row's entries ``e_0, e_2, ...`` (the quads' ends) come first, then ``e_1, e_3, ...``
-    (their middles), so that each operand is a slice (NumPy takes up to twice as long on strided
-    views of arrays of this size); ``c0``, ``c1`` the block's cells. Cached per topology."""
+    """Per block of cells (:func:`cell_blocks`), the table of its cells' vertices for the fans: rows
+    of :func:`row_table` with head the first vertex ``x_0`` (the fan's apex), entries ``e_0 = x_1,
+    e_1 = x_2, ...``, ``overlap=1`` (a fan's triangles are consecutive pairs of entries) and an odd
+    width ``2h + 1``, so ``h`` quadrilaterals ``(x_0, e_2j, e_2j+1, e_2j+2)`` a row. Its slots are
+    the ends of the quads' diagonals, ``e_1, e_3, .., e_2h-1, e_2, e_4, .., e_2h`` then ``x_0`` (h
+    times), ``e_0, e_2, .., e_2h-2``: the two halves' difference is both diagonals in one NumPy call
+    on slices (a broadcast ``x_0`` and strided operands took twice as long); ``c0``, ``c1`` the
+    block's cells. Cached per topology."""
     def build():
         sides, cv = state.cell_sides.astype(np.int64), state.cell_vertices
         out = []
@@ -88,8 +90,10 @@ def fan_rows(state):
             body = cv[c0:c1, 1:]
             entries = body[np.arange(body.shape[1]) < sides[c0:c1, None] - 1]   # cell after cell
             rows = row_table(sides[c0:c1] - 1, entries, cv[c0:c1, 0], overlap=1, odd=True)
-            width = len(rows["table"]) - 1
-            order = np.concatenate(([0], np.arange(1, width + 1, 2), np.arange(2, width + 1, 2)))
-            out.append(dict(rows, table=np.ascontiguousarray(rows["table"][order]), c0=c0, c1=c1))
+            table = rows["table"]
+            h = len(table) // 2 - 1
+            ends, middles = table[1::2], table[2::2]
+            order = (middles, ends[1:], np.repeat(table[:1], h, axis=0), ends[:-1])
+            out.append(dict(rows, table=np.ascontiguousarray(np.concatenate(order)), c0=c0, c1=c1))
         return out
     return state.cached((fan_rows,), build, topology=True)

@@ -154,10 +154,11 @@ class Sphere(Constraint):
             return part, sums
 
         def fan(rows):
-            x = comp.take(rows["table"], axis=1, mode="clip")           # (3, 1 + width, rows): x_0, ends, middles
-            h = x.shape[1] // 2 - 1
+            x = comp.take(rows["table"], axis=1, mode="clip")           # (3, 4h, rows): the diagonals' ends
+            h = x.shape[1] // 4
             # two triangles at a time: y_j x y_{j+1} + y_{j+1} x y_{j+2} = y_{j+1} x (x_{j+2} - x_j), y = x - x_0
-            twice = _cross(x[:, h + 2:] - x[:, :1], x[:, 2:h + 2] - x[:, 1:h + 1]).sum(axis=1)
+            d = xp.subtract(x[:, :2 * h], x[:, 2 * h:], out=x[:, :2 * h])
+            twice = _cross(d[:, :h], d[:, h:]).sum(axis=1)
             xp.multiply(fold(twice, rows), 0.5, out=area_vector[:, rows["c0"]:rows["c1"]])
 
         jobs = [(corners, block) for block in index]
@@ -252,8 +253,8 @@ class Sphere(Constraint):
                 s = s[:, 0] + s[:, 1] + s[:, 2]
             if vectors is not None:
                 w = vectors.take(index["cells"], axis=1).reshape(3, 3, -1)
-                t = _cross(part["f"], w[:, :2] - w[:, 2:])           # f_0 x (da[0] - da[2]) + f_1 x (da[1] - da[2])
-                s = s + rv * (t[:, 0] + t[:, 1])                     # in units of the unit sphere's terms
+                t = _cross(part["f"], w[:, :2] - w[:, 2:]).sum(axis=1)   # f_0 x (da[0] - da[2]) + f_1 x (da[1] - da[2])
+                s = s + rv * t                                       # in units of the unit sphere's terms
             u = g["u"][:, lo:hi]
             s -= _dot(s, u) * u                                      # onto the tangent plane
             out[lo:hi] = (s / rv).T

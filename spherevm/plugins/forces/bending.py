@@ -208,7 +208,7 @@ class Bending(Force):
         geometry = state.constraint.cell_geometry(state, area_vectors=True)
         cell_energy, d_area, d_perimeter = model.cell_terms(state, geometry)
         bending_energy, d_area_vector = _cell_terms(state, self._device_B(state)[1], geometry.area_vector)
-        cell_energy = cell_energy + bending_energy
+        cell_energy += bending_energy                     # the vertex model's own array
         energy = weighted_bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)
         forces = -state.constraint.shape_gradient(state, geometry, d_area, d_perimeter, d_area_vector.T)
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)

@@ -311,7 +311,7 @@ def test_t1_new_edge_shorter_than_the_old_is_refused():
 
 def test_gsd_writer_given_a_directory_is_refused_at_construction(tmp_path):
     with pytest.raises(ValueError, match="is a directory; give a file name such as"):
-        GSD(tmp_path)
+        GSD(filename=tmp_path)
 
 
 def test_cli_out_in_proc_is_a_usage_error_naming_out():

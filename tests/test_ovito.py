@@ -50,7 +50,7 @@ def test_ovito_reads_a_growing_tissue(tmp_path):
                                 svm.plugins.updaters.Extrusion(area_threshold=0.4),
                                 svm.plugins.updaters.RadiusSchedule("constant_area")]
     sim.operations.integrator = svm.plugins.integrators.FIRE(dt=0.05)
-    sim.operations.writers.append(svm.plugins.writers.GSD(str(path), trigger=2))
+    sim.operations.writers.append(svm.plugins.writers.GSD(trigger=2, filename=str(path)))
     states = [sim.state.copy()]
     for _ in range(6):
         sim.run(2)

@@ -17,6 +17,7 @@ step is the minimiser's move followed by the updaters of the next timestep (its 
 """
 from __future__ import annotations
 
+from .plugins.base import Minimizer
 from .trigger import Always, Periodic
 
 #: steps per captured graph; the rest of a stretch replays a one-step graph
@@ -160,7 +161,7 @@ class StepGraphs:
                 self.graphs[key][k].launch(self.stream)
         sim.timestep += steps
         integrator = sim.operations.integrator
-        if hasattr(integrator, "iteration"):   # a minimiser's count, which its steps advance on the host
+        if isinstance(integrator, Minimizer):   # its iteration count, which its steps advance on the host
             integrator.iteration += steps
         if self.minimizing:          # the updaters of the last timestep ran, those not in_minimize held back
             sim._updated_at, sim._held_back = sim.timestep, True
@@ -176,7 +177,7 @@ class StepGraphs:
         import cupy as cp
         sim = self.sim
         integrator = sim.operations.integrator
-        t0, i0 = sim.timestep, getattr(integrator, "iteration", None)
+        t0, i0 = sim.timestep, integrator.iteration if isinstance(integrator, Minimizer) else None
         sim._step_counter = self.counter
         sim.state_changed()                  # the first step computes its forces inside the graph
         try:

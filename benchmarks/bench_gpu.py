@@ -99,10 +99,12 @@ def measure(n_cells, replicas, gpu, numpy_max, bw):
     t_fire = median_time(lambda: fire_iteration(sim), gpu, repeat=51)
     bsim = brownian_sim(n_cells, replicas, gpu)
     t_brown = median_time(lambda: brownian_step(bsim), gpu, repeat=101)
-    t_graph = run_step_time(brownian_sim(n_cells, replicas, gpu), gpu, steps=200 if n_cells * replicas >= 1e6 else 1000)
+    steps = 200 if n_cells * replicas >= 1e6 else 1000
+    t_graph = run_step_time(brownian_sim(n_cells, replicas, gpu), gpu, steps=steps, fused=False)
+    t_fused = run_step_time(brownian_sim(n_cells, replicas, gpu), gpu, steps=steps)   # = t_graph where not fused
     row = dict(system=f"{replicas} x {n_cells}" if replicas > 1 else f"{n_cells:.0e}",
                cells=n_cells * replicas, force_ms=1e3 * t_force, fire_ms=1e3 * t_fire, brown_ms=1e3 * t_brown,
-               graph_ms=1e3 * t_graph,
+               graph_ms=1e3 * t_graph, fused_ms=1e3 * t_fused,
                force_gbs=force_floor_bytes(state) / t_force / 1e9, fire_gbs=fire_floor_bytes(state) / t_fire / 1e9)
     row["fire_frac_bw"] = row["fire_gbs"] / bw
     if n_cells * replicas <= numpy_max:
@@ -131,10 +133,11 @@ def main(argv=None):
     print(f"# device-to-device copy bandwidth: {bw:.0f} GB/s")
     print("# launches per step: force 2 kernels; FIRE iteration = force + 3 kernels; "
           "Brownian step with T1 check = T1 pass (1 memset + 2 kernels + 1 read-back of 12 bytes) + force + 1 kernel; "
-          "in graphs: the same steps through Simulation.run(graphs=True), no read-back, per step")
+          "in graphs: the same steps through Simulation.run(graphs=True, fused=False), no read-back, per step; "
+          "run: Simulation.run(graphs=True), the fused small-tissue steps where they apply (spherevm.tissue_steps)")
     print("# GB/s: bytes each kernel must move at least (every array once) over the measured time")
     head = (f"{'system':>12} {'force ms':>9} {'GB/s':>6} {'FIRE it ms':>11} {'GB/s':>6} {'of copy':>8} "
-            f"{'Brown+T1 ms':>12} {'in graphs':>10} {'NumPy force':>12} {'NumPy FIRE':>11} {'NumPy Brown':>12} {'speed-up':>9} "
+            f"{'Brown+T1 ms':>12} {'in graphs':>10} {'run':>8} {'NumPy force':>12} {'NumPy FIRE':>11} {'NumPy Brown':>12} {'speed-up':>9} "
             f"{'B/cell':>7}")
     print(head)
     systems = [(int(n), 1) for n in args.cells]
@@ -148,7 +151,7 @@ def main(argv=None):
         npi = row.get("numpy_fire_ms", np.nan)
         npb = row.get("numpy_brown_ms", np.nan)
         print(f"{row['system']:>12} {row['force_ms']:9.4f} {row['force_gbs']:6.0f} {row['fire_ms']:11.4f} "
-              f"{row['fire_gbs']:6.0f} {row['fire_frac_bw']:8.2f} {row['brown_ms']:12.4f} {row['graph_ms']:10.4f} {npf:12.3f} {npi:11.3f} "
+              f"{row['fire_gbs']:6.0f} {row['fire_frac_bw']:8.2f} {row['brown_ms']:12.4f} {row['graph_ms']:10.4f} {row['fused_ms']:8.4f} {npf:12.3f} {npi:11.3f} "
               f"{npb:12.3f} {npi / row['fire_ms']:9.1f} {row['bytes_per_cell']:7.0f}", flush=True)
 
 

@@ -42,7 +42,8 @@ def median_times(fns, device=None, repeat=11, warmup=2, clock=time.perf_counter)
     return [statistics.median(t) for t in times]
 
 
-def run_step_time(sim, device, steps=1000, repeat=5):
-    """Median seconds per step of ``sim.run(steps, graphs=True)`` (CUDA graphs, checks every 100
-    steps as by default; each run captures its graphs again, so the capture is in the time)."""
-    return median_time(lambda: sim.run(steps, graphs=True), device, repeat=repeat, warmup=1) / steps
+def run_step_time(sim, device, steps=1000, repeat=5, **run):
+    """Median seconds per step of ``sim.run(steps, graphs=True, **run)`` (CUDA graphs, or the fused
+    small-tissue steps where they apply unless ``fused=False``; checks every 100 steps as by default;
+    each run captures its graphs again, so the capture is in the time)."""
+    return median_time(lambda: sim.run(steps, graphs=True, **run), device, repeat=repeat, warmup=1) / steps

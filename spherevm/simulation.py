@@ -286,7 +286,7 @@ class Simulation:
             w.write(self, ts)
             w._last_written = ts
 
-    def run(self, steps: int, check_every=None, progress=None, graphs=None):
+    def run(self, steps: int, check_every=None, progress=None, graphs=None, fused=None):
         """Advance ``steps`` timesteps: updaters, forces, integrator, writers on each.
 
         Every ``check_every`` steps (default: every step on the CPU, every 100 on the GPU, where a
@@ -299,6 +299,11 @@ class Simulation:
         the GPU when every operation can, the run has at least ``graphs.MIN_STEPS`` steps and the
         State at most ``graphs.MAX_VERTICES`` vertices; True: always (ValueError naming what
         cannot); False: never.
+
+        ``fused``: with graphs on, Brownian dynamics of small tissues run a stretch of steps in one
+        launch, a thread block per tissue (:mod:`spherevm.tissue_steps`; the same trajectory bit for
+        bit). None (default): wherever ``tissue_steps.why_not`` finds nothing against it; False:
+        graph replays of the general kernels.
         """
         from .graphs import StepGraphs
         self._require_state()
@@ -308,7 +313,7 @@ class Simulation:
         if check_every is None:
             check_every = 100 if self.device.is_gpu else 1
         check_every = integer("check_every", check_every, minimum=1)
-        runner = StepGraphs.for_run(self, steps, graphs)
+        runner = StepGraphs.for_run(self, steps, graphs, fused)
         self._write()   # the frame a run starts from (writers skip timesteps they already wrote)
         try:
             done = 0

@@ -8,10 +8,23 @@
 #include "geometry/surface.cuh"
 #include "device_common.cuh"
 
+// Cell c of area A and perimeter P: its energy (returned) and the two coefficients the vertex forces need,
+// coef = (2 kA (A - A0) area_unit, 2 kP (P - P0) length_unit) (R^2 and R on the sphere, 1 on the plane).
+// Shared with the fused small-tissue steps (spherevm/tissue_steps.cu), whose coef is a tissue's copy in
+// shared memory, offset so that it is indexed by the global cell index.
+__device__ __forceinline__ double vm_cell_terms(double A, double P, long c, Surface::Size s,
+                                                const double* kA, const double* kP, const double* A0,
+                                                const double* P0, double* coef)
+{
+    double dA = A - A0[c], dP = P - P0[c];
+    coef[2 * c] = 2.0 * kA[c] * dA * Surface::area_unit(s);
+    coef[2 * c + 1] = 2.0 * kP[c] * dP * Surface::length_unit(s);
+    return kA[c] * dA * dA + kP[c] * dP * dP;
+}
+
 // One thread per cell: area and perimeter (Surface::cell_measures), the cell's energy, the
 // per-replica energy sum (device_common.cuh: `sums` over the cells; left to a later kernel of the
-// extra's where Extra::sums_energy), and the two coefficients the vertex kernel needs:
-// coef = (2 kA (A - A0) area_unit, 2 kP (P - P0) length_unit) (R^2 and R on the sphere, 1 on the plane).
+// extra's where Extra::sums_energy), and the two coefficients the vertex kernel needs (vm_cell_terms).
 // size: the State's radius (n_replicas,) or box (n_replicas, 2).
 template <class Extra>
 __device__ __forceinline__ void vm_cell_geometry_body(
@@ -32,10 +45,7 @@ __device__ __forceinline__ void vm_cell_geometry_body(
         double A, P;
         Surface::cell_measures(pos, row, n, s, &A, &P);
         extra.cell(pos, row, n, c);
-        double dA = A - A0[c], dP = P - P0[c];
-        e = kA[c] * dA * dA + kP[c] * dP * dP;
-        coef[2 * c] = 2.0 * kA[c] * dA * Surface::area_unit(s);
-        coef[2 * c + 1] = 2.0 * kP[c] * dP * Surface::length_unit(s);
+        e = vm_cell_terms(A, P, c, s, kA, kP, A0, P0, coef);
         cell_energy[c] = e;
     }
     if (!Extra::sums_energy) segment_sum(e, rep, sums, replica_energy);

@@ -67,13 +67,18 @@ class Brownian(Integrator):
     def _after_move(self, simulation):
         pass
 
+    def _error_flag(self):
+        """The device word in which kernels flag the earliest exploding step (:meth:`check` reads it)."""
+        if getattr(self, "_error", None) is None:
+            import cupy as cp
+            self._error = cp.full(1, np.iinfo(np.uint64).max, dtype=cp.uint64)
+        return self._error
+
     def _step_gpu(self, simulation, forces):
         """One kernel per step (brownian.cu, compiled for the State's surface), plus one per cell for
         cell directors."""
-        import cupy as cp
         state = simulation.state
-        if getattr(self, "_error", None) is None:
-            self._error = cp.full(1, np.iinfo(np.uint64).max, dtype=cp.uint64)
+        self._error_flag()
         module, size = surface_kernels(_KERNELS, state)
         unit, amp = self._per_replica(state)
         directors = self.directors if self._mode else self._error   # mode 0 reads no directors
@@ -93,6 +98,14 @@ class Brownian(Integrator):
     def capture_ready(self, simulation, steps):
         """Its kernels take the timestep through ``Simulation.kernel_timestep``: CUDA graphs may hold them."""
         return ()
+
+    def tissue_step_arguments(self, simulation):
+        """The move's part of the fused small-tissue steps' arguments (:mod:`spherevm.tissue_steps`,
+        which calls brownian.cuh's move as brownian_move does): noise amplitudes and sqrt(<A>) per
+        replica, mu, dt, max_step, the seed and the error flag (:meth:`check`)."""
+        unit, amp = self._per_replica(simulation.state)
+        return (amp, unit, np.float64(self.mu), np.float64(self.dt), np.float64(self.max_step),
+                np.uint32(simulation.seed), self._error_flag())
 
     def _per_replica(self, state):
         """sqrt(<A>) and the noise amplitude sqrt(2 mu T dt) per replica, on the device (computed

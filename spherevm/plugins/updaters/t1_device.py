@@ -183,6 +183,20 @@ class DevicePass:
         buf["width_host"] = -1               # the step-by-step path sets it again
         return table
 
+    def tissue_step_arguments(self, simulation):
+        """T1's part of the fused small-tissue steps' arguments (:mod:`spherevm.tissue_steps`, after
+        :meth:`capture_ready`): active replicas, squared threshold chords, new lengths, the
+        candidate room, the per-pass counters and totals; and ``(width, log_pass)``, which the
+        finishing kernel advances as t1_detect and t1_apply would have."""
+        state = simulation.state
+        buf = self._gpu_buffers(state, 3 * state.n_vertices // 2)
+        chord2, new_length = self._device_lengths(state)
+        integrator = simulation.operations.integrator
+        active = integrator.active_on_device() if integrator is not None else buf["all_active"]
+        return ((active, chord2, new_length, np.float64(self.length_factor or 0.0), buf["cand"], buf["cand_len"],
+                 buf["flips"], buf["refused"], buf["total_flips"], buf["total_refused"]),
+                (buf["width"], buf["log_pass"]))
+
     def capture_done(self, simulation):
         """The cell table back to the width the step-by-step path would have (one small read-back)."""
         buf = getattr(self, "_gpu", None)

@@ -1,0 +1,137 @@
+// One T1 pass's three steps for one vertex or one candidate: the bodies of t1.cu's kernels and of
+// the fused small-tissue steps (spherevm/tissue_steps.cu), so both flip the same edges to the same
+// places. What differs between the two is only where the pass's counters live (global memory for
+// the whole State, or shared memory for one tissue), so the callers count.
+// Compiled once per surface (geometry/surface.cuh). pos and claim may be a tissue's copies in shared
+// memory, offset so that they are indexed by global vertex and cell indices.
+#pragma once
+#include "geometry/surface.cuh"
+#include "plugins/updaters/t1_fold.cuh"
+
+#define CAND_INTS 13   // u, k, v, a, b, c, d, C1, C2, C3, C4, replica, turn
+
+// Vertex u of replica r: list its edges to higher-numbered neighbours shorter than the chord
+// threshold (chord2, squared). *count is the pass's candidate count (a slot each, atomically);
+// slots from capacity on are counted but not written.
+__device__ __forceinline__ void t1_detect_vertex(const double* pos, const int* vn, const int* vc, Surface::Size s,
+                                                 double chord2, int r, int u, int* count, int* cand,
+                                                 double* cand_len, int capacity)
+{
+    vec3 pu = load3(pos, u);
+    for (int k = 0; k < 3; ++k) {
+        int v = vn[3 * u + k];
+        if (v <= u) continue;
+        vec3 pv = load3(pos, v);
+        if (!(Surface::chord2(pu, pv, s) < chord2)) continue;   // chord test: no trigonometry for the many long edges
+        int i = atomicAdd(count, 1);
+        if (i >= capacity) continue;
+        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        int j = vn[3 * v] == u ? 0 : (vn[3 * v + 1] == u ? 1 : 2);
+        int* e = cand + (long)i * CAND_INTS;
+        e[0] = u; e[1] = k; e[2] = v; e[3] = vn[3 * u + k1]; e[4] = vn[3 * u + k2];
+        e[5] = vn[3 * v + (j + 1) % 3]; e[6] = vn[3 * v + (j + 2) % 3];
+        e[7] = vc[3 * u + k]; e[8] = vc[3 * u + k2]; e[9] = vc[3 * u + k1]; e[10] = vc[3 * v + (j + 1) % 3];
+        e[11] = r; e[12] = 0;
+        cand_len[i] = Surface::edge_length(pu, pv, s);
+    }
+}
+
+// The new edge's full length: new_length (> 0: absolute) or length_factor times the old length.
+__device__ __forceinline__ double t1_full_length(double new_length, double length_factor, double old_length)
+{
+    return new_length > 0.0 ? new_length : length_factor * old_length;
+}
+
+// Candidate e (full: its new length): the rules of T1.select. Refuse a flip that leaves a triangle
+// with two sides or joins a cell to itself, place it as folding.t1_placement does (usual, else
+// turned, else refused if it folds); false if refused. Otherwise e[12] is its turn and it claims its
+// four cells (atomicMin: the lowest edge index wins).
+__device__ __forceinline__ bool t1_check_candidate(const double* pos, const int* vn, const int* sides,
+                                                   const int* cell_vertices, int max_sides, Surface::Size s,
+                                                   double full, int* claim, int* e)
+{
+    int u = e[0], k = e[1], v = e[2], a = e[3], b = e[4], c = e[5], d = e[6];
+    int C1 = e[7], C2 = e[8], C3 = e[9], C4 = e[10];
+    bool distinct = C1 != C2 && C1 != C3 && C1 != C4 && C2 != C3 && C2 != C4 && C3 != C4;
+    bool refuse = sides[C1] <= 3 || sides[C2] <= 3 || !distinct, turn = false;
+    if (!refuse) {      // folding.t1_placement: usual if clean, else turned if clean, else usual unless it folds
+        vec3 px, py;
+        Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py);
+        int usual = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px,
+                                  py, s);
+        if (usual != T1_CLEAN) {
+            Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py, true);
+            turn = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px,
+                                 py, s) == T1_CLEAN;
+            refuse = usual == T1_FOLDS && !turn;
+        }
+    }
+    if (refuse) return false;   // a refused candidate claims nothing, so t1_apply_candidate passes it by
+    e[12] = turn ? 1 : 0;
+    int index = 3 * u + k;
+    atomicMin(claim + C1, index);
+    atomicMin(claim + C2, index);
+    atomicMin(claim + C3, index);
+    atomicMin(claim + C4, index);
+    return true;
+}
+
+__device__ __forceinline__ void replace_neighbor(int* vn, int w, int old_v, int new_v) {
+    for (int s = 0; s < 3; ++s)
+        if (vn[3 * w + s] == old_v) { vn[3 * w + s] = new_v; return; }
+}
+
+__device__ __forceinline__ void remove_from_row(int* row, int* n, int x) {
+    int p = 0;
+    while (row[p] != x) ++p;
+    for (int j = p; j < *n - 1; ++j) row[j] = row[j + 1];
+    row[*n - 1] = -1;
+    *n -= 1;
+}
+
+__device__ __forceinline__ void split_in_row(int* row, int* n, int x, int first, int second) {
+    int p = 0;
+    while (row[p] != x) ++p;
+    for (int j = *n; j > p + 1; --j) row[j] = row[j - 1];
+    row[p] = first;
+    row[p + 1] = second;
+    *n += 1;
+}
+
+// Candidate e (full: its new length), after every candidate's claims: flip it if it holds all four
+// of its cells (true), and give back the cells it holds (claims stay at INT_MAX between passes, so a
+// pass costs no sweep over all cells): a cell is held by one candidate, whose thread alone resets it
+// after reading it, so no other thread's decision can change. Winners touch disjoint cells and
+// vertices, so they need no locks.
+__device__ __forceinline__ bool t1_apply_candidate(double* pos, int* vn, int* vc, int* cell_vertices, int* sides,
+                                                   int max_sides, Surface::Size s, double full, int* claim,
+                                                   const int* e)
+{
+    int u = e[0], k = e[1], v = e[2], a = e[3], b = e[4], c = e[5], d = e[6];
+    int C1 = e[7], C2 = e[8], C3 = e[9], C4 = e[10];
+    int index = 3 * u + k, cells[4] = {C1, C2, C3, C4};
+    bool mine[4], won = true;
+    for (int j = 0; j < 4; ++j) { mine[j] = claim[cells[j]] == index; won = won && mine[j]; }
+    for (int j = 0; j < 4; ++j) if (mine[j]) claim[cells[j]] = 0x7fffffff;
+    if (!won) return false;
+    if (sides[C3] >= max_sides || sides[C4] >= max_sides) return false;   // cannot happen: the table was widened
+    int X = v, Y = u;   // counter-clockwise rotation: v ends up on the C1 side
+    vn[3 * X] = Y; vn[3 * X + 1] = d; vn[3 * X + 2] = a;
+    vc[3 * X] = C4; vc[3 * X + 1] = C1; vc[3 * X + 2] = C3;
+    vn[3 * Y] = X; vn[3 * Y + 1] = b; vn[3 * Y + 2] = c;
+    vc[3 * Y] = C3; vc[3 * Y + 1] = C2; vc[3 * Y + 2] = C4;
+    replace_neighbor(vn, a, u, X);
+    replace_neighbor(vn, c, v, Y);
+    int n;
+    n = sides[C1]; remove_from_row(cell_vertices + (long)C1 * max_sides, &n, Y); sides[C1] = n;
+    n = sides[C2]; remove_from_row(cell_vertices + (long)C2 * max_sides, &n, X); sides[C2] = n;
+    n = sides[C3]; split_in_row(cell_vertices + (long)C3 * max_sides, &n, u, Y, X); sides[C3] = n;
+    n = sides[C4]; split_in_row(cell_vertices + (long)C4 * max_sides, &n, v, X, Y); sides[C4] = n;
+    // geometry: the edge turned by 90 degrees about the normal at its midpoint (Surface::t1_positions),
+    // the places t1_check checked
+    vec3 px, py;
+    Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py, e[12] != 0);
+    store3(pos, X, px);
+    store3(pos, Y, py);
+    return true;
+}

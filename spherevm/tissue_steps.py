@@ -1,0 +1,109 @@
+"""Many Brownian steps of small tissues in one launch: a thread block per tissue (tissue_steps.cu).
+
+Inside CUDA graphs (:mod:`spherevm.graphs`) a small tissue's Brownian step with T1 is still seven
+kernels of a few microseconds each (T1's memset and three kernels, the vertex model's two, the
+move), and the GPU idles between them: about 0.03 ms a step for 8 tissues of 1,024 cells on an
+H200, whatever the size below ~1e4 cells. Here one launch runs a whole stretch of steps (up to the
+next check or write): each tissue's block keeps its positions, forces, cell coefficients and T1
+claims in shared memory and runs the phases of every step one after another, with a barrier
+between them.
+
+The trajectory is the general kernels' bit for bit: every phase calls the same device function
+(``vertex_model.cuh``, ``t1_pass.cuh``, ``brownian.cuh``) with the same global indices, so the
+Philox draws, the flips (lowest edge index wins) and the arithmetic are the same. The tests compare
+the two paths' positions, topology and counters exactly (``tests/test_tissue_steps.py``).
+
+It serves ``Simulation.run`` (not ``minimize``) where :func:`why_not` finds nothing against it:
+the GPU, a sphere or periodic plane, a :class:`~spherevm.plugins.integrators.Brownian` integrator
+(not Active), one :class:`~spherevm.plugins.forces.VertexModel`, at most one
+:class:`~spherevm.plugins.updaters.T1` without flip-back counting, every operation firing each
+step, and every tissue small enough for one block's shared memory (about 2,000 cells on an H200).
+``run(fused=False)`` keeps the general kernels.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .plugins.base import SURFACE_DEFINES, surface_kernels
+from .plugins.forces import VertexModel
+from .plugins.integrators import Brownian
+from .plugins.updaters import T1
+
+_KERNELS = Path(__file__).with_suffix(".cu")
+#: threads per tissue's block (at most this many; fewer for a tissue with fewer vertices)
+THREADS = 1024
+
+
+def shared_bytes(state) -> int:
+    """Shared memory of the largest tissue's block: positions and forces (3 doubles a vertex each),
+    cell coefficients (2 doubles a cell) and claims (an int a cell)."""
+    nv, nc = state.vertices_per_replica, state.cells_per_replica
+    return int(np.max(48 * nv + 20 * nc))
+
+
+def why_not(simulation) -> str | None:
+    """Why the fused steps cannot run ``simulation``'s next steps (None if they can)."""
+    state, ops = simulation.state, simulation.operations
+    if not simulation.device.is_gpu:
+        return "the fused small-tissue steps need the GPU"
+    if not isinstance(state.constraint, tuple(SURFACE_DEFINES)):
+        return f"no kernels for {type(state.constraint).__name__}"
+    if type(ops.integrator) is not Brownian:
+        return f"the integrator is {type(ops.integrator).__name__}, not Brownian"
+    if len(ops.forces) != 1 or type(ops.forces[0]) is not VertexModel:
+        return "the forces are not one VertexModel"
+    updaters = list(ops.updaters)
+    if len(updaters) > 1 or (updaters and type(updaters[0]) is not T1):
+        return "the updaters are not at most one T1"
+    if updaters and updaters[0].counting(simulation):
+        return "T1 counts flip-backs (count_flip_backs=True)"
+    import cupy as cp
+    room = cp.cuda.Device().attributes["MaxSharedMemoryPerBlockOptin"]
+    if shared_bytes(state) > room:
+        return f"a tissue needs {shared_bytes(state)} bytes of shared memory, a block has {room}"
+    return None
+
+
+class TissueSteps:
+    """The fused steps of one Simulation: :meth:`run` advances the State ``steps`` steps (the
+    caller, :class:`spherevm.graphs.StepGraphs`, has made T1's room and padded the cell table for
+    them, and does the Simulation's bookkeeping)."""
+
+    def __init__(self, simulation, max_steps: int):
+        import cupy as cp
+        self.sim = simulation
+        self.step_need = cp.full(max_steps, -1, dtype=cp.int32)   # per step of a launch (tissue_steps_finish)
+
+    def run(self, steps: int):
+        import cupy as cp
+        sim = self.sim
+        state = sim.state
+        if steps > len(self.step_need):
+            raise ValueError(f"at most {len(self.step_need)} fused steps a launch, got {steps}")
+        module, size = surface_kernels(_KERNELS, state)
+        kernel = module.get_function("tissue_steps")
+        shared = shared_bytes(state)
+        if kernel.max_dynamic_shared_size_bytes < shared:
+            kernel.max_dynamic_shared_size_bytes = shared
+        model = sim.operations.forces[0]
+        kA, kP, A0, P0 = model.device_parameters(state)
+        t1 = sim.operations.updaters[0] if sim.operations.updaters else None
+        if t1 is not None:
+            t1_args, (width, log_pass) = t1.tissue_step_arguments(sim)
+        else:
+            zero = cp.zeros(1, dtype=cp.int32)
+            t1_args = (zero.view(bool), cp.zeros(1), cp.zeros(1), np.float64(0.0), zero, cp.zeros(1), zero, zero,
+                       zero, zero)
+        vertex_start, cell_start = state.cached((TissueSteps, "starts"), lambda: (
+            cp.asarray(state.vertex_start.astype(np.int32)), cp.asarray(state.cell_start.astype(np.int32))))
+        threads = int(min(THREADS, -(-int(state.vertices_per_replica.max()) // 32) * 32))
+        kernel((state.n_replicas,), (threads,),
+               (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_vertices, state.cell_sides,
+                vertex_start, cell_start, size, np.int32(state.max_sides), kA, kP, A0, P0,
+                np.int32(t1 is not None), *t1_args, self.step_need,
+                *sim.operations.integrator.tissue_step_arguments(sim), np.uint64(sim.timestep), np.int32(steps)),
+               shared_mem=shared)
+        if t1 is not None:
+            module.get_function("tissue_steps_finish")((1,), (1,), (width, self.step_need, np.int32(steps), log_pass))

@@ -68,8 +68,13 @@ def test_hot_ensemble_is_the_general_kernels_trajectory(surface):
 
 
 @pytest.mark.gpu
-def test_a_tissue_with_more_vertices_than_a_block_has_threads():
-    state = ensemble("sphere", (1500, 32))
+@pytest.mark.parametrize("per_block, cluster", [(10 ** 6, 1), (1200, 2), (600, 4), (300, 8)])
+def test_a_large_tissue_on_one_block_or_a_cluster(monkeypatch, per_block, cluster):
+    """A 1,200-cell tissue beside a small one: on one block (more vertices than threads: each thread
+    loops) and spread over clusters of 2, 4 and 8 blocks (distributed shared memory)."""
+    monkeypatch.setattr(tissue_steps, "VERTICES_PER_BLOCK", per_block)
+    state = ensemble("sphere", (1200, 32))
+    assert tissue_steps.cluster_size(state) == cluster
     assert state.vertices_per_replica.max() > tissue_steps.THREADS
     runs = three_runs(state, 150, T=0.2, check_every=64)
     assert_same(runs)
@@ -103,5 +108,11 @@ def test_the_fused_steps_need_the_gpu():
     sim = dynamics_simulation(ensemble("plane", (16,)), "cpu", Brownian(dt=0.01))
     assert "GPU" in tissue_steps.why_not(sim)
     state = ensemble("sphere", (40, 100))
-    assert tissue_steps.shared_bytes(state) == 48 * 196 + 20 * 100   # 2 x 100 - 4 vertices on a sphere
+    # 2 x 100 - 4 = 196 vertices on a sphere; on 1 block and on 2
+    assert tissue_steps.shared_bytes(state, 1) == 8 * (6 * 196 + 2 * 100 + 3 * 196) + 4 * 100
+    assert tissue_steps.shared_bytes(state, 2) == 8 * (6 * 196 + 2 * 100 + 3 * 98) + 4 * 100
+    assert tissue_steps.cluster_size(state) == 1
+    big = ensemble("sphere", (1024,))
+    assert tissue_steps.cluster_size(big) == 2                      # 2,044 vertices: two blocks
+    assert tissue_steps.cluster_size(big, n_sm=1) == 1              # ... unless the SMs run out
 

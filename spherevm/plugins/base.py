@@ -17,11 +17,12 @@ SURFACE_DEFINES = {Sphere: (), PeriodicPlane: ("SVM_SURFACE_PLANE",)}
 KERNEL_SURFACES = tuple(SURFACE_DEFINES)
 
 
-def surface_kernels(cu_file, state):
-    """``(module, size)``: the kernels of ``cu_file`` compiled for ``state``'s surface and the State's
-    per-replica size array they take (``radius`` on the sphere, ``box`` on the plane)."""
-    defines = next(d for cls, d in SURFACE_DEFINES.items() if isinstance(state.constraint, cls))
-    return load_module(cu_file, defines), getattr(state, state.constraint.size_name)
+def surface_kernels(cu_file, state, defines=()):
+    """``(module, size)``: the kernels of ``cu_file`` compiled for ``state``'s surface (and the macros
+    ``defines``) and the State's per-replica size array they take (``radius`` on the sphere, ``box``
+    on the plane)."""
+    surface = next(d for cls, d in SURFACE_DEFINES.items() if isinstance(state.constraint, cls))
+    return load_module(cu_file, surface + tuple(defines)), getattr(state, state.constraint.size_name)
 
 
 class Operation:

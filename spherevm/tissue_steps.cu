@@ -15,9 +15,6 @@
 #include "plugins/updaters/t1_pass.cuh"
 #include "plugins/integrators/brownian.cuh"
 
-#ifndef TISSUE_THREADS
-#define TISSUE_THREADS 1024
-#endif
 #ifndef TISSUE_CLUSTER
 #define TISSUE_CLUSTER 1
 #endif
@@ -51,7 +48,7 @@ __device__ __forceinline__ void to_others(double* const* bases, int rank, long o
         if (q != rank) store3(bases[q] + offset, i, x);
 }
 
-// Shared memory of each block, in doubles (tissue_steps.py computes the same, in bytes): two copies
+// At most 1,024 threads a block (tissue_steps.THREADS). Shared memory of each block, in doubles (tissue_steps.py computes the same, in bytes): two copies
 // of the positions (3 nv each: the step's, and the next, which the move writes while other blocks
 // still read the step's), the cell coefficients (2 nc), the forces of the block's vertices
 // (3 ceil(nv / TISSUE_CLUSTER)), then the T1 claims (nc ints).
@@ -59,7 +56,7 @@ __device__ __forceinline__ void to_others(double* const* bases, int rank, long o
 // slot per edge, the tissue's from 3 vertex_start[r] / 2 on), its per-pass counters (flips, refused:
 // the last pass's are left, as t1_apply leaves them) and running totals, and step_need[j]: the widest
 // C3/C4 row of a claimant in step j (tissue_steps_finish turns it into the width t1_apply grows).
-extern "C" __global__ void __launch_bounds__(TISSUE_THREADS) TISSUE_CLUSTER_DIMS tissue_steps(
+extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_steps(
     double* __restrict__ pos, int* vn, int* vc, int* cell_vertices, int* sides,
     const int* __restrict__ vertex_start, const int* __restrict__ cell_start, const double* __restrict__ size,
     int max_sides, const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,

@@ -24,6 +24,7 @@ cluster of blocks, on an H200).
 """
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -66,6 +67,17 @@ def shared_bytes(state, cluster: int) -> int:
     return int(np.max(8 * (6 * nv + 2 * nc + 3 * (-(-nv // cluster))) + 4 * nc))
 
 
+@functools.lru_cache(maxsize=None)
+def device_limits(device_id: int):
+    """``(compute capability, shared memory a block may opt in to, SM count)`` of a GPU, asked once
+    (CuPy's ``Device.attributes`` queries every attribute, a cost each stretch need not pay)."""
+    import cupy as cp
+    device = cp.cuda.Device(device_id)
+    attributes = device.attributes
+    return (int(device.compute_capability), attributes["MaxSharedMemoryPerBlockOptin"],
+            attributes["MultiProcessorCount"])
+
+
 def why_not(simulation) -> str | None:
     """Why the fused steps cannot run ``simulation``'s next steps (None if they can)."""
     state, ops = simulation.state, simulation.operations
@@ -83,11 +95,10 @@ def why_not(simulation) -> str | None:
     if updaters and updaters[0].counting(simulation):
         return "T1 counts flip-backs (count_flip_backs=True)"
     import cupy as cp
-    device = cp.cuda.Device()
-    if int(device.compute_capability) < 90:
+    capability, room, n_sm = device_limits(cp.cuda.Device().id)
+    if capability < 90:
         return "the fused small-tissue steps need thread block clusters (compute capability 9.0, Hopper)"
-    room = device.attributes["MaxSharedMemoryPerBlockOptin"]
-    need = shared_bytes(state, cluster_size(state, device.attributes["MultiProcessorCount"]))
+    need = shared_bytes(state, cluster_size(state, n_sm))
     if need > room:
         return f"a tissue needs {need} bytes of shared memory a block, a block has {room}"
     return None
@@ -101,8 +112,10 @@ class TissueSteps:
     def __init__(self, simulation, max_steps: int):
         import cupy as cp
         self.sim = simulation
-        self.n_sm = cp.cuda.Device().attributes["MultiProcessorCount"]
+        self.n_sm = device_limits(cp.cuda.Device().id)[2]
         self.step_need = cp.full(max_steps, -1, dtype=cp.int32)   # per step of a launch (tissue_steps_finish)
+        zero, none = cp.zeros(1, dtype=cp.int32), cp.zeros(1)
+        self.no_t1 = (zero.view(bool), none, none, np.float64(0.0), zero, none, zero, zero, zero, zero)
 
     def run(self, steps: int):
         import cupy as cp
@@ -121,10 +134,8 @@ class TissueSteps:
         t1 = sim.operations.updaters[0] if sim.operations.updaters else None
         if t1 is not None:
             t1_args, (width, log_pass) = t1.tissue_step_arguments(sim)
-        else:
-            zero = cp.zeros(1, dtype=cp.int32)
-            t1_args = (zero.view(bool), cp.zeros(1), cp.zeros(1), np.float64(0.0), zero, cp.zeros(1), zero, zero,
-                       zero, zero)
+        else:                        # t1 = 0: the kernel reads none of T1's arguments
+            t1_args = self.no_t1
         vertex_start, cell_start = state.cached((TissueSteps, "starts"), lambda: (
             cp.asarray(state.vertex_start.astype(np.int32)), cp.asarray(state.cell_start.astype(np.int32))))
         block_vertices = -(-int(state.vertices_per_replica.max()) // cluster)

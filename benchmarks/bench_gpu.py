@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import median_time, run_step_time  # noqa: E402
+from common import median_time, minimize_step_time, run_step_time  # noqa: E402
 
 import spherevm as svm  # noqa: E402
 from spherevm.device import info, resolve  # noqa: E402
@@ -72,6 +72,13 @@ def brownian_sim(n_cells, replicas, device):
     return sim
 
 
+def fire_t1_sim(n_cells, replicas, device):
+    """FIRE + T1, as every minimisation of the rigidity sweeps."""
+    sim = build(n_cells, replicas, device)
+    sim.operations.updaters.append(svm.plugins.updaters.T1())
+    return sim
+
+
 def brownian_step(sim):
     sim._update()
     sim._integrate()
@@ -102,9 +109,12 @@ def measure(n_cells, replicas, gpu, numpy_max, bw):
     steps = 200 if n_cells * replicas >= 1e6 else 1000
     t_graph = run_step_time(brownian_sim(n_cells, replicas, gpu), gpu, steps=steps, fused=False)
     t_fused = run_step_time(brownian_sim(n_cells, replicas, gpu), gpu, steps=steps)   # = t_graph where not fused
+    t_min_graph = minimize_step_time(fire_t1_sim(n_cells, replicas, gpu), gpu, steps=steps, fused=False)
+    t_min_fused = minimize_step_time(fire_t1_sim(n_cells, replicas, gpu), gpu, steps=steps)
     row = dict(system=f"{replicas} x {n_cells}" if replicas > 1 else f"{n_cells:.0e}",
                cells=n_cells * replicas, force_ms=1e3 * t_force, fire_ms=1e3 * t_fire, brown_ms=1e3 * t_brown,
-               graph_ms=1e3 * t_graph, fused_ms=1e3 * t_fused,
+               graph_ms=1e3 * t_graph, fused_ms=1e3 * t_fused, min_graph_ms=1e3 * t_min_graph,
+               min_fused_ms=1e3 * t_min_fused,
                force_gbs=force_floor_bytes(state) / t_force / 1e9, fire_gbs=fire_floor_bytes(state) / t_fire / 1e9)
     row["fire_frac_bw"] = row["fire_gbs"] / bw
     if n_cells * replicas <= numpy_max:
@@ -134,11 +144,13 @@ def main(argv=None):
     print("# launches per step: force 2 kernels; FIRE iteration = force + 3 kernels; "
           "Brownian step with T1 check = T1 pass (1 memset + 2 kernels + 1 read-back of 12 bytes) + force + 1 kernel; "
           "in graphs: the same steps through Simulation.run(graphs=True, fused=False), no read-back, per step; "
-          "run: Simulation.run(graphs=True), the fused small-tissue steps where they apply (spherevm.tissue_steps)")
+          "run: Simulation.run(graphs=True), the fused small-tissue steps where they apply (spherevm.tissue_steps); "
+          "FIRE+T1 in graphs / minimize: an iteration of Simulation.minimize(graphs=True, fused=False) / "
+          "minimize(graphs=True) (fused where it applies), with T1, a check every 100 iterations")
     print("# GB/s: bytes each kernel must move at least (every array once) over the measured time")
     head = (f"{'system':>12} {'force ms':>9} {'GB/s':>6} {'FIRE it ms':>11} {'GB/s':>6} {'of copy':>8} "
-            f"{'Brown+T1 ms':>12} {'in graphs':>10} {'run':>8} {'NumPy force':>12} {'NumPy FIRE':>11} {'NumPy Brown':>12} {'speed-up':>9} "
-            f"{'B/cell':>7}")
+            f"{'Brown+T1 ms':>12} {'in graphs':>10} {'run':>8} {'FIRE+T1 graphs':>15} {'minimize':>9} "
+            f"{'NumPy force':>12} {'NumPy FIRE':>11} {'NumPy Brown':>12} {'speed-up':>9} {'B/cell':>7}")
     print(head)
     systems = [(int(n), 1) for n in args.cells]
     for e in args.ensembles:
@@ -151,7 +163,8 @@ def main(argv=None):
         npi = row.get("numpy_fire_ms", np.nan)
         npb = row.get("numpy_brown_ms", np.nan)
         print(f"{row['system']:>12} {row['force_ms']:9.4f} {row['force_gbs']:6.0f} {row['fire_ms']:11.4f} "
-              f"{row['fire_gbs']:6.0f} {row['fire_frac_bw']:8.2f} {row['brown_ms']:12.4f} {row['graph_ms']:10.4f} {row['fused_ms']:8.4f} {npf:12.3f} {npi:11.3f} "
+              f"{row['fire_gbs']:6.0f} {row['fire_frac_bw']:8.2f} {row['brown_ms']:12.4f} {row['graph_ms']:10.4f} "
+              f"{row['fused_ms']:8.4f} {row['min_graph_ms']:15.4f} {row['min_fused_ms']:9.4f} {npf:12.3f} {npi:11.3f} "
               f"{npb:12.3f} {npi / row['fire_ms']:9.1f} {row['bytes_per_cell']:7.0f}", flush=True)
 
 

@@ -47,3 +47,12 @@ def run_step_time(sim, device, steps=1000, repeat=5, **run):
     small-tissue steps where they apply unless ``fused=False``; checks every 100 steps as by default;
     each run captures its graphs again, so the capture is in the time)."""
     return median_time(lambda: sim.run(steps, graphs=True, **run), device, repeat=repeat, warmup=1) / steps
+
+
+def minimize_step_time(sim, device, steps=1000, repeat=5, **minimize):
+    """Median seconds per iteration of ``sim.minimize(max_steps=steps, graphs=True, **minimize)`` with the
+    tolerances at zero (every replica iterates throughout), a convergence check every 100 iterations
+    and no narrowing: CUDA graphs, or the fused small-tissue minimisation where it applies unless
+    ``fused=False`` (each call captures its graphs again, so the capture is in the time)."""
+    return median_time(lambda: sim.minimize(max_steps=steps, force_tol=0.0, energy_tol=0.0, check_every=100, narrow=False,
+                                            graphs=True, **minimize), device, repeat=repeat, warmup=1) / steps

@@ -24,6 +24,29 @@ struct SegmentSum {
 // The (at most two) segments that cross this block's tile edges, found by segment_sum_partial.
 __shared__ int segment_sum_crossing[2];
 
+// Segmented suffix sums inside a warp (every lane calls it): each lane's v[j] ends as the sum from
+// itself to the end of its segment's run in the warp, always in the same order.
+template <int N>
+__device__ __forceinline__ void warp_segment_suffix(double (&v)[N], int segment)
+{
+    int lane = threadIdx.x & 31;
+    for (int offset = 1; offset < 32; offset <<= 1) {
+        int other_segment = __shfl_down_sync(0xffffffffu, segment, offset);
+        bool same = lane + offset < 32 && other_segment == segment;
+        for (int j = 0; j < N; ++j) {
+            double other = __shfl_down_sync(0xffffffffu, v[j], offset);
+            if (same) v[j] += other;
+        }
+    }
+}
+
+// The sum of a warp's values in fixed butterflies (every lane calls it; lane 0's is the one used).
+__device__ __forceinline__ double warp_butterfly_sum(double v)
+{
+    for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_xor_sync(0xffffffffu, v, offset);
+    return v;
+}
+
 // N sums of this block's items at once (value[j] is the item's term of sum j): out[j][s] (plus
 // out[j][s] if add) for a segment inside the tile, the parts of the others to the scratch. Each sum
 // is added in the same order as if it were summed alone; together they share the segment shuffles
@@ -42,14 +65,7 @@ __device__ void segment_sum_partial(const double (&value)[N], int segment, const
     // its segment's run in the warp, always in the same order
     double v[N];
     for (int j = 0; j < N; ++j) v[j] = segment >= 0 ? value[j] : 0.0;
-    for (int offset = 1; offset < 32; offset <<= 1) {
-        int other_segment = __shfl_down_sync(0xffffffffu, segment, offset);
-        bool same = lane + offset < 32 && other_segment == segment;
-        for (int j = 0; j < N; ++j) {
-            double other = __shfl_down_sync(0xffffffffu, v[j], offset);
-            if (same) v[j] += other;
-        }
-    }
+    warp_segment_suffix<N>(v, segment);
     int previous = __shfl_up_sync(0xffffffffu, segment, 1);
     if (lane == 0) {
         for (int j = 0; j < N; ++j) warp_first_part[j][warp] = v[j];
@@ -112,12 +128,11 @@ __device__ void segment_sum_finish(const SegmentSum& sums, double* const* outs, 
             v += a; v += b; v += c; v += d;
         }
         for (; t <= t1; t += stride) v += __ldcg(head + t);
-        for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_xor_sync(0xffffffffu, v, offset);
+        v = warp_butterfly_sum(v);
         if (lane == 0) warp_total[warp] = v;
         __syncthreads();
         if (warp == 0) {
-            v = lane < n_warps ? warp_total[lane] : 0.0;
-            for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_xor_sync(0xffffffffu, v, offset);
+            v = warp_butterfly_sum(lane < n_warps ? warp_total[lane] : 0.0);
             if (lane == 0) outs[j][s] = add ? outs[j][s] + v : v;
         }
         __syncthreads();
@@ -132,4 +147,57 @@ __device__ void segment_sum(double value, int segment, const SegmentSum& sums, d
     const double values[1] = {value};
     segment_sum_partial<1>(values, segment, sums, &out, add);
     segment_sum_finish(sums, &out, 1, add);
+}
+
+// One block holding one whole segment [s0, s1) gives its sums the bits segment_sum_partial and
+// segment_sum_finish give them in a launch of `tile` threads a block over all the items (the fused
+// small-tissue steps, spherevm/tissue_steps.cu). Thread t's k-th item is item g = (s0 & ~31) + t +
+// k * blockDim.x (blockDim.x a multiple of 32), so the block's warps are that launch's warps. Every
+// thread calls block_segment_warp once per k, with `mine` = s0 <= g < s1: it leaves each of the
+// warp's suffix sums at lane 0 in part[j * (n_warps + 1) + w] (w: the warp's place from s0 & ~31),
+// and at the segment's first item in part[j * (n_warps + 1) + n_warps].
+template <int N>
+__device__ __forceinline__ void block_segment_warp(const double (&value)[N], bool mine, long g, long s0, int n_warps,
+                                                   double* part)
+{
+    double v[N];
+    for (int j = 0; j < N; ++j) v[j] = mine ? value[j] : 0.0;
+    warp_segment_suffix<N>(v, mine ? 0 : -1);
+    int w = (int)((g - (s0 & ~31L)) >> 5);
+    if ((threadIdx.x & 31) == 0 && w < n_warps)
+        for (int j = 0; j < N; ++j) part[j * (n_warps + 1) + w] = v[j];
+    if (g == s0)
+        for (int j = 0; j < N; ++j) part[j * (n_warps + 1) + n_warps] = v[j];
+}
+
+// After every block_segment_warp (and a barrier): the N sums, in lane 0 of the calling warp (its 32
+// lanes call it). Per tile, its first item's suffix plus the next warps' in the tile, in order
+// (segment_sum_partial); over several tiles (at most 32), the finish's order: the first part plus
+// the second tile's in thread 0, the others' tiles in threads 1.., butterflies in the warp, then
+// over the finishing block's warps (warp 0's total, zeros from the others).
+template <int N>
+__device__ __forceinline__ void block_segment_total(const double* part, long s0, long s1, int n_warps, long tile,
+                                                    double (&out)[N])
+{
+    int lane = threadIdx.x & 31;
+    long base = s0 & ~31L, t0 = s0 / tile, t1 = (s1 - 1) / tile;
+    int n_tiles = (int)(t1 - t0 + 1);
+    for (int j = 0; j < N; ++j) {
+        const double* p = part + j * (n_warps + 1);
+        double total = 0.0;
+        if (lane < n_tiles) {
+            long t = t0 + lane, first = t == t0 ? s0 : t * tile, end = min(s1, (t + 1) * tile);
+            total = t == t0 ? p[n_warps] : p[(first - base) >> 5];
+            for (long w = ((first >> 5) + 1) << 5; w < end; w += 32) total += p[(w - base) >> 5];
+        }
+        if (n_tiles == 1) {
+            out[j] = total;
+            continue;
+        }
+        double next = __shfl_down_sync(0xffffffffu, total, 1);
+        double v = lane == 0 ? total : 0.0;
+        if (lane + 1 < n_tiles) v += next;
+        v = warp_butterfly_sum(v);
+        out[j] = warp_butterfly_sum(lane == 0 ? v : 0.0);
+    }
 }

@@ -15,9 +15,10 @@ its cell table (:meth:`T1.capture_ready`). Every operation says whether it can r
 ``Simulation.minimize`` runs its iterations between two convergence checks the same way; there a
 step is the minimiser's move followed by the updaters of the next timestep (its order step by step).
 
-Where :func:`spherevm.tissue_steps.why_not` finds nothing against it (Brownian dynamics of small
-tissues with the vertex model and T1), a ``run`` stretch is one launch of the fused small-tissue
-steps instead of graph replays: the same trajectory, bit for bit, in a third of the time.
+Where :func:`spherevm.tissue_steps.why_not` finds nothing against it (Brownian dynamics or FIRE
+minimisation of small tissues with the vertex model and T1), a stretch is one launch of the fused
+small-tissue steps instead of graph replays: the same trajectory, bit for bit, in a third of the
+time.
 """
 from __future__ import annotations
 
@@ -81,37 +82,34 @@ class StepGraphs:
     def for_run(cls, simulation, steps, graphs, fused=None):
         """The runner for ``run(steps, graphs=..., fused=...)``: None where graphs are off (``graphs=None``:
         on the GPU for runs of at least MIN_STEPS steps on at most MAX_VERTICES vertices)."""
+        return cls._for(simulation, steps, graphs, fused, why_not(simulation), "run")
+
+    @classmethod
+    def for_minimize(cls, simulation, max_steps, graphs, fused=None):
+        """The runner for ``minimize(max_steps, graphs=..., fused=...)``: as :meth:`for_run`, and never
+        with a writer attached (a writer sees the State between the move and the updaters)."""
+        reason = why_not(simulation)
+        if reason is None and simulation.operations.writers:
+            reason = "a writer is attached (minimize writes between a move and the next updaters)"
+        return cls._for(simulation, max_steps, graphs, fused, reason, "minimize")
+
+    @classmethod
+    def _for(cls, simulation, steps, graphs, fused, reason, what):
         if fused not in (None, False):
             raise ValueError(f"fused must be None (auto) or False, got {fused!r}")
         if graphs is False:
             return None
-        reason = why_not(simulation)
+        minimizing = what == "minimize"
         if graphs is None:
             small = simulation.state.n_vertices <= MAX_VERTICES
-            return cls(simulation, False, fused=fused) if reason is None and small and steps >= MIN_STEPS else None
-        if graphs is not True:
-            raise ValueError(f"graphs must be None (auto), True or False, got {graphs!r}")
-        if reason is not None:
-            raise ValueError(f"run(graphs=True): {reason}")
-        return cls(simulation, True, fused=fused)
-
-    @classmethod
-    def for_minimize(cls, simulation, max_steps, graphs):
-        """The runner for ``minimize(max_steps, graphs=...)``: as :meth:`for_run`, and never with a
-        writer attached (a writer sees the State between the move and the updaters)."""
-        if graphs is False:
+            if reason is None and small and steps >= MIN_STEPS:
+                return cls(simulation, False, minimizing, fused)
             return None
-        reason = why_not(simulation)
-        if reason is None and simulation.operations.writers:
-            reason = "a writer is attached (minimize writes between a move and the next updaters)"
-        if graphs is None:
-            small = simulation.state.n_vertices <= MAX_VERTICES
-            return cls(simulation, False, True) if reason is None and small and max_steps >= MIN_STEPS else None
         if graphs is not True:
             raise ValueError(f"graphs must be None (auto), True or False, got {graphs!r}")
         if reason is not None:
-            raise ValueError(f"minimize(graphs=True): {reason}")
-        return cls(simulation, True, True)
+            raise ValueError(f"{what}(graphs=True): {reason}")
+        return cls(simulation, True, minimizing, fused)
 
     def stretch(self, done, steps, check_every):
         """How many steps to run before the host must look: the next check, the end of the run, or
@@ -160,7 +158,8 @@ class StepGraphs:
                 raise ValueError(f"{what}(graphs=True): {refused} cannot run inside a CUDA graph now")
             return False
         if self._fused_ready():
-            self.tissue.run(steps)
+            for done in range(0, steps, MAX_STRETCH):      # a minimisation's checks may be farther apart
+                self.tissue.run(min(MAX_STRETCH, steps - done))
         else:
             steps = self._replay(key, steps)
         sim.timestep += steps
@@ -176,11 +175,11 @@ class StepGraphs:
         return True
 
     def _fused_ready(self) -> bool:
-        """Whether this ``run`` stretch goes to the fused small-tissue steps (:mod:`spherevm.tissue_steps`)."""
-        if self.minimizing or self.fused is False or tissue_steps.why_not(self.sim) is not None:
+        """Whether this stretch goes to the fused small-tissue steps (:mod:`spherevm.tissue_steps`)."""
+        if self.fused is False or tissue_steps.why_not(self.sim, self.minimizing) is not None:
             return False
         if self.tissue is None:
-            self.tissue = tissue_steps.TissueSteps(self.sim, MAX_STRETCH)
+            self.tissue = tissue_steps.TissueSteps(self.sim, MAX_STRETCH, self.minimizing)
         return True
 
     def _replay(self, key, steps) -> int:

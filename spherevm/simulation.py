@@ -379,7 +379,8 @@ class Simulation:
                 w.flush()
 
     def minimize(self, force_tol=None, energy_tol=None, max_steps: int = 100_000, check_every=None,
-                 progress=None, narrow: bool = True, resume: bool = False, graphs=None) -> MinimizeResult:
+                 progress=None, narrow: bool = True, resume: bool = False, graphs=None,
+                 fused=None) -> MinimizeResult:
         """Minimise every replica with the Minimizer integrator (FIRE if none is set) until each
         converges, is halted or ``max_steps`` iterations have passed.
 
@@ -411,6 +412,11 @@ class Simulation:
         ``graphs.MIN_STEPS`` and the State has at most ``graphs.MAX_VERTICES`` vertices; True:
         always (ValueError naming what cannot); False: never. A ``progress`` callback sees the State
         as step by step, but must not change the operations' parameters (the graphs hold them).
+
+        ``fused``: with graphs on, FIRE minimisations of small tissues run the iterations between
+        two checks in one launch, a thread block per tissue (:mod:`spherevm.tissue_steps`; the same
+        minimisation bit for bit). None (default): wherever ``tissue_steps.why_not`` finds nothing
+        against it; False: graph replays of the general kernels.
         """
         from .graphs import StepGraphs
         from .plugins.integrators import FIRE   # the default minimiser
@@ -434,7 +440,7 @@ class Simulation:
         narrow = narrow and not self.operations.writers and all(op.narrowable for op in self.operations)
         n_rep, n_cells = self._state.n_replicas, self._state.cells_per_replica
         narrowed = []
-        runner = StepGraphs.for_minimize(self, max_steps, graphs)
+        runner = StepGraphs.for_minimize(self, max_steps, graphs, fused)
         self._write()
         try:
             while True:

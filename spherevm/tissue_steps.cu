@@ -14,6 +14,8 @@
 #include "plugins/forces/vertex_model.cuh"
 #include "plugins/updaters/t1_pass.cuh"
 #include "plugins/integrators/brownian.cuh"
+#include "plugins/integrators/fire.cuh"
+#include "device_common.cuh"
 
 #ifndef TISSUE_CLUSTER
 #define TISSUE_CLUSTER 1
@@ -48,14 +50,91 @@ __device__ __forceinline__ void to_others(double* const* bases, int rank, long o
         if (q != rank) store3(bases[q] + offset, i, x);
 }
 
-// At most 1,024 threads a block (tissue_steps.THREADS). Shared memory of each block, in doubles (tissue_steps.py computes the same, in bytes): two copies
-// of the positions (3 nv each: the step's, and the next, which the move writes while other blocks
-// still read the step's), the cell coefficients (2 nc), the forces of the block's vertices
-// (3 ceil(nv / TISSUE_CLUSTER)), then the T1 claims (nc ints).
-// t1: 0 no T1 pass; else T1's parameters (chord2, new_length, length_factor), its candidate room (a
-// slot per edge, the tissue's from 3 vertex_start[r] / 2 on), its per-pass counters (flips, refused:
-// the last pass's are left, as t1_apply leaves them) and running totals, and step_need[j]: the widest
-// C3/C4 row of a claimant in step j (tissue_steps_finish turns it into the width t1_apply grows).
+// T1's arguments of the fused steps: its parameters (chord2, new_length, length_factor), its
+// candidate room (a slot per edge, the tissue's from 3 vertex_start[r] / 2 on), its per-pass
+// counters (flips, refused: the last pass's are left, as t1_apply leaves them) and running totals,
+// step_need[j] (the widest C3/C4 row of a claimant in step j: tissue_steps_finish turns it into the
+// width t1_apply grows), and with `logging` the flip log (pass0: the number of the launch's first
+// pass less one, as t1_detect counts).
+struct TissueT1 {
+    const double* chord2;
+    const double* new_length;
+    double length_factor;
+    int* cand;
+    double* cand_len;
+    int* flips;
+    int* refused;
+    unsigned long long* total_flips;
+    unsigned long long* total_refused;
+    int* step_need;
+    int* log_count;
+    int* log;
+    int logging;
+    int pass0;
+};
+
+// One T1 pass of tissue r (vertices v0..v1) by the calling block, the `step`-th of the launch:
+// detect, check and claim, apply (t1_pass.cuh), barriers between; flipped(e) after each flip.
+// claim: the tissue's claims (all free between passes); n_cand: a shared counter.
+template <class Flipped>
+__device__ __forceinline__ void tissue_t1_pass(double* P, int* vn, int* vc, int* cell_vertices, int* sides,
+                                               int max_sides, Surface::Size s, int r, int v0, int v1, bool flipping,
+                                               const TissueT1& t1, int* claim, int* n_cand, int step,
+                                               Flipped flipped)
+{
+    const int tid = threadIdx.x, stride = blockDim.x;
+    const int room0 = (3 * v0) / 2, room = (3 * v1) / 2 - room0;
+    int* cand = t1.cand + (long)room0 * CAND_INTS;
+    double* len = t1.cand_len + room0;
+    if (tid == 0) { *n_cand = 0; t1.flips[r] = 0; t1.refused[r] = 0; }
+    __syncthreads();
+    if (flipping)
+        for (int u = v0 + tid; u < v1; u += stride)
+            t1_detect_vertex(P, vn, vc, s, t1.chord2[r], r, u, n_cand, cand, len, room);
+    __syncthreads();
+    const int n = min(*n_cand, room);
+    for (int i = tid; i < n; i += stride) {
+        int* e = cand + (long)i * CAND_INTS;
+        if (t1_check_candidate(P, vn, sides, cell_vertices, max_sides, s,
+                               t1_full_length(t1.new_length[r], t1.length_factor, len[i]), claim, e)) {
+            atomicMax(t1.step_need + step, max(sides[e[9]], sides[e[10]]));
+        } else {
+            atomicAdd(t1.refused + r, 1);
+            atomicAdd(t1.total_refused + r, 1ull);
+        }
+    }
+    __syncthreads();
+    for (int i = tid; i < n; i += stride) {
+        const int* e = cand + (long)i * CAND_INTS;
+        if (t1_apply_candidate(P, vn, vc, cell_vertices, sides, max_sides, s,
+                               t1_full_length(t1.new_length[r], t1.length_factor, len[i]), claim, e)) {
+            atomicAdd(t1.flips + r, 1);
+            atomicAdd(t1.total_flips + r, 1ull);
+            if (t1.logging) t1_log_flip(t1.log_count, t1.log, t1.pass0 + step + 1, e);
+            flipped(e);
+        }
+    }
+}
+
+// After a flip in a cluster's first block: the flipped edge's new positions to the other blocks.
+struct SendFlipped {
+    double* const* bases;
+    int rank;
+    long offset;
+    const double* P;
+    __device__ void operator()(const int* e) const
+    {
+        to_others(bases, rank, offset, e[0], load3(P, e[0]));
+        to_others(bases, rank, offset, e[2], load3(P, e[2]));
+    }
+};
+
+// At most 1,024 threads a block (tissue_steps.THREADS). Shared memory of each block, in doubles
+// (tissue_steps.py computes the same, in bytes): two copies of the positions (3 nv each: the step's,
+// and the next, which the move writes while other blocks still read the step's), the cell
+// coefficients (2 nc), the forces of the block's vertices (3 ceil(nv / TISSUE_CLUSTER)), then the T1
+// claims (nc ints). t1: 0 no T1 pass, else T1's arguments follow (TissueT1; log_pass: the flip log's
+// pass count before the launch).
 extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_steps(
     double* __restrict__ pos, int* vn, int* vc, int* cell_vertices, int* sides,
     const int* __restrict__ vertex_start, const int* __restrict__ cell_start, const double* __restrict__ size,
@@ -63,7 +142,8 @@ extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_st
     const double* __restrict__ P0, int t1, const bool* __restrict__ active, const double* __restrict__ chord2,
     const double* __restrict__ new_length, double length_factor, int* cand, double* cand_len,
     int* __restrict__ flips, int* __restrict__ refused, unsigned long long* __restrict__ total_flips,
-    unsigned long long* __restrict__ total_refused, int* __restrict__ step_need, const double* __restrict__ amp,
+    unsigned long long* __restrict__ total_refused, int* __restrict__ log_count, int* __restrict__ log, int logging,
+    const int* __restrict__ log_pass, int* __restrict__ step_need, const double* __restrict__ amp,
     const double* __restrict__ length_unit, double mu, double dt, double max_step, unsigned int seed,
     unsigned long long* __restrict__ error, unsigned long long step0, int steps)
 {
@@ -88,46 +168,18 @@ extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_st
     for (int c = c0 + tid; c < c1; c += stride) claim[c] = 0x7fffffff;
     const Surface::Size s = Surface::size(size, r);
     const bool flipping = t1 && active[r];
-    const int room0 = (3 * v0) / 2, room = (3 * v1) / 2 - room0;
-    int* tcand = cand + (long)room0 * CAND_INTS;
-    double* tlen = cand_len + room0;
+    const TissueT1 t1_args = {chord2, new_length, length_factor, cand, cand_len, flips, refused, total_flips,
+                              total_refused, step_need, log_count, log, logging, t1 ? *log_pass : 0};
     cluster_sync();   // every block of the cluster has started (its shared memory may be written)
     int now = 0;
     for (int step = 0; step < steps; ++step) {
         unsigned long long timestep = step0 + step;
         double* P = shared + at_pos[now];
         double* next = shared + at_pos[1 - now];
-        if (t1) {   // T1's pass in the first block: detect, check and claim, apply (t1_pass.cuh)
-            if (rank == 0) {
-                if (tid == 0) { n_cand = 0; flips[r] = 0; refused[r] = 0; }
-                __syncthreads();
-                if (flipping)
-                    for (int u = v0 + tid; u < v1; u += stride)
-                        t1_detect_vertex(P, vn, vc, s, chord2[r], r, u, &n_cand, tcand, tlen, room);
-                __syncthreads();
-                int n = min(n_cand, room);
-                for (int i = tid; i < n; i += stride) {
-                    int* e = tcand + (long)i * CAND_INTS;
-                    if (t1_check_candidate(P, vn, sides, cell_vertices, max_sides, s,
-                                           t1_full_length(new_length[r], length_factor, tlen[i]), claim, e)) {
-                        atomicMax(step_need + step, max(sides[e[9]], sides[e[10]]));
-                    } else {
-                        atomicAdd(refused + r, 1);
-                        atomicAdd(total_refused + r, 1ull);
-                    }
-                }
-                __syncthreads();
-                for (int i = tid; i < n; i += stride) {
-                    const int* e = tcand + (long)i * CAND_INTS;
-                    if (t1_apply_candidate(P, vn, vc, cell_vertices, sides, max_sides, s,
-                                           t1_full_length(new_length[r], length_factor, tlen[i]), claim, e)) {
-                        atomicAdd(flips + r, 1);
-                        atomicAdd(total_flips + r, 1ull);
-                        to_others(bases, rank, at_pos[now], e[0], load3(P, e[0]));
-                        to_others(bases, rank, at_pos[now], e[2], load3(P, e[2]));
-                    }
-                }
-            }
+        if (t1) {   // T1's pass in the first block
+            if (rank == 0)
+                tissue_t1_pass(P, vn, vc, cell_vertices, sides, max_sides, s, r, v0, v1, flipping, t1_args, claim,
+                               &n_cand, step, SendFlipped{bases, rank, at_pos[now], P});
             cluster_sync();   // the flips' topology and positions, everywhere
         }
         for (int c = cb0 + tid; c < cb1; c += stride) {   // the vertex model (vertex_model.cuh): this block's cells
@@ -152,6 +204,121 @@ extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_st
         now = 1 - now;
     }
     for (int j = 3 * (vb0 - v0) + tid; j < 3 * (vb1 - v0); j += stride) pos[3L * v0 + j] = shared[at_pos[now] + 3L * v0 + j];
+}
+
+// After a flip in the minimisation with T1's reset_velocities: FIRE forgets the flipped edge's
+// vertices' velocities (fire_reset_vertices).
+struct ResetFlipped {
+    double* V;
+    int reset;
+    __device__ void operator()(const int* e) const
+    {
+        if (!reset) return;
+        store3(V, e[0], v3(0.0, 0.0, 0.0));
+        store3(V, e[2], v3(0.0, 0.0, 0.0));
+    }
+};
+
+// Many FIRE iterations of Simulation.minimize in one launch, a thread block per tissue: each
+// iteration the vertex model's forces, FIRE's per-replica sums (in device_common.cuh's order for
+// a launch of `tile` threads a block: block_segment_warp / block_segment_total), its control
+// (thread 0) and move (fire.cuh), then T1's pass of the next timestep, as minimize orders them.
+// A stopped replica (fire_active false) only has its velocities zeroed (and T1's counters, as each pass
+// does). Shared memory, in doubles (tissue_steps.py computes the same, in bytes): the positions,
+// forces and velocities (3 nv each), the cell coefficients (2 nc), the sums' warp parts
+// (3 (n_warps + 1), n_warps the warps from v0 & ~31 to v1), then the T1 claims (nc ints).
+extern "C" __global__ void __launch_bounds__(1024) tissue_minimize(
+    double* __restrict__ pos, int* vn, int* vc, int* cell_vertices, int* sides,
+    const int* __restrict__ vertex_start, const int* __restrict__ cell_start, const double* __restrict__ size,
+    int max_sides, const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
+    const double* __restrict__ P0, int t1, const bool* __restrict__ active, const double* __restrict__ chord2,
+    const double* __restrict__ new_length, double length_factor, int* cand, double* cand_len,
+    int* __restrict__ flips, int* __restrict__ refused, unsigned long long* __restrict__ total_flips,
+    unsigned long long* __restrict__ total_refused, int* __restrict__ log_count, int* __restrict__ log, int logging,
+    const int* __restrict__ log_pass, int* __restrict__ step_need, int reset_velocities,
+    const bool* __restrict__ fire_active, double* __restrict__ vel, double* __restrict__ dt,
+    double* __restrict__ alpha, long long* __restrict__ n_positive, int n_min, double f_inc, double f_dec,
+    double alpha_start, double f_alpha, double dt_max,
+    const double* __restrict__ length_unit, double max_step, unsigned long long* __restrict__ error, int tile,
+    unsigned long long step0, int steps)
+{
+    extern __shared__ double shared[];
+    __shared__ int n_cand;
+    __shared__ double control[3];   // keep, scale, step
+    const int r = blockIdx.x, tid = threadIdx.x, stride = blockDim.x;
+    const int v0 = vertex_start[r], v1 = vertex_start[r + 1], c0 = cell_start[r], c1 = cell_start[r + 1];
+    const int nv = v1 - v0, nc = c1 - c0;
+    const long base = v0 & ~31L;
+    const int n_warps = (int)((v1 - base + 31) >> 5), rounds = (int)((v1 - base + stride - 1) / stride);
+    // the arrays, offset so that global indices address them
+    double* P = shared - 3L * v0;
+    double* F = shared + 3L * nv - 3L * v0;
+    double* V = shared + 6L * nv - 3L * v0;
+    double* coef = shared + 9L * nv - 2L * c0;
+    double* part = shared + 9L * nv + 2L * nc;
+    int* claim = (int*)(part + 3 * (n_warps + 1)) - c0;
+    for (int j = tid; j < 3 * nv; j += stride) {
+        shared[j] = pos[3L * v0 + j];
+        shared[6L * nv + j] = vel[3L * v0 + j];
+    }
+    for (int c = c0 + tid; c < c1; c += stride) claim[c] = 0x7fffffff;
+    const Surface::Size s = Surface::size(size, r);
+    const bool running = fire_active[r], flipping = t1 && active[r];
+    const FireParams fire = {n_min, f_inc, f_dec, alpha_start, f_alpha, dt_max};
+    const TissueT1 t1_args = {chord2, new_length, length_factor, cand, cand_len, flips, refused, total_flips,
+                              total_refused, step_need, log_count, log, logging, t1 ? *log_pass : 0};
+    // thread 0 keeps the replica's dt, alpha and counter through the launch
+    double replica_dt = dt[r], replica_alpha = alpha[r];
+    long long positive = n_positive[r];
+    __syncthreads();
+    for (int step = 0; step < steps; ++step) {
+        if (running) {
+            for (int c = c0 + tid; c < c1; c += stride) {   // the vertex model (vertex_model.cuh)
+                double A, Pc;
+                Surface::cell_measures(P, cell_vertices + (long)c * max_sides, sides[c], s, &A, &Pc);
+                vm_cell_terms(A, Pc, c, s, kA, kP, A0, P0, coef);
+            }
+            __syncthreads();
+            for (int k = 0; k < rounds; ++k) {   // forces, and fire_reduce's terms F.v, v.v, F.F
+                long g = base + tid + (long)k * stride;
+                bool mine = g >= v0 && g < v1;
+                double terms[3] = {0.0, 0.0, 0.0};
+                if (mine) {
+                    vec3 f = Surface::vertex_force(P, vn, vc, g, s, coef), w = load3(V, g);
+                    store3(F, g, f);
+                    terms[0] = dot3(f, w);
+                    terms[1] = dot3(w, w);
+                    terms[2] = dot3(f, f);
+                }
+                block_segment_warp<3>(terms, mine, g, v0, n_warps, part);
+            }
+            __syncthreads();
+            if (tid < 32) {   // the sums, then fire_control's (fire.cuh)
+                double sums[3];
+                block_segment_total<3>(part, v0, v1, n_warps, tile, sums);
+                if (tid == 0)
+                    fire_control_replica(sums[0], sums[1], sums[2], &replica_dt, &replica_alpha, &positive, fire,
+                                         control, control + 1, control + 2);
+            }
+            __syncthreads();
+            for (int v = v0 + tid; v < v1; v += stride)   // fire_move's (fire.cuh)
+                fire_move_vertex(P, V, F, v, s, control[0], control[1], control[2], length_unit[r], max_step,
+                                 step0 + step, error);
+        } else {
+            for (int j = tid; j < 3 * nv; j += stride) shared[6L * nv + j] = 0.0;
+        }
+        __syncthreads();
+        if (t1) {   // T1's pass of the next timestep
+            tissue_t1_pass(P, vn, vc, cell_vertices, sides, max_sides, s, r, v0, v1, flipping, t1_args, claim, &n_cand,
+                           step, ResetFlipped{V, reset_velocities});
+            __syncthreads();
+        }
+    }
+    for (int j = tid; j < 3 * nv; j += stride) {
+        pos[3L * v0 + j] = shared[j];
+        vel[3L * v0 + j] = shared[6L * nv + j];
+    }
+    if (tid == 0) { dt[r] = replica_dt; alpha[r] = replica_alpha; n_positive[r] = positive; }
 }
 
 // After tissue_steps, one thread: the table width the step-by-step path would hold (t1_apply grows it

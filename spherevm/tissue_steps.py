@@ -1,5 +1,5 @@
-"""Many Brownian steps of small tissues in one launch: a thread block (or a cluster of them) per
-tissue (tissue_steps.cu).
+"""Many Brownian steps or FIRE iterations of small tissues in one launch: a thread block (or a
+cluster of them) per tissue (tissue_steps.cu).
 
 Inside CUDA graphs (:mod:`spherevm.graphs`) a small tissue's Brownian step with T1 is still seven
 kernels of a few microseconds each (T1's memset and three kernels, the vertex model's two, the
@@ -14,13 +14,19 @@ The trajectory is the general kernels' bit for bit: every phase calls the same d
 Philox draws, the flips (lowest edge index wins) and the arithmetic are the same. The tests compare
 the two paths' positions, topology and counters exactly (``tests/test_tissue_steps.py``).
 
-It serves ``Simulation.run`` (not ``minimize``) where :func:`why_not` finds nothing against it:
-the GPU, a sphere or periodic plane, a :class:`~spherevm.plugins.integrators.Brownian` integrator
-(not Active), one :class:`~spherevm.plugins.forces.VertexModel`, at most one
-:class:`~spherevm.plugins.updaters.T1` without flip-back counting, every operation firing each
-step, and every tissue small enough for shared memory (about 1,400 cells on one block, 1,800 on a
-cluster of blocks, on an H200).
-``run(fused=False)`` keeps the general kernels.
+It serves ``Simulation.run`` where :func:`why_not` finds nothing against it: the GPU, a sphere or
+periodic plane, a :class:`~spherevm.plugins.integrators.Brownian` integrator (not Active), one
+:class:`~spherevm.plugins.forces.VertexModel`, at most one :class:`~spherevm.plugins.updaters.T1`,
+every operation firing each step, and every tissue small enough for shared memory (about 1,400
+cells on one block, 1,800 on a cluster of blocks, on an H200). ``run(fused=False)`` keeps the
+general kernels.
+
+It serves ``Simulation.minimize`` the same way with :class:`~spherevm.plugins.integrators.FIRE`
+(``minimize(fused=False)`` keeps the general kernels): the tissue's block also sums FIRE's power and
+norms per replica in the order the general reduction adds them (``device_common.cuh``:
+``block_segment_total``), so the minimisation is the general one bit for bit too. One block a
+tissue (about 1,300 cells on an H200): a minimisation's sums would cross the cluster at every
+iteration.
 """
 from __future__ import annotations
 
@@ -29,9 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .device import BLOCK
 from .plugins.base import SURFACE_DEFINES, surface_kernels
 from .plugins.forces import VertexModel
-from .plugins.integrators import Brownian
+from .plugins.integrators import FIRE, Brownian
 from .plugins.updaters import T1
 
 _KERNELS = Path(__file__).with_suffix(".cu")
@@ -59,11 +66,16 @@ def cluster_size(state, n_sm: int | None = None) -> int:
     return size
 
 
-def shared_bytes(state, cluster: int) -> int:
-    """Shared memory of a block of the largest tissue (tissue_steps.cu): two copies of the positions
-    (3 doubles a vertex each), the cell coefficients (2 doubles a cell), the forces of the block's
-    vertices and the claims (an int a cell)."""
+def shared_bytes(state, cluster: int, minimizing: bool = False) -> int:
+    """Shared memory of a block of the largest tissue (tissue_steps.cu). Steps: two copies of the
+    positions (3 doubles a vertex each), the cell coefficients (2 doubles a cell), the forces of the
+    block's vertices and the claims (an int a cell). Minimisation (one block): the positions,
+    forces and velocities, the cell coefficients, the sums' warp parts (3 doubles a warp, one more)
+    and the claims."""
     nv, nc = state.vertices_per_replica, state.cells_per_replica
+    if minimizing:
+        warps = (nv + 62) // 32          # from v0 rounded down to a warp's start, to v1
+        return int(np.max(8 * (9 * nv + 2 * nc + 3 * (warps + 1)) + 4 * nc))
     return int(np.max(8 * (6 * nv + 2 * nc + 3 * (-(-nv // cluster))) + 4 * nc))
 
 
@@ -78,44 +90,47 @@ def device_limits(device_id: int):
             attributes["MultiProcessorCount"])
 
 
-def why_not(simulation) -> str | None:
-    """Why the fused steps cannot run ``simulation``'s next steps (None if they can)."""
+def why_not(simulation, minimizing: bool = False) -> str | None:
+    """Why the fused steps cannot run ``simulation``'s next steps of ``run`` (or of ``minimize``:
+    ``minimizing``); None if they can."""
     state, ops = simulation.state, simulation.operations
     if not simulation.device.is_gpu:
         return "the fused small-tissue steps need the GPU"
     if not isinstance(state.constraint, tuple(SURFACE_DEFINES)):
         return f"no kernels for {type(state.constraint).__name__}"
-    if type(ops.integrator) is not Brownian:
-        return f"the integrator is {type(ops.integrator).__name__}, not Brownian"
+    wanted = FIRE if minimizing else Brownian
+    if type(ops.integrator) is not wanted:
+        return f"the integrator is {type(ops.integrator).__name__}, not {wanted.__name__}"
     if len(ops.forces) != 1 or type(ops.forces[0]) is not VertexModel:
         return "the forces are not one VertexModel"
-    updaters = list(ops.updaters)
+    updaters = [u for u in ops.updaters if u.in_minimize or not minimizing]
     if len(updaters) > 1 or (updaters and type(updaters[0]) is not T1):
         return "the updaters are not at most one T1"
-    if updaters and updaters[0].counting(simulation):
-        return "T1 counts flip-backs (count_flip_backs=True)"
+    if minimizing and -(-int(state.vertices_per_replica.max()) // BLOCK) >= 32:
+        return "a tissue spans more than 31 tiles of the general kernels' sums"
     import cupy as cp
     capability, room, n_sm = device_limits(cp.cuda.Device().id)
     if capability < 90:
         return "the fused small-tissue steps need thread block clusters (compute capability 9.0, Hopper)"
-    need = shared_bytes(state, cluster_size(state, n_sm))
+    need = shared_bytes(state, 1 if minimizing else cluster_size(state, n_sm), minimizing)
     if need > room:
         return f"a tissue needs {need} bytes of shared memory a block, a block has {room}"
     return None
 
 
 class TissueSteps:
-    """The fused steps of one Simulation: :meth:`run` advances the State ``steps`` steps (the
-    caller, :class:`spherevm.graphs.StepGraphs`, has made T1's room and padded the cell table for
-    them, and does the Simulation's bookkeeping)."""
+    """The fused steps of one Simulation: :meth:`run` advances the State ``steps`` steps of ``run``
+    (or iterations of ``minimize``: ``minimizing``; the caller, :class:`spherevm.graphs.StepGraphs`,
+    has made T1's room and padded the cell table for them, and does the Simulation's bookkeeping)."""
 
-    def __init__(self, simulation, max_steps: int):
+    def __init__(self, simulation, max_steps: int, minimizing: bool = False):
         import cupy as cp
-        self.sim = simulation
+        self.sim, self.minimizing = simulation, minimizing
         self.n_sm = device_limits(cp.cuda.Device().id)[2]
         self.step_need = cp.full(max_steps, -1, dtype=cp.int32)   # per step of a launch (tissue_steps_finish)
         zero, none = cp.zeros(1, dtype=cp.int32), cp.zeros(1)
-        self.no_t1 = (zero.view(bool), none, none, np.float64(0.0), zero, none, zero, zero, zero, zero)
+        self.no_t1 = (zero.view(bool), none, none, np.float64(0.0), zero, none, zero, zero, zero, zero, zero, zero,
+                      np.int32(0), zero)
 
     def run(self, steps: int):
         import cupy as cp
@@ -123,28 +138,32 @@ class TissueSteps:
         state = sim.state
         if steps > len(self.step_need):
             raise ValueError(f"at most {len(self.step_need)} fused steps a launch, got {steps}")
-        cluster = cluster_size(state, self.n_sm)
+        cluster = 1 if self.minimizing else cluster_size(state, self.n_sm)
+        # threads: a tissue's vertices (from a warp's start, minimising) over its blocks
+        block_vertices = -(-(int(state.vertices_per_replica.max()) + 31 * self.minimizing) // cluster)
+        threads = int(min(THREADS, -(-block_vertices // 32) * 32))
         module, size = surface_kernels(_KERNELS, state, (f"TISSUE_CLUSTER={cluster}",))
-        kernel = module.get_function("tissue_steps")
-        shared = shared_bytes(state, cluster)
+        kernel = module.get_function("tissue_minimize" if self.minimizing else "tissue_steps")
+        shared = shared_bytes(state, cluster, self.minimizing)
         if kernel.max_dynamic_shared_size_bytes < shared:
             kernel.max_dynamic_shared_size_bytes = shared
         model = sim.operations.forces[0]
         kA, kP, A0, P0 = model.device_parameters(state)
-        t1 = sim.operations.updaters[0] if sim.operations.updaters else None
+        t1 = next((u for u in sim.operations.updaters if u.in_minimize or not self.minimizing), None)
         if t1 is not None:
             t1_args, (width, log_pass) = t1.tissue_step_arguments(sim)
         else:                        # t1 = 0: the kernel reads none of T1's arguments
             t1_args = self.no_t1
+        integrator = sim.operations.integrator.tissue_step_arguments(sim)
+        if self.minimizing:          # the tile of the general sums, whose order the kernel keeps
+            integrator = (np.int32(t1 is not None and t1.reset_velocities), *integrator, np.int32(BLOCK))
         vertex_start, cell_start = state.cached((TissueSteps, "starts"), lambda: (
             cp.asarray(state.vertex_start.astype(np.int32)), cp.asarray(state.cell_start.astype(np.int32))))
-        block_vertices = -(-int(state.vertices_per_replica.max()) // cluster)
-        threads = int(min(THREADS, -(-block_vertices // 32) * 32))
         kernel((cluster * state.n_replicas,), (threads,),
                (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_vertices, state.cell_sides,
                 vertex_start, cell_start, size, np.int32(state.max_sides), kA, kP, A0, P0,
-                np.int32(t1 is not None), *t1_args, self.step_need,
-                *sim.operations.integrator.tissue_step_arguments(sim), np.uint64(sim.timestep), np.int32(steps)),
+                np.int32(t1 is not None), *t1_args, self.step_need, *integrator, np.uint64(sim.timestep),
+                np.int32(steps)),
                shared_mem=shared)
         if t1 is not None:
             module.get_function("tissue_steps_finish")((1,), (1,), (width, self.step_need, np.int32(steps), log_pass))

@@ -14,7 +14,8 @@ from spherevm.plugins.forces import Bending
 from spherevm.plugins.integrators import FIRE, Active, Brownian
 from spherevm.plugins.updaters import T1
 
-from conftest import Snapshots, dynamics_simulation, snapshot
+from conftest import (Snapshots, assert_same_minimizations, dynamics_simulation, minimizations, snapshot,
+                      sweep_like)
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 
@@ -196,46 +197,9 @@ def test_a_pass_with_more_candidates_than_the_step_by_step_room():
 
 
 # ---------------------------------------------------------------------------------------- minimize
-def sweep_like(state, p0, **t1):
-    """FIRE + T1 (flip-back bookkeeping on, as in every minimisation) at kr = 0 with one p0 per
-    replica, as a rigidity sweep's chunk: replicas converge at different iterations (narrowing)."""
-    sim = svm.Simulation(device="gpu")
-    sim.state = state
-    rep = sim.state.cell_replica_np()
-    sim.operations.forces.append(svm.plugins.forces.VertexModel(kA=0.0, kP=1.0, A0=1.0, P0=np.asarray(p0)[rep]))
-    sim.operations.updaters.append(T1(**t1))
-    sim.operations.integrator = FIRE(dt=0.02)
-    return sim
-
-
 def twin_minimizations(state, p0, calls=({},), t1=None):
-    """The same minimisation(s) with and without graphs: everything each leaves behind."""
-    out = []
-    for use in (True, False):
-        sim = sweep_like(state, p0, **(t1 or {}))
-        results = [sim.minimize(graphs=use, **kw) for kw in calls]
-        t1_op, fire = sim.operations.updaters[0], sim.operations.integrator
-        t1_op._sync_counters()
-        out.append(dict(state=snapshot(sim.state), timestep=sim.timestep, iteration=fire.iteration,
-                        results=[(r.reason.tolist(), r.steps.tolist(), r.energy.tobytes(), r.max_force.tobytes())
-                                 for r in results],
-                        velocities=fire.velocities.get().tobytes(), dt=fire.replica_dt.get().tobytes(),
-                        flips=t1_op.total_flips.copy(), refused=t1_op.total_refused.copy(),
-                        flip_backs=t1_op.flip_backs.copy(), separated=t1_op._separated.copy(),
-                        rejoins=t1_op._rejoins.copy()))
-    return out
-
-
-def assert_same_minimizations(graph, step):
-    for key in step:
-        if key == "state":
-            for k in step["state"]:
-                assert graph["state"][k].shape == step["state"][k].shape, k
-                assert graph["state"][k].tobytes() == step["state"][k].tobytes(), k
-        elif isinstance(step[key], np.ndarray):
-            assert np.array_equal(graph[key], step[key]), key
-        else:
-            assert graph[key] == step[key], key
+    """The same minimisation(s) in graphs (the general kernels) and step by step."""
+    return minimizations(state, p0, (dict(graphs=True, fused=False), dict(graphs=False)), calls, t1)
 
 
 @pytest.mark.gpu

@@ -4,8 +4,9 @@ Each GPU test runs the same Simulation three ways: fused (a thread block per tis
 steps per launch), the general kernels in CUDA graphs (``fused=False``) and step by step
 (``graphs=False``), and compares every array of the State bitwise, T1's counters, the flip log's
 pass number and the table width the host sees. Hot dynamics make T1 flip and widen the cell table
-every few steps; ensembles mix tissue sizes, and a 1,500-cell tissue has more vertices than a
-block has threads.
+every few steps; ensembles mix tissue sizes, and a 1,200-cell tissue has more vertices than a
+block has threads. Minimisations (FIRE + T1) are compared the same way: FIRE's state, the
+convergence results and T1's flip-back memory too.
 """
 import numpy as np
 import pytest
@@ -13,9 +14,10 @@ import pytest
 import spherevm as svm
 from spherevm import tissue_steps
 from spherevm.plugins.forces import Bending
-from spherevm.plugins.integrators import Active, Brownian
+from spherevm.plugins.integrators import FIRE, Active, Brownian
+from spherevm.plugins.updaters import T1
 
-from conftest import dynamics_simulation, snapshot
+from conftest import assert_same_minimizations, dynamics_simulation, minimizations, snapshot, sweep_like
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 
@@ -91,8 +93,12 @@ def test_without_t1_and_between_writes():
 def test_the_fused_steps_are_chosen_only_where_they_apply():
     sim = dynamics_simulation(ensemble("sphere", (40, 50)), "gpu", Brownian(dt=0.01, T=0.1))
     assert tissue_steps.why_not(sim) is None
-    sim.operations.updaters[0].count_flip_backs = True
-    assert "flip-backs" in tissue_steps.why_not(sim)
+    assert "not FIRE" in tissue_steps.why_not(sim, minimizing=True)
+    sim.operations.integrator = FIRE()
+    assert tissue_steps.why_not(sim, minimizing=True) is None
+    assert "not Brownian" in tissue_steps.why_not(sim)
+    sim = dynamics_simulation(ensemble("sphere", (1500,)), "gpu", FIRE())
+    assert "shared memory" in tissue_steps.why_not(sim, minimizing=True)     # one block a tissue
     sim = dynamics_simulation(ensemble("sphere", (40,)), "gpu", Active(dt=0.01, v0=0.1, Dr=0.1))
     assert "Active" in tissue_steps.why_not(sim)
     sim = dynamics_simulation(ensemble("sphere", (40,)), "gpu", Brownian(dt=0.01))
@@ -104,6 +110,69 @@ def test_the_fused_steps_are_chosen_only_where_they_apply():
         sim.run(10, fused=True)
 
 
+@pytest.mark.gpu
+def test_flip_backs_are_counted_in_the_fused_steps():
+    """``count_flip_backs=True`` under dynamics: the fused steps write the flip log as t1_apply does
+    (each flip's pass), so the flip-back memory is the general kernels'."""
+    out = []
+    for way in WAYS:
+        sim = dynamics_simulation(ensemble("sphere", (40, 150)), "gpu", Brownian(dt=0.01, T=0.3))
+        sim.operations.updaters[0] = t1 = T1(count_flip_backs=True)
+        sim.run(300, check_every=100, **way)
+        t1._sync_counters()
+        out.append((snapshot(sim.state), t1._separated.copy(), t1._rejoins.copy(), t1.flip_backs.copy()))
+    (ref, *memory) = out[-1]
+    for snap, *other in out[:-1]:
+        for key in ref:
+            assert snap[key].tobytes() == ref[key].tobytes(), key
+        for x, y in zip(other, memory):
+            assert np.array_equal(x, y)
+    assert memory[1].sum() > 0, "pairs were joined again"
+
+
+MINIMIZE_WAYS = (dict(graphs=True), dict(graphs=True, fused=False), dict(graphs=False))
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize("surface", ["sphere", "plane"])
+def test_fused_minimisation_is_the_general_one(surface):
+    """A sweep-like chunk of mixed sizes: tissues that start inside a warp, span several tiles of the
+    general sums (150 and 600 cells) and have more vertices than a block has threads (600 cells);
+    replicas stop at different checks (stopped ones stay in the State until it narrows); checks
+    farther apart than a launch's stretch."""
+    sizes = (40, 150, 32, 600, 64, 90)
+    p0 = np.linspace(3.6, 3.95, len(sizes))
+    assert tissue_steps.why_not(sweep_like(ensemble(surface, sizes), p0), minimizing=True) is None
+    *others, step = minimizations(ensemble(surface, sizes), p0, MINIMIZE_WAYS,
+                                  calls=({"max_steps": 4000, "check_every": 90},))   # > graphs.MAX_STRETCH
+    for other in others:
+        assert_same_minimizations(other, step)
+    assert len(set(step["results"][0][1])) > 2, "replicas stopped at different checks"
+    assert step["flips"].sum() > 0 and len(step["separated"]) > 0, "T1 flipped and kept its memory"
+
+
+@pytest.mark.gpu
+def test_fused_minimisation_halts_resumes_and_explodes_as_the_general_one():
+    """Oscillating replicas halted from the flip log; a limit that is no multiple of the check
+    interval, then a resumed call; an exploding FIRE step named at the same timestep."""
+    state = ensemble("sphere", (80, 60, 120))
+    runs = minimizations(ensemble("sphere", (100, 60, 120)), np.array([3.7, 3.8, 3.9]), MINIMIZE_WAYS[::2],
+                         calls=({"max_steps": 137}, {"max_steps": 205, "resume": True}))
+    assert_same_minimizations(*runs)
+    assert "max_steps" in runs[1]["results"][0][0], "the first call stopped at its limit, not at a check"
+    runs = minimizations(state, np.full(3, 3.9), MINIMIZE_WAYS[::2], calls=({"max_steps": 2000},),
+                         t1=dict(threshold=0.3, new_length=0.45, max_flip_backs=3))
+    assert_same_minimizations(*runs)
+    assert "t1_oscillation" in runs[1]["results"][0][0], "some replica was halted"
+    messages = []
+    for way in MINIMIZE_WAYS[::2]:
+        sim = dynamics_simulation(state, "gpu", FIRE(dt=50.0, dt_max=500.0, max_step=0.05))
+        with pytest.raises(FloatingPointError) as err:
+            sim.minimize(max_steps=200, **way)
+        messages.append(str(err.value))
+    assert messages[0] == messages[1] and "exploding step at timestep" in messages[0]
+
+
 def test_the_fused_steps_need_the_gpu():
     sim = dynamics_simulation(ensemble("plane", (16,)), "cpu", Brownian(dt=0.01))
     assert "GPU" in tissue_steps.why_not(sim)
@@ -111,6 +180,8 @@ def test_the_fused_steps_need_the_gpu():
     # 2 x 100 - 4 = 196 vertices on a sphere; on 1 block and on 2
     assert tissue_steps.shared_bytes(state, 1) == 8 * (6 * 196 + 2 * 100 + 3 * 196) + 4 * 100
     assert tissue_steps.shared_bytes(state, 2) == 8 * (6 * 196 + 2 * 100 + 3 * 98) + 4 * 100
+    # minimising: positions, forces, velocities; the sums' parts of (196 + 62) // 32 = 8 warps, one more
+    assert tissue_steps.shared_bytes(state, 1, minimizing=True) == 8 * (9 * 196 + 2 * 100 + 3 * 9) + 4 * 100
     assert tissue_steps.cluster_size(state) == 1
     big = ensemble("sphere", (1024,))
     assert tissue_steps.cluster_size(big) == 2                      # 2,044 vertices: two blocks

@@ -1,6 +1,7 @@
 // FIRE: the CUDA path of fire.py (same update, per-replica control), compiled once per surface
-// (geometry/surface.cuh).
-#include "geometry/surface.cuh"
+// (geometry/surface.cuh). The control and the move are fire.cuh's (shared with the fused
+// small-tissue minimisation).
+#include "plugins/integrators/fire.cuh"
 #include "device_common.cuh"
 
 // Per vertex: F.v, v.v, F.F summed per replica (device_common.cuh: the same bits on every run).
@@ -43,16 +44,9 @@ extern "C" __global__ void fire_control(
         step[r] = 0.0;
         return;
     }
-    bool uphill = power[r] <= 0.0;
-    bool grow = !uphill && n_positive[r] >= n_min;
-    double mix = uphill ? 0.0 : alpha[r];
-    double vn = sqrt(vnorm2[r]), fn = sqrt(fnorm2[r]);
-    scale[r] = fn > 0.0 ? mix * vn / fn : 0.0;
-    keep[r] = uphill ? 0.0 : 1.0 - mix;
-    dt[r] = uphill ? dt[r] * f_dec : (grow ? fmin(dt[r] * f_inc, dt_max) : dt[r]);
-    alpha[r] = uphill ? alpha_start : (grow ? alpha[r] * f_alpha : alpha[r]);
-    n_positive[r] = uphill ? 0 : n_positive[r] + 1;
-    step[r] = dt[r];
+    const FireParams p = {n_min, f_inc, f_dec, alpha_start, f_alpha, dt_max};
+    fire_control_replica(power[r], vnorm2[r], fnorm2[r], dt + r, alpha + r, n_positive + r, p, keep + r, scale + r,
+                         step + r);
 }
 
 // Per vertex: mix, semi-implicit Euler, P_N re-projection and P_T velocity transport.
@@ -71,21 +65,8 @@ extern "C" __global__ void fire_move(
     unsigned long long timestep = step0 + *step_add;   // Simulation.kernel_timestep (CUDA graphs)
     int r = vertex_replica[i];
     if (!active[r]) { store3(vel, i, v3(0.0, 0.0, 0.0)); return; }
-    vec3 f = load3(forces, i);
-    vec3 w = keep[r] * load3(vel, i) + scale[r] * f;
-    double h = step[r];
-    w = w + h * f;
-    double moved = norm3(h * w) / length_unit[r];
-    if (!(moved <= max_step)) {
-        atomicMin(error, (timestep << 32) | (unsigned long long)i);
-        return;
-    }
-    vec3 x = load3(pos, i) + h * w;
-    vec3 n = Surface::normal(x);
-    x = Surface::place(x, n, Surface::size(size, r));
-    w = w - dot3(w, n) * n;
-    store3(pos, i, x);
-    store3(vel, i, w);
+    fire_move_vertex(pos, vel, forces, i, Surface::size(size, r), keep[r], scale[r], step[r], length_unit[r], max_step,
+                     timestep, error);
 }
 
 // Integrator contract reset_vertices: zero the velocities of the listed vertices (-1: none).

@@ -203,6 +203,17 @@ class FIRE(Minimizer):
                 *simulation.kernel_timestep(), self._error_word()))
         simulation.state_changed()
 
+    def tissue_step_arguments(self, simulation):
+        """The minimiser's part of the fused small-tissue minimisation's arguments
+        (:mod:`spherevm.tissue_steps`, which calls fire.cuh's control and move as fire_control and
+        fire_move do): the active mask, velocities, dt, alpha and counters per replica, the
+        constants, sqrt(<A>) per replica, max_step and the error word (:meth:`check`)."""
+        state = simulation.state
+        return (self.active_on_device(), self.velocities, self.replica_dt, self.alpha, self.n_positive,
+                np.int32(self.n_min), np.float64(self.f_inc), np.float64(self.f_dec), np.float64(self.alpha_start),
+                np.float64(self.f_alpha), np.float64(self.dt_max), self._length_unit(state),
+                np.float64(self.max_step), self._error_word())
+
     def capture_ready(self, simulation, steps):
         """Its kernels read nothing back and take the timestep from ``Simulation.kernel_timestep``;
         the key holds its per-vertex and per-replica arrays (replaced by a reset, a checkpoint or a

@@ -12,8 +12,6 @@
 // if that does not fold it, and is refused otherwise (folding.t1_placement).
 #include "plugins/updaters/t1_pass.cuh"
 
-#define LOG_INTS 6     // pass, C1, C2, C3, C4, replica
-
 // counters: [0] short edges listed (candidates), [1] a C3/C4 row of a candidate that was not refused
 // has width[0] entries (widen the table), [2] candidates not refused (claimants; t1_check).
 // width[0]: the table's width as the step-by-step path holds it (inside a CUDA graph the table has
@@ -88,9 +86,5 @@ extern "C" __global__ void t1_apply(
     atomicAdd(total_flips + r, 1ull);
     moved[2 * i] = e[0];           // for Integrator.reset_vertices
     moved[2 * i + 1] = e[2];
-    if (!logging) return;          // no flip-back bookkeeping (T1.counting)
-    int slot = atomicAdd(log_count, 1);
-    int* entry = log + (long)slot * LOG_INTS;
-    // the pass, counted since the log was last replayed (t1_detect)
-    entry[0] = *log_pass; entry[1] = e[7]; entry[2] = e[8]; entry[3] = e[9]; entry[4] = e[10]; entry[5] = r;
+    if (logging) t1_log_flip(log_count, log, *log_pass, e);   // the pass: t1_detect's count
 }

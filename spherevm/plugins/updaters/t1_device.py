@@ -186,15 +186,17 @@ class DevicePass:
     def tissue_step_arguments(self, simulation):
         """T1's part of the fused small-tissue steps' arguments (:mod:`spherevm.tissue_steps`, after
         :meth:`capture_ready`): active replicas, squared threshold chords, new lengths, the
-        candidate room, the per-pass counters and totals; and ``(width, log_pass)``, which the
-        finishing kernel advances as t1_detect and t1_apply would have."""
+        candidate room, the per-pass counters and totals, the flip log (with whether this pass
+        logs, :meth:`counting`) and its pass count; and ``(width, log_pass)``, which the finishing
+        kernel advances as t1_detect and t1_apply would have."""
         state = simulation.state
         buf = self._gpu_buffers(state, 3 * state.n_vertices // 2)
         chord2, new_length = self._device_lengths(state)
         integrator = simulation.operations.integrator
         active = integrator.active_on_device() if integrator is not None else buf["all_active"]
         return ((active, chord2, new_length, np.float64(self.length_factor or 0.0), buf["cand"], buf["cand_len"],
-                 buf["flips"], buf["refused"], buf["total_flips"], buf["total_refused"]),
+                 buf["flips"], buf["refused"], buf["total_flips"], buf["total_refused"], buf["log_count"], buf["log"],
+                 np.int32(self.counting(simulation)), buf["log_pass"]),
                 (buf["width"], buf["log_pass"]))
 
     def capture_done(self, simulation):

@@ -9,6 +9,7 @@
 #include "plugins/updaters/t1_fold.cuh"
 
 #define CAND_INTS 13   // u, k, v, a, b, c, d, C1, C2, C3, C4, replica, turn
+#define LOG_INTS 6     // a flip in the flip log: pass, C1, C2, C3, C4, replica
 
 // Vertex u of replica r: list its edges to higher-numbered neighbours shorter than the chord
 // threshold (chord2, squared). *count is the pass's candidate count (a slot each, atomically);
@@ -134,4 +135,12 @@ __device__ __forceinline__ bool t1_apply_candidate(double* pos, int* vn, int* vc
     store3(pos, X, px);
     store3(pos, Y, py);
     return true;
+}
+
+// A flip into the flip log (T1.counting): its pass (counted since the log was last replayed), its
+// four cells and replica, in the next slot.
+__device__ __forceinline__ void t1_log_flip(int* log_count, int* log, int pass, const int* e)
+{
+    int* entry = log + (long)atomicAdd(log_count, 1) * LOG_INTS;
+    entry[0] = pass; entry[1] = e[7]; entry[2] = e[8]; entry[3] = e[9]; entry[4] = e[10]; entry[5] = e[11];
 }

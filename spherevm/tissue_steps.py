@@ -79,6 +79,18 @@ def shared_bytes(state, cluster: int, minimizing: bool = False) -> int:
     return int(np.max(8 * (6 * nv + 2 * nc + 3 * (-(-nv // cluster))) + 4 * nc))
 
 
+def layout(state, minimizing: bool, n_sm: int):
+    """``(blocks a tissue, shared memory a block, threads a block)`` of the fused kernels for
+    ``state`` (worked out once per State: they are asked before every stretch). Threads: a
+    tissue's vertices over its blocks, from a warp's start when minimising."""
+    def build():
+        cluster = 1 if minimizing else cluster_size(state, n_sm)
+        block_vertices = -(-(int(state.vertices_per_replica.max()) + 31 * minimizing) // cluster)
+        threads = int(min(THREADS, -(-block_vertices // 32) * 32))
+        return cluster, shared_bytes(state, cluster, minimizing), threads
+    return state.cached((layout, minimizing, n_sm), build)
+
+
 @functools.lru_cache(maxsize=None)
 def device_limits(device_id: int):
     """``(compute capability, shared memory a block may opt in to, SM count)`` of a GPU, asked once
@@ -112,7 +124,7 @@ def why_not(simulation, minimizing: bool = False) -> str | None:
     capability, room, n_sm = device_limits(cp.cuda.Device().id)
     if capability < 90:
         return "the fused small-tissue steps need thread block clusters (compute capability 9.0, Hopper)"
-    need = shared_bytes(state, 1 if minimizing else cluster_size(state, n_sm), minimizing)
+    need = layout(state, minimizing, n_sm)[1]
     if need > room:
         return f"a tissue needs {need} bytes of shared memory a block, a block has {room}"
     return None
@@ -138,13 +150,9 @@ class TissueSteps:
         state = sim.state
         if steps > len(self.step_need):
             raise ValueError(f"at most {len(self.step_need)} fused steps a launch, got {steps}")
-        cluster = 1 if self.minimizing else cluster_size(state, self.n_sm)
-        # threads: a tissue's vertices (from a warp's start, minimising) over its blocks
-        block_vertices = -(-(int(state.vertices_per_replica.max()) + 31 * self.minimizing) // cluster)
-        threads = int(min(THREADS, -(-block_vertices // 32) * 32))
+        cluster, shared, threads = layout(state, self.minimizing, self.n_sm)
         module, size = surface_kernels(_KERNELS, state, (f"TISSUE_CLUSTER={cluster}",))
         kernel = module.get_function("tissue_minimize" if self.minimizing else "tissue_steps")
-        shared = shared_bytes(state, cluster, self.minimizing)
         if kernel.max_dynamic_shared_size_bytes < shared:
             kernel.max_dynamic_shared_size_bytes = shared
         model = sim.operations.forces[0]

@@ -90,6 +90,38 @@ def test_flip_back_bookkeeping():
     assert t.flip_backs.tolist() == [0, 2]
 
 
+def test_flip_backs_of_many_passes_at_once_are_those_pass_by_pass():
+    """The device's flip log is replayed in one call (``passes``): the memory, the re-join counts
+    and flip_backs must be those of replaying its passes one after another. Random logs over a few
+    cells, so that pairs are separated and re-joined many times, within and across calls."""
+    rng = np.random.default_rng(7)
+    state = SimpleNamespace(n_cells=12, n_replicas=2)
+    most = 0
+    for trial in range(200):
+        batched, stepped = T1(), T1()
+        for t in (batched, stepped):
+            t._reset_counters(2)
+        for call in range(3):
+            rows = []
+            for p in range(int(rng.integers(1, 6))):
+                for r in range(2):          # a pass's flips share no cell: at most one flip per replica here
+                    if rng.random() < 0.8:
+                        cells = rng.choice(6, size=4, replace=False) + 6 * r
+                        rows.append([p, *cells, r])
+            if not rows:
+                continue
+            log = np.array(rows)[rng.permutation(len(rows))]      # the device writes a pass's flips in any order
+            batched._count_flip_backs(state, log[:, 1:5], log[:, 5], passes=log[:, 0])
+            for p in np.unique(log[:, 0]):
+                rows_p = log[log[:, 0] == p]
+                stepped._count_flip_backs(state, rows_p[:, 1:5], rows_p[:, 5])
+            assert batched._separated.tolist() == stepped._separated.tolist(), trial
+            assert batched._rejoins.tolist() == stepped._rejoins.tolist(), trial
+            assert batched.flip_backs.tolist() == stepped.flip_backs.tolist(), trial
+        most = max(most, int(stepped.flip_backs.max()))
+    assert most > 2, "pairs were re-joined several times"
+
+
 def test_pairs_between_rekeys_and_drops():
     n_from, n_to = 6, 3
     keys = np.array([0 * 6 + 5, 1 * 6 + 4, 2 * 6 + 3])

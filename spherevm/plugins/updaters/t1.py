@@ -214,29 +214,43 @@ class T1(DevicePass, Updater):
             integrator.reset_vertices(state.device.asarray(moved))
         simulation.state_changed()
 
-    def _count_flip_backs(self, state, cells, rep, n_cells=None):
+    def _count_flip_backs(self, state, cells, rep, n_cells=None, passes=None):
         """Count re-joins: a flip making two cells neighbours again that an earlier flip separated.
-        ``n_cells``: the cell count the flips saw (the device log's, if the State was resized since)."""
+        ``n_cells``: the cell count the flips saw (the device log's, if the State was resized since).
+        ``passes``: each flip's pass (None: all of one pass). The passes are counted at once, as if
+        one after another: a flip is a flip back if its pair was separated before its pass (in the
+        memory, or by a flip of an earlier pass here); a pair gains a re-join per pass that makes it
+        back (two flips of one pass never share a cell), and each replica's ``flip_backs`` is its
+        largest count after a flip back, the count after the pair's last one."""
         n = state.n_cells if n_cells is None else n_cells
 
         def pair_key(x, y):
             return np.minimum(x, y).astype(np.int64) * n + np.maximum(x, y)
 
+        def find(sorted_keys, keys):
+            """Positions of keys in sorted_keys, and whether each is there."""
+            at = np.searchsorted(sorted_keys, keys)
+            found = np.zeros(len(keys), dtype=bool)
+            inside = at < len(sorted_keys)
+            found[inside] = sorted_keys[at[inside]] == keys[inside]
+            return at, found
+
         removed, made = pair_key(cells[:, 0], cells[:, 1]), pair_key(cells[:, 2], cells[:, 3])
-        pos = np.searchsorted(self._separated, made)
-        pos = np.minimum(pos, max(len(self._separated) - 1, 0))
-        back = (self._separated[pos] == made) if len(self._separated) else np.zeros(len(made), bool)
-        self._rejoins[pos[back]] += 1
+        passes = np.zeros(len(made), dtype=np.int64) if passes is None else np.asarray(passes, dtype=np.int64)
+        order = np.lexsort((passes, removed))               # each pair separated here, at its earliest pass
+        new, first = np.unique(removed[order], return_index=True)
+        first_pass = passes[order][first]
+        at, earlier = find(new, made)
+        earlier[earlier] = first_pass[at[earlier]] < passes[earlier]
+        back = find(self._separated, made)[1] | earlier
+        at, known = find(self._separated, new)              # merged into the sorted memory (no sort
+        self._separated = np.insert(self._separated, at[~known], new[~known])   # of all of it: a sweep
+        self._rejoins = np.insert(self._rejoins, at[~known], 0)                  # replays many passes)
+        pos = np.searchsorted(self._separated, made[back])
+        np.add.at(self._rejoins, pos, 1)
         worst = np.zeros(state.n_replicas, dtype=np.int64)
-        np.maximum.at(worst, rep[back], self._rejoins[pos[back]])
+        np.maximum.at(worst, np.asarray(rep)[back], self._rejoins[pos])
         self.flip_backs = np.maximum(self.flip_backs, worst)
-        new = np.unique(removed)         # merged into the sorted memory (no sort of all of it: a sweep
-        at = np.searchsorted(self._separated, new)      # replays tens of thousands of passes)
-        known = np.zeros(len(new), dtype=bool)
-        inside = at < len(self._separated)
-        known[inside] = self._separated[at[inside]] == new[inside]
-        self._separated = np.insert(self._separated, at[~known], new[~known])
-        self._rejoins = np.insert(self._rejoins, at[~known], 0)
 
     # ------------------------------------------------------------------ narrowing (minimize)
     narrowable = True

@@ -208,7 +208,7 @@ class DevicePass:
             state.cell_vertices = cp.ascontiguousarray(buf["table"][:, :int(buf["width"].get()[0])])
 
     def _flush_log(self, state):
-        """Replay the device's flip log, pass by pass, into the flip-back bookkeeping."""
+        """Replay the device's flip log (its passes at once) into the flip-back bookkeeping."""
         buf = getattr(self, "_gpu", None)
         if buf is None:
             return
@@ -219,10 +219,7 @@ class DevicePass:
             return
         log = buf["log"][:n].get()
         buf["log_count"].fill(0)
-        order = np.argsort(log[:, 0], kind="stable")
-        log = log[order]
-        for pass_rows in np.split(log, np.flatnonzero(np.diff(log[:, 0])) + 1):  # passes, not flips
-            self._count_flip_backs(state, pass_rows[:, 1:5].astype(np.int64), pass_rows[:, 5], buf["n_cells"])
+        self._count_flip_backs(state, log[:, 1:5].astype(np.int64), log[:, 5], buf["n_cells"], passes=log[:, 0])
 
     def _sync_flip_backs(self):
         """Bring the flip-back counts up to date (the flip log replayed; halting needs no more)."""

@@ -129,21 +129,27 @@ struct SendFlipped {
     }
 };
 
+// The arguments both fused kernels take first (tissue_steps.TissueSteps.run passes them): the
+// State's positions and topology, the per-replica vertex and cell offsets and sizes, the vertex
+// model's parameters, then T1's (t1: 0 no T1 pass; TissueT1; log_pass: the flip log's pass count
+// before the launch).
+#define TISSUE_COMMON_PARAMS \
+    double* __restrict__ pos, int* vn, int* vc, int* cell_vertices, int* sides, \
+    const int* __restrict__ vertex_start, const int* __restrict__ cell_start, const double* __restrict__ size, \
+    int max_sides, const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0, \
+    const double* __restrict__ P0, int t1, const bool* __restrict__ active, const double* __restrict__ chord2, \
+    const double* __restrict__ new_length, double length_factor, int* cand, double* cand_len, \
+    int* __restrict__ flips, int* __restrict__ refused, unsigned long long* __restrict__ total_flips, \
+    unsigned long long* __restrict__ total_refused, int* __restrict__ log_count, int* __restrict__ log, int logging, \
+    const int* __restrict__ log_pass, int* __restrict__ step_need
+
 // At most 1,024 threads a block (tissue_steps.THREADS). Shared memory of each block, in doubles
 // (tissue_steps.py computes the same, in bytes): two copies of the positions (3 nv each: the step's,
 // and the next, which the move writes while other blocks still read the step's), the cell
 // coefficients (2 nc), the forces of the block's vertices (3 ceil(nv / TISSUE_CLUSTER)), then the T1
-// claims (nc ints). t1: 0 no T1 pass, else T1's arguments follow (TissueT1; log_pass: the flip log's
-// pass count before the launch).
+// claims (nc ints).
 extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_steps(
-    double* __restrict__ pos, int* vn, int* vc, int* cell_vertices, int* sides,
-    const int* __restrict__ vertex_start, const int* __restrict__ cell_start, const double* __restrict__ size,
-    int max_sides, const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
-    const double* __restrict__ P0, int t1, const bool* __restrict__ active, const double* __restrict__ chord2,
-    const double* __restrict__ new_length, double length_factor, int* cand, double* cand_len,
-    int* __restrict__ flips, int* __restrict__ refused, unsigned long long* __restrict__ total_flips,
-    unsigned long long* __restrict__ total_refused, int* __restrict__ log_count, int* __restrict__ log, int logging,
-    const int* __restrict__ log_pass, int* __restrict__ step_need, const double* __restrict__ amp,
+    TISSUE_COMMON_PARAMS, const double* __restrict__ amp,
     const double* __restrict__ length_unit, double mu, double dt, double max_step, unsigned int seed,
     unsigned long long* __restrict__ error, unsigned long long step0, int steps)
 {
@@ -228,14 +234,7 @@ struct ResetFlipped {
 // forces and velocities (3 nv each), the cell coefficients (2 nc), the sums' warp parts
 // (3 (n_warps + 1), n_warps the warps from v0 & ~31 to v1), then the T1 claims (nc ints).
 extern "C" __global__ void __launch_bounds__(1024) tissue_minimize(
-    double* __restrict__ pos, int* vn, int* vc, int* cell_vertices, int* sides,
-    const int* __restrict__ vertex_start, const int* __restrict__ cell_start, const double* __restrict__ size,
-    int max_sides, const double* __restrict__ kA, const double* __restrict__ kP, const double* __restrict__ A0,
-    const double* __restrict__ P0, int t1, const bool* __restrict__ active, const double* __restrict__ chord2,
-    const double* __restrict__ new_length, double length_factor, int* cand, double* cand_len,
-    int* __restrict__ flips, int* __restrict__ refused, unsigned long long* __restrict__ total_flips,
-    unsigned long long* __restrict__ total_refused, int* __restrict__ log_count, int* __restrict__ log, int logging,
-    const int* __restrict__ log_pass, int* __restrict__ step_need, int reset_velocities,
+    TISSUE_COMMON_PARAMS, int reset_velocities,
     const bool* __restrict__ fire_active, double* __restrict__ vel, double* __restrict__ dt,
     double* __restrict__ alpha, long long* __restrict__ n_positive, int n_min, double f_inc, double f_dec,
     double alpha_start, double f_alpha, double dt_max,

@@ -50,6 +50,70 @@ __device__ __forceinline__ void to_others(double* const* bases, int rank, long o
         if (q != rank) store3(bases[q] + offset, i, x);
 }
 
+// The vertex model's terms (vm_cell_terms into coef) of cells cb0..cb1, by the calling block; sent(c)
+// after each. On a surface that splits a cell's corners (the sphere: Surface::split_corners), a cell
+// takes `lanes` neighbouring threads (a power of two, at most 8): each lane computes every lanes-th
+// corner's arc and fan factor (Surface::cell_corner), and every lane adds them in the cell's order
+// (Surface::add_corner), so the chain of a cell's atan2s is shortened and the bits are
+// cell_measures'. Every thread of the block calls it, with S = Surface.
+template <class S, class Sent>
+__device__ __forceinline__ void tissue_cells(const double* P, const int* cell_vertices, const int* sides,
+                                             int max_sides, typename S::Size s, int cb0, int cb1, int lanes,
+                                             const double* kA, const double* kP, const double* A0,
+                                             const double* P0, double* coef, Sent sent)
+{
+    const int tid = threadIdx.x, stride = blockDim.x;
+    if constexpr (S::split_corners) {
+        if (lanes > 1) {
+            const unsigned all = 0xffffffffu;
+            const int lane = tid & (lanes - 1), groups = stride / lanes;
+            for (int first = cb0; first < cb1; first += groups) {   // the same number of rounds in every thread
+                const int c = first + tid / lanes;
+                const bool mine = c < cb1;
+                const int n = mine ? sides[c] : 0;
+                const int* row = cell_vertices + (long)(mine ? c : cb0) * max_sides;
+                const vec3 a = normalize3(load3(P, row[0]));
+                typename S::CellSum sum = {0.0, 1.0, 0.0};
+                const int rounds = __reduce_max_sync(all, (n + lanes - 1) / lanes);
+                for (int q = 0; q < rounds; ++q) {
+                    typename S::Corner k = {0.0, 0.0, 0.0};
+                    if (q * lanes + lane < n) k = S::cell_corner(P, row, n, q * lanes + lane, a);
+                    for (int l = 0; l < lanes; ++l) {
+                        typename S::Corner kl = {__shfl_sync(all, k.half, l, lanes), __shfl_sync(all, k.num, l, lanes),
+                                                 __shfl_sync(all, k.den, l, lanes)};
+                        if (q * lanes + l < n) S::add_corner(&sum, kl);
+                    }
+                }
+                if (mine && lane == 0) {
+                    double A, Pc;
+                    S::finish_measures(sum, s, &A, &Pc);
+                    vm_cell_terms(A, Pc, c, s, kA, kP, A0, P0, coef);
+                    sent(c);
+                }
+            }
+            return;
+        }
+    }
+    for (int c = cb0 + tid; c < cb1; c += stride) {   // one thread a cell
+        double A, Pc;
+        S::cell_measures(P, cell_vertices + (long)c * max_sides, sides[c], s, &A, &Pc);
+        vm_cell_terms(A, Pc, c, s, kA, kP, A0, P0, coef);
+        sent(c);
+    }
+}
+
+// Threads a cell in tissue_cells (cb cells): as many as a block of at most 256 threads has for its
+// cells, a power of two up to 8. A block of more threads keeps one a cell: its SM is busy with its
+// many warps, and the lanes' shuffles and repeated sums only add work (one H200, 8 x 1,024 cells:
+// the cells' phase took 18 % longer on two lanes a cell; 1,024 x 32 and 64 x 64 cells, 2-5 warps a
+// block, 4-14 % shorter).
+__device__ __forceinline__ int tissue_cell_lanes(int cb)
+{
+    int lanes = 1;
+    while (blockDim.x <= 256 && lanes < 8 && blockDim.x / (2 * lanes) >= cb) lanes *= 2;
+    return lanes;
+}
+
 // T1's arguments of the fused steps: its parameters (chord2, new_length, length_factor), its
 // candidate room (a slot per edge, the tissue's from 3 vertex_start[r] / 2 on), its per-pass
 // counters (flips, refused: the last pass's are left, as t1_apply leaves them) and running totals,
@@ -74,7 +138,8 @@ struct TissueT1 {
 };
 
 // One T1 pass of tissue r (vertices v0..v1) by the calling block, the `step`-th of the launch:
-// detect, check and claim, apply (t1_pass.cuh), barriers between; flipped(e) after each flip.
+// detect, check and claim (a warp a candidate: t1_check_candidate_warp), apply (t1_pass.cuh), barriers
+// between; flipped(e) after each flip.
 // claim: the tissue's claims (all free between passes); n_cand: a shared counter.
 template <class Flipped>
 __device__ __forceinline__ void tissue_t1_pass(double* P, int* vn, int* vc, int* cell_vertices, int* sides,
@@ -93,10 +158,12 @@ __device__ __forceinline__ void tissue_t1_pass(double* P, int* vn, int* vc, int*
             t1_detect_vertex(P, vn, vc, s, t1.chord2[r], r, u, n_cand, cand, len, room);
     __syncthreads();
     const int n = min(*n_cand, room);
-    for (int i = tid; i < n; i += stride) {
+    for (int i = tid >> 5; i < n; i += stride >> 5) {   // a warp a candidate (blockDim.x: a multiple of 32)
         int* e = cand + (long)i * CAND_INTS;
-        if (t1_check_candidate(P, vn, sides, cell_vertices, max_sides, s,
-                               t1_full_length(t1.new_length[r], t1.length_factor, len[i]), claim, e)) {
+        bool kept = t1_check_candidate_warp(P, vn, sides, cell_vertices, max_sides, s,
+                                            t1_full_length(t1.new_length[r], t1.length_factor, len[i]), claim, e);
+        if ((tid & 31) != 0) continue;
+        if (kept) {
             atomicMax(t1.step_need + step, max(sides[e[9]], sides[e[10]]));
         } else {
             atomicAdd(t1.refused + r, 1);
@@ -176,6 +243,7 @@ extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_st
     const bool flipping = t1 && active[r];
     const TissueT1 t1_args = {chord2, new_length, length_factor, cand, cand_len, flips, refused, total_flips,
                               total_refused, step_need, log_count, log, logging, t1 ? *log_pass : 0};
+    const int lanes = tissue_cell_lanes(cb1 - cb0);
     cluster_sync();   // every block of the cluster has started (its shared memory may be written)
     int now = 0;
     for (int step = 0; step < steps; ++step) {
@@ -188,16 +256,14 @@ extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_st
                                &n_cand, step, SendFlipped{bases, rank, at_pos[now], P});
             cluster_sync();   // the flips' topology and positions, everywhere
         }
-        for (int c = cb0 + tid; c < cb1; c += stride) {   // the vertex model (vertex_model.cuh): this block's cells
-            double A, Pc;
-            Surface::cell_measures(P, cell_vertices + (long)c * max_sides, sides[c], s, &A, &Pc);
-            vm_cell_terms(A, Pc, c, s, kA, kP, A0, P0, coef);
-            for (int q = 0; q < TISSUE_CLUSTER; ++q)
-                if (q != rank) {
-                    bases[q][at_coef + 2L * c] = coef[2L * c];
-                    bases[q][at_coef + 2L * c + 1] = coef[2L * c + 1];
-                }
-        }
+        tissue_cells<Surface>(P, cell_vertices, sides, max_sides, s, cb0, cb1, lanes, kA, kP, A0, P0, coef,   // this block's cells
+                     [&](int c) {
+                         for (int q = 0; q < TISSUE_CLUSTER; ++q)
+                             if (q != rank) {
+                                 bases[q][at_coef + 2L * c] = coef[2L * c];
+                                 bases[q][at_coef + 2L * c + 1] = coef[2L * c + 1];
+                             }
+                     });
         cluster_sync();
         for (int v = vb0 + tid; v < vb1; v += stride) {   // this block's vertices: force, then the move (brownian.cuh)
             store3(F, v, Surface::vertex_force(P, vn, vc, v, s, coef));
@@ -269,14 +335,11 @@ extern "C" __global__ void __launch_bounds__(1024) tissue_minimize(
     // thread 0 keeps the replica's dt, alpha and counter through the launch
     double replica_dt = dt[r], replica_alpha = alpha[r];
     long long positive = n_positive[r];
+    const int lanes = tissue_cell_lanes(nc);
     __syncthreads();
     for (int step = 0; step < steps; ++step) {
         if (running) {
-            for (int c = c0 + tid; c < c1; c += stride) {   // the vertex model (vertex_model.cuh)
-                double A, Pc;
-                Surface::cell_measures(P, cell_vertices + (long)c * max_sides, sides[c], s, &A, &Pc);
-                vm_cell_terms(A, Pc, c, s, kA, kP, A0, P0, coef);
-            }
+            tissue_cells<Surface>(P, cell_vertices, sides, max_sides, s, c0, c1, lanes, kA, kP, A0, P0, coef, [](int) {});
             __syncthreads();
             for (int k = 0; k < rounds; ++k) {   // forces, and fire_reduce's terms F.v, v.v, F.F
                 long g = base + tid + (long)k * stride;

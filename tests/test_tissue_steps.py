@@ -66,6 +66,7 @@ def test_hot_ensemble_is_the_general_kernels_trajectory(surface):
     runs = three_runs(state, 437, check_every=100)
     assert_same(runs)
     assert runs[-1][2][0].sum() > 437, "hot enough that T1 flips every step"
+    assert runs[-1][2][1].sum() > 0, "and its checks (a warp a candidate when fused) refused flips"
     assert runs[-1][0]["cell_vertices"].shape[1] > width, "the cell table widened during the run"
 
 
@@ -81,6 +82,21 @@ def test_a_large_tissue_on_one_block_or_a_cluster(monkeypatch, per_block, cluste
     runs = three_runs(state, 150, T=0.2, check_every=64)
     assert_same(runs)
     assert runs[-1][2][0][0] > 0, "T1 flipped in the large tissue"
+
+
+@pytest.mark.gpu
+def test_small_tissues_split_their_cells_corners():
+    """Blocks of at most 256 threads give a spherical cell 2, 4 or 8 threads (tissue_cell_lanes: the
+    12-cell tissue 8, the 32-cell one 4, the others 2), which compute its corners apart and add
+    them in the cell's order: the same bits as one thread a cell, in dynamics and in minimisations."""
+    state = ensemble("sphere", (12, 40, 32, 60))
+    assert_same(three_runs(state, 300, check_every=100))
+    sizes = (12, 32, 20, 48)
+    *others, step = minimizations(ensemble("sphere", sizes), np.linspace(3.7, 3.9, len(sizes)), MINIMIZE_WAYS,
+                                  calls=({"max_steps": 1500, "check_every": 50},))
+    for other in others:
+        assert_same_minimizations(other, step)
+    assert step["flips"].sum() > 0, "T1 flipped"
 
 
 @pytest.mark.gpu
@@ -149,6 +165,7 @@ def test_fused_minimisation_is_the_general_one(surface):
         assert_same_minimizations(other, step)
     assert len(set(step["results"][0][1])) > 2, "replicas stopped at different checks"
     assert step["flips"].sum() > 0 and len(step["separated"]) > 0, "T1 flipped and kept its memory"
+    assert step["refused"].sum() > 0, "T1's checks (a warp a candidate when fused) refused flips"
 
 
 @pytest.mark.gpu

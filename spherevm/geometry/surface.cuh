@@ -43,26 +43,50 @@ struct SphereSurface {
 
     // Area: a fan about the cell's first vertex a, each triangle (a, b, d) as den + i num with
     // num = (a - b).(b x d), den = 1 + b.d + a.(b + d), the area 2 arg of their product: one atan2
-    // per cell, valid below a hemisphere. Perimeter: the sum of the arcs.
+    // per cell, valid below a hemisphere. Perimeter: the sum of the arcs. Each corner's terms are
+    // independent (corner, cell_corner); only their sum and product run in the cell's order
+    // (CellSum), so the fused small-tissue steps spread a cell's corners over several threads
+    // (split_corners) and get these bits.
+    static constexpr bool split_corners = true;
+    struct Corner { double half, num, den; };    // the edge b -> d's half arc, the fan triangle's factor
+    struct CellSum { double P, re, im; };        // the arcs' sum, the product of the factors so far
+
+    __device__ static Corner corner(vec3 a, vec3 b, vec3 d) {
+        edge_terms t = make_edge(b, d);
+        Corner k = {half_angle(t), dot3(a - b, t.x), 0.5 * t.q + dot3(a, b + d)};
+        return k;
+    }
+    // corner i of the cell (row, n sides) whose first vertex's direction is a
+    __device__ static Corner cell_corner(const double* pos, const int* row, int n, int i, vec3 a) {
+        vec3 b = i == 0 ? a : normalize3(load3(pos, row[i]));
+        vec3 d = i + 1 < n ? normalize3(load3(pos, row[i + 1])) : a;
+        return corner(a, b, d);
+    }
+    // the next corner into the sums, rounded as written (the forms the compiler chose for
+    // cell_measures' loop: re den - im num as one fused multiply-add), so that the threads of the
+    // fused steps and cell_measures give the same bits
+    __device__ static void add_corner(CellSum* sum, Corner k) {
+        double re = __fma_rn(sum->re, k.den, -__dmul_rn(sum->im, k.num));
+        sum->im = __fma_rn(sum->im, k.den, __dmul_rn(sum->re, k.num));
+        sum->re = re;
+        sum->P = __dadd_rn(sum->P, k.half);
+    }
+    __device__ static void finish_measures(CellSum sum, Size R, double* area, double* perimeter) {
+        *area = 2.0 * atan2(sum.im, sum.re) * (R * R);
+        *perimeter = sum.P * (2.0 * R);
+    }
+
     __device__ static void cell_measures(const double* pos, const int* row, int n, Size R, double* area,
                                          double* perimeter) {
         vec3 a = normalize3(load3(pos, row[0]));
         vec3 b = a;
-        double P = 0.0, re = 1.0, im = 0.0;
+        CellSum sum = {0.0, 1.0, 0.0};
         for (int i = 0; i < n; ++i) {
             vec3 d = i + 1 < n ? normalize3(load3(pos, row[i + 1])) : a;
-            edge_terms t = make_edge(b, d);
-            P += half_angle(t);
-            double num = dot3(a - b, t.x);
-            double den = 0.5 * t.q + dot3(a, b + d);
-            double r = re * den - im * num;
-            im = re * num + im * den;
-            re = r;
+            add_corner(&sum, corner(a, b, d));
             b = d;
         }
-        *area = 2.0 * atan2(im, re) * (R * R);
-        P *= 2.0 * R;
-        *perimeter = P;
+        finish_measures(sum, R, area, perimeter);
     }
 
     // Each of v's edges v -> n_j lies in cell j (slot j) and, as n_j -> v, in cell j-1 (slot j+2
@@ -147,6 +171,8 @@ struct PlaneSurface {
     __device__ static double area_unit(Size) { return 1.0; }
     __device__ static double length_unit(Size) { return 1.0; }
 
+    // the shoelace sum runs on prefix sums of the edges: one thread a cell
+    static constexpr bool split_corners = false;
     __device__ static void cell_measures(const double* pos, const int* row, int n, Size b, double* area,
                                          double* perimeter) {
         plane_cell_measures(pos, row, n, b, area, perimeter);

@@ -55,40 +55,79 @@ __device__ __forceinline__ void t1_cell_areas(const double* pos, const int* row,
 #define T1_CLEAN 0      // folding.CLEAN, INVERTED, FOLDS
 #define T1_INVERTED 1
 #define T1_FOLDS 2
+#define T1_FOLD_PARTS 10   // t1_fold_part: the four cells' areas, then the six corners
+
+// One of t1_fold_level's independent terms (one lane each in the fused steps' warp-wide check,
+// t1_pass.cuh): part k < 4 is cell C(k+1)'s signed area now and after the flip (now, after); part
+// k >= 4 is whether corner k - 4 (of v, u, a, d, b, c) is inverted now and after it (inverted_now,
+// inverted_after).
+struct T1FoldPart {
+    double now, after;
+    bool inverted_now, inverted_after;
+};
+
+__device__ __forceinline__ T1FoldPart t1_fold_part(const double* pos, const int* vn, const int* cell_vertices,
+                                                   const int* sides, int max_sides, int u, int v, int a, int b,
+                                                   int c, int d, int C1, int C2, int C3, int C4, vec3 px, vec3 py,
+                                                   Surface::Size s, int k)
+{
+    T1FoldPart part = {0.0, 0.0, false, false};
+    if (k < 4) {
+        vec3 pa = load3(pos, a), pb = load3(pos, b), pc = load3(pos, c), pd = load3(pos, d);
+        const int cells[4] = {C1, C2, C3, C4};
+        const vec3 apex = k == 0 || k == 3 ? px : py;
+        vec3 ends[4];
+        int m = k < 2 ? 3 : 4;
+        if (k == 0) { ends[0] = pa; ends[1] = px; ends[2] = pd; }
+        else if (k == 1) { ends[0] = pc; ends[1] = py; ends[2] = pb; }
+        else if (k == 2) { ends[0] = pb; ends[1] = py; ends[2] = px; ends[3] = pa; }
+        else { ends[0] = pd; ends[1] = px; ends[2] = py; ends[3] = pc; }
+        t1_cell_areas(pos, cell_vertices + (long)cells[k] * max_sides, sides[cells[k]], u, v, apex, ends, m, s,
+                      &part.now, &part.after);
+        return part;
+    }
+    const int corner[6] = {v, u, a, d, b, c};
+    const int w = corner[k - 4];
+    part.inverted_now = t1_row_inverted(pos, vn, w, -1, px, s);
+    if (k == 4) part.inverted_after = t1_inverted(px, py, load3(pos, d), load3(pos, a), s);
+    else if (k == 5) part.inverted_after = t1_inverted(py, px, load3(pos, b), load3(pos, c), s);
+    else part.inverted_after = t1_row_inverted(pos, vn, w, k == 6 || k == 8 ? u : v, k < 8 ? px : py, s);
+    return part;
+}
+
+// t1_fold_level's verdict from its parts: the four cells' areas now (n) and after (a); new: a corner
+// is inverted after the flip that was not before; inverted: one is after it.
+__device__ __forceinline__ int t1_fold_verdict(const double* n, const double* a, bool new_inverted, bool inverted,
+                                               Surface::Size s)
+{
+    if (!(a[0] > 0.0) || !(a[1] > 0.0) || !(a[2] > 0.0) || !(a[3] > 0.0)) return T1_FOLDS;
+    double before = ((n[0] + n[1]) + n[2]) + n[3];
+    if (!(fabs(((a[0] + a[1]) + a[2]) + a[3] - before) < Surface::half_area(s))) return T1_FOLDS;
+    return new_inverted ? T1_FOLDS : (inverted ? T1_INVERTED : T1_CLEAN);
+}
 
 // folding.t1_fold_level of flipping u-v with its vertices at px, py: T1_FOLDS if one of the four
 // cells would have area <= 0, or their areas would not add up to what they did, or a corner of u,
 // v, a, b, c, d would be inverted that was not; T1_INVERTED if only corners inverted before stay
-// so; T1_CLEAN otherwise.
+// so; T1_CLEAN otherwise. Its parts one after another (t1_check's one thread a candidate).
 __device__ __forceinline__ int t1_fold_level(const double* pos, const int* vn, const int* cell_vertices,
                                              const int* sides, int max_sides, int u, int v, int a, int b, int c,
                                              int d, int C1, int C2, int C3, int C4, vec3 px, vec3 py,
                                              Surface::Size s)
 {
-    vec3 pa = load3(pos, a), pb = load3(pos, b), pc = load3(pos, c), pd = load3(pos, d);
-    vec3 e1[3] = {pa, px, pd}, e2[3] = {pc, py, pb}, e3[4] = {pb, py, px, pa}, e4[4] = {pd, px, py, pc};
-    const int* row1 = cell_vertices + (long)C1 * max_sides;
-    const int* row2 = cell_vertices + (long)C2 * max_sides;
-    const int* row3 = cell_vertices + (long)C3 * max_sides;
-    const int* row4 = cell_vertices + (long)C4 * max_sides;
-    double n1, n2, n3, n4, a1, a2, a3, a4;
-    t1_cell_areas(pos, row1, sides[C1], u, v, px, e1, 3, s, &n1, &a1);
-    t1_cell_areas(pos, row2, sides[C2], u, v, py, e2, 3, s, &n2, &a2);
-    t1_cell_areas(pos, row3, sides[C3], u, v, py, e3, 4, s, &n3, &a3);
-    t1_cell_areas(pos, row4, sides[C4], u, v, px, e4, 4, s, &n4, &a4);
-    if (!(a1 > 0.0) || !(a2 > 0.0) || !(a3 > 0.0) || !(a4 > 0.0)) return T1_FOLDS;
-    double before = ((n1 + n2) + n3) + n4;
-    if (!(fabs(((a1 + a2) + a3) + a4 - before) < Surface::half_area(s))) return T1_FOLDS;
-    bool now[6] = {t1_row_inverted(pos, vn, v, -1, px, s), t1_row_inverted(pos, vn, u, -1, py, s),
-                   t1_row_inverted(pos, vn, a, -1, px, s), t1_row_inverted(pos, vn, d, -1, px, s),
-                   t1_row_inverted(pos, vn, b, -1, py, s), t1_row_inverted(pos, vn, c, -1, py, s)};
-    bool after[6] = {t1_inverted(px, py, pd, pa, s), t1_inverted(py, px, pb, pc, s),
-                     t1_row_inverted(pos, vn, a, u, px, s), t1_row_inverted(pos, vn, d, v, px, s),
-                     t1_row_inverted(pos, vn, b, u, py, s), t1_row_inverted(pos, vn, c, v, py, s)};
-    int level = T1_CLEAN;
-    for (int i = 0; i < 6; ++i) {
-        if (after[i] && !now[i]) return T1_FOLDS;
-        if (after[i]) level = T1_INVERTED;
+    double n[4], after[4];
+    bool new_inverted = false, inverted = false;
+#pragma unroll
+    for (int k = 0; k < T1_FOLD_PARTS; ++k) {
+        T1FoldPart part = t1_fold_part(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4,
+                                       px, py, s, k);
+        if (k < 4) {
+            n[k] = part.now;
+            after[k] = part.after;
+        } else {
+            new_inverted = new_inverted || (part.inverted_after && !part.inverted_now);
+            inverted = inverted || part.inverted_after;
+        }
     }
-    return level;
+    return t1_fold_verdict(n, after, new_inverted, inverted, s);
 }

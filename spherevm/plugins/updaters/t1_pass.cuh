@@ -43,37 +43,95 @@ __device__ __forceinline__ double t1_full_length(double new_length, double lengt
     return new_length > 0.0 ? new_length : length_factor * old_length;
 }
 
-// Candidate e (full: its new length): the rules of T1.select. Refuse a flip that leaves a triangle
-// with two sides or joins a cell to itself, place it as folding.t1_placement does (usual, else
-// turned, else refused if it folds); false if refused. Otherwise e[12] is its turn and it claims its
-// four cells (atomicMin: the lowest edge index wins).
+// Candidate e's topology rules of T1.select: refused if it would leave a triangle with two sides or
+// join a cell to itself.
+__device__ __forceinline__ bool t1_refused_by_topology(const int* sides, const int* e)
+{
+    int C1 = e[7], C2 = e[8], C3 = e[9], C4 = e[10];
+    bool distinct = C1 != C2 && C1 != C3 && C1 != C4 && C2 != C3 && C2 != C4 && C3 != C4;
+    return sides[C1] <= 3 || sides[C2] <= 3 || !distinct;
+}
+
+// A kept candidate e: its turn in e[12], and its claims on its four cells (atomicMin: the lowest edge
+// index wins).
+__device__ __forceinline__ void t1_claim(int* claim, int* e, bool turn)
+{
+    e[12] = turn ? 1 : 0;
+    int index = 3 * e[0] + e[1];
+    atomicMin(claim + e[7], index);
+    atomicMin(claim + e[8], index);
+    atomicMin(claim + e[9], index);
+    atomicMin(claim + e[10], index);
+}
+
+// folding.t1_placement from the fold levels of the usual and the turned placement: whether the
+// candidate is refused, and whether it turns (usual if clean, else turned if clean, else usual
+// unless it folds).
+__device__ __forceinline__ bool t1_placement_refused(int usual, int turned, bool* turn)
+{
+    *turn = usual != T1_CLEAN && turned == T1_CLEAN;
+    return usual == T1_FOLDS && !*turn;
+}
+
+// Candidate e (full: its new length): the rules of T1.select (t1_check, one thread a candidate).
+// Refuse a flip by its topology (t1_refused_by_topology), place it as folding.t1_placement does
+// (usual, else turned, else refused if it folds); false if refused. Otherwise it claims its four
+// cells (t1_claim).
 __device__ __forceinline__ bool t1_check_candidate(const double* pos, const int* vn, const int* sides,
                                                    const int* cell_vertices, int max_sides, Surface::Size s,
                                                    double full, int* claim, int* e)
 {
-    int u = e[0], k = e[1], v = e[2], a = e[3], b = e[4], c = e[5], d = e[6];
+    int u = e[0], v = e[2], a = e[3], b = e[4], c = e[5], d = e[6];
     int C1 = e[7], C2 = e[8], C3 = e[9], C4 = e[10];
-    bool distinct = C1 != C2 && C1 != C3 && C1 != C4 && C2 != C3 && C2 != C4 && C3 != C4;
-    bool refuse = sides[C1] <= 3 || sides[C2] <= 3 || !distinct, turn = false;
-    if (!refuse) {      // folding.t1_placement: usual if clean, else turned if clean, else usual unless it folds
-        vec3 px, py;
-        Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py);
-        int usual = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px,
-                                  py, s);
-        if (usual != T1_CLEAN) {
-            Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py, true);
-            turn = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px,
-                                 py, s) == T1_CLEAN;
-            refuse = usual == T1_FOLDS && !turn;
-        }
+    if (t1_refused_by_topology(sides, e)) return false;   // a refused candidate claims nothing
+    vec3 px, py;
+    Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py);
+    int usual = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px, py, s);
+    int turned = T1_CLEAN;
+    if (usual != T1_CLEAN) {
+        Surface::t1_positions(pos, u, v, a, b, c, d, s, full, &px, &py, true);
+        turned = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px, py, s);
     }
-    if (refuse) return false;   // a refused candidate claims nothing, so t1_apply_candidate passes it by
-    e[12] = turn ? 1 : 0;
-    int index = 3 * u + k;
-    atomicMin(claim + C1, index);
-    atomicMin(claim + C2, index);
-    atomicMin(claim + C3, index);
-    atomicMin(claim + C4, index);
+    bool turn;
+    if (t1_placement_refused(usual, turned, &turn)) return false;
+    t1_claim(claim, e, turn);
+    return true;
+}
+
+// t1_check_candidate by a whole warp (the fused steps: a candidate's check is one thread's long
+// chain, which a tissue's few candidates make the pass's critical path): lanes 0-9 take the usual
+// placement's fold parts (t1_fold_part), lanes 16-25 the turned placement's, both at once; the
+// verdicts (t1_fold_verdict) come from the same values, so the decisions are t1_check's. Every lane
+// calls it with the same e and gets the same answer; lane 0 claims.
+__device__ __forceinline__ bool t1_check_candidate_warp(const double* pos, const int* vn, const int* sides,
+                                                        const int* cell_vertices, int max_sides, Surface::Size s,
+                                                        double full, int* claim, int* e)
+{
+    if (t1_refused_by_topology(sides, e)) return false;
+    const unsigned all = 0xffffffffu;
+    int lane = threadIdx.x & 31, k = lane & 15;
+    T1FoldPart part = {0.0, 0.0, false, false};
+    if (k < T1_FOLD_PARTS) {
+        vec3 px, py;
+        Surface::t1_positions(pos, e[0], e[2], e[3], e[4], e[5], e[6], s, full, &px, &py, lane >= 16);
+        part = t1_fold_part(pos, vn, cell_vertices, sides, max_sides, e[0], e[2], e[3], e[4], e[5], e[6], e[7], e[8],
+                            e[9], e[10], px, py, s, k);
+    }
+    bool corner = k >= 4 && k < T1_FOLD_PARTS;
+    unsigned new_inverted = __ballot_sync(all, corner && part.inverted_after && !part.inverted_now);
+    unsigned inverted = __ballot_sync(all, corner && part.inverted_after);
+    int level[2];
+    for (int h = 0; h < 2; ++h) {   // the usual placement (lanes 0-15), the turned one (16-31)
+        double n[4], after[4];
+        for (int j = 0; j < 4; ++j) {
+            n[j] = __shfl_sync(all, part.now, 16 * h + j);
+            after[j] = __shfl_sync(all, part.after, 16 * h + j);
+        }
+        level[h] = t1_fold_verdict(n, after, (new_inverted >> (16 * h)) & 0xffffu, (inverted >> (16 * h)) & 0xffffu, s);
+    }
+    bool turn;
+    if (t1_placement_refused(level[0], level[1], &turn)) return false;
+    if (lane == 0) t1_claim(claim, e, turn);
     return true;
 }
 

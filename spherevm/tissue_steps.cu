@@ -256,14 +256,15 @@ extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_st
                                &n_cand, step, SendFlipped{bases, rank, at_pos[now], P});
             cluster_sync();   // the flips' topology and positions, everywhere
         }
-        tissue_cells<Surface>(P, cell_vertices, sides, max_sides, s, cb0, cb1, lanes, kA, kP, A0, P0, coef,   // this block's cells
-                     [&](int c) {
-                         for (int q = 0; q < TISSUE_CLUSTER; ++q)
-                             if (q != rank) {
-                                 bases[q][at_coef + 2L * c] = coef[2L * c];
-                                 bases[q][at_coef + 2L * c + 1] = coef[2L * c + 1];
-                             }
-                     });
+        // the vertex model (vertex_model.cuh): this block's cells, their coefficients to the other blocks
+        tissue_cells<Surface>(P, cell_vertices, sides, max_sides, s, cb0, cb1, lanes, kA, kP, A0, P0, coef,
+                              [&](int c) {
+                                  for (int q = 0; q < TISSUE_CLUSTER; ++q)
+                                      if (q != rank) {
+                                          bases[q][at_coef + 2L * c] = coef[2L * c];
+                                          bases[q][at_coef + 2L * c + 1] = coef[2L * c + 1];
+                                      }
+                              });
         cluster_sync();
         for (int v = vb0 + tid; v < vb1; v += stride) {   // this block's vertices: force, then the move (brownian.cuh)
             store3(F, v, Surface::vertex_force(P, vn, vc, v, s, coef));
@@ -339,7 +340,8 @@ extern "C" __global__ void __launch_bounds__(1024) tissue_minimize(
     __syncthreads();
     for (int step = 0; step < steps; ++step) {
         if (running) {
-            tissue_cells<Surface>(P, cell_vertices, sides, max_sides, s, c0, c1, lanes, kA, kP, A0, P0, coef, [](int) {});
+            tissue_cells<Surface>(P, cell_vertices, sides, max_sides, s, c0, c1, lanes, kA, kP, A0, P0, coef,
+                                  [](int) {});   // the vertex model (vertex_model.cuh)
             __syncthreads();
             for (int k = 0; k < rounds; ++k) {   // forces, and fire_reduce's terms F.v, v.v, F.F
                 long g = base + tid + (long)k * stride;

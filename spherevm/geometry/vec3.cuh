@@ -20,3 +20,15 @@ __device__ __forceinline__ vec3 normalize3(vec3 a) { double s = rsqrt(dot3(a, a)
 __device__ __forceinline__ vec3 load3(const double* p, long i) { return v3(p[3 * i], p[3 * i + 1], p[3 * i + 2]); }
 __device__ __forceinline__ void store3(double* p, long i, vec3 a) { p[3 * i] = a.x; p[3 * i + 1] = a.y; p[3 * i + 2] = a.z; }
 
+// a x + y, a x and x + y with each operation rounded as written: neither the compiler nor ptxas may
+// fuse or split them, so code that must give the same bits wherever it is inlined (FIRE's move,
+// plugins/integrators/fire.cuh) writes its arithmetic out with them.
+__device__ __forceinline__ vec3 fma3_rn(double a, vec3 x, vec3 y) {
+    return v3(__fma_rn(a, x.x, y.x), __fma_rn(a, x.y, y.y), __fma_rn(a, x.z, y.z));
+}
+__device__ __forceinline__ vec3 mul3_rn(double a, vec3 x) {
+    return v3(__dmul_rn(a, x.x), __dmul_rn(a, x.y), __dmul_rn(a, x.z));
+}
+__device__ __forceinline__ vec3 add3_rn(vec3 x, vec3 y) {
+    return v3(__dadd_rn(x.x, y.x), __dadd_rn(x.y, y.y), __dadd_rn(x.z, y.z));
+}

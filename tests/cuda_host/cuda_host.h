@@ -3,7 +3,8 @@
  *
  * Include this before the headers. It supplies only what they take from CUDA: the function
  * qualifiers (empty or plain inline on the host), the vector types uint2/uint4 and their make_*
- * constructors, rsqrt and the rounded intrinsics __fma_rn, __dmul_rn, __dadd_rn. Nothing here changes a formula; the headers are included unmodified.
+ * constructors, rsqrt and the rounded intrinsics __fma_rn, __dmul_rn, __dadd_rn. Nothing here
+ * changes a formula; the headers are included unmodified.
  *
  * rsqrt: CUDA's double rsqrt(x) is 1/sqrt(x) to about 1 ulp (not correctly rounded). The host
  * stand-in 1.0 / sqrt(x) is two correctly rounded operations, also within 1 ulp; the two may differ

@@ -28,23 +28,15 @@ __device__ __forceinline__ void fire_control_replica(double power, double vnorm2
     *step = *dt;
 }
 
-// a x + y, a x and x + y for three-vectors, each operation rounded as written: the compiler may
-// not fuse or split them, so FIRE's move has the same bits wherever it is inlined (fire.cu's kernel,
-// the fused minimisation). Left to the compiler, the mix below had become (keep v) + fma(scale, f)
-// in one of them and fma(keep, v, scale f) in the other (session 12).
-__device__ __forceinline__ vec3 fma3_rn(double a, vec3 x, vec3 y)
-{
-    return v3(__fma_rn(a, x.x, y.x), __fma_rn(a, x.y, y.y), __fma_rn(a, x.z, y.z));
-}
-__device__ __forceinline__ vec3 mul3_rn(double a, vec3 x) { return v3(__dmul_rn(a, x.x), __dmul_rn(a, x.y), __dmul_rn(a, x.z)); }
-__device__ __forceinline__ vec3 add3_rn(vec3 x, vec3 y) { return v3(__dadd_rn(x.x, y.x), __dadd_rn(x.y, y.y), __dadd_rn(x.z, y.z)); }
-
 // Vertex i (its global index; pos, vel and forces may be a tissue's copies in shared memory, offset
 // so that they are indexed by it) of a running replica whose size is s: mix, semi-implicit Euler,
 // P_N re-projection and P_T velocity transport. A move |h w| that is not finite or above max_step
 // units (sqrt(<A>)) leaves the vertex and its velocity as they were and flags (timestep << 32 | i).
-// The arithmetic is written out (the _rn helpers) in the forms session 11's fire.cu compiled to:
-// w = fma(keep, v, scale f), w = fma(h, f, w), x = x + (h w), w = fma(-(w.n), n, w) (fire.cu's SASS).
+// The arithmetic is written out (vec3.cuh's rounded helpers) in the forms session 11's fire.cu
+// compiled to: w = fma(keep, v, scale f), w = fma(h, f, w), x = x + (h w), w = fma(-(w.n), n, w), so
+// it has the same bits wherever it is inlined (fire.cu's kernel, the fused minimisation). Left to the
+// compiler, the mix had become (keep v) + fma(scale, f) in one and fma(keep, v, scale f) in the
+// other (session 12).
 __device__ __forceinline__ void fire_move_vertex(double* pos, double* vel, const double* forces, long i,
                                                  Surface::Size s, double keep, double scale, double h, double unit,
                                                  double max_step, unsigned long long timestep,

@@ -6,7 +6,9 @@
 // cells and vertices over the cluster's blocks (Hopper thread block clusters): each block keeps a
 // copy of the tissue's positions and cell coefficients in its shared memory and sends what it
 // computes to the others' copies (distributed shared memory). T1's pass is cheap and runs in the
-// cluster's first block; the tissue's topology stays in global memory.
+// cluster's first block; the tissue's topology stays in global memory. On the sphere each block also
+// keeps every vertex's 1 / |x| (KeptNorm, geometry/surface.cuh), computed once after each move or
+// flip: the cells and vertex forces would otherwise each take an rsqrt of every vertex they read.
 // Every phase runs the same device function as the general kernels (vertex_model.cuh, t1_pass.cuh,
 // brownian.cuh) on the same indices, so the trajectory is the general path's bit for bit: the same
 // Philox draws (counted by global vertex index and timestep), the same flips (lowest edge index
@@ -30,16 +32,18 @@ __device__ __forceinline__ void cluster_sync()
     asm volatile("barrier.cluster.arrive.release.aligned;\n\tbarrier.cluster.wait.acquire.aligned;" ::: "memory");
 }
 // The address of p (this block's shared memory) in the shared memory of the cluster's block `rank`.
-__device__ __forceinline__ double* cluster_map(double* p, unsigned int rank)
+template <class T>
+__device__ __forceinline__ T* cluster_map(T* p, unsigned int rank)
 {
     unsigned long long out;
     asm volatile("mapa.u64 %0, %1, %2;" : "=l"(out) : "l"(p), "r"(rank));
-    return (double*)out;
+    return (T*)out;
 }
 #else
 #define TISSUE_CLUSTER_DIMS
 __device__ __forceinline__ void cluster_sync() { __syncthreads(); }
-__device__ __forceinline__ double* cluster_map(double* p, unsigned int) { return p; }
+template <class T>
+__device__ __forceinline__ T* cluster_map(T* p, unsigned int) { return p; }
 #endif
 
 // x into item i of the array at `offset` (doubles, indexed as the tissue's copy is) in every other
@@ -50,16 +54,16 @@ __device__ __forceinline__ void to_others(double* const* bases, int rank, long o
         if (q != rank) store3(bases[q] + offset, i, x);
 }
 
-// The vertex model's terms (vm_cell_terms into coef) of cells cb0..cb1, by the calling block; sent(c)
-// after each. On a surface that splits a cell's corners (the sphere: Surface::split_corners), a cell
+// The vertex model's terms (vm_cell_terms into coef) of cells cb0..cb1, by the calling block, the
+// vertices' directions from norm (Surface::directions); sent(c) after each. On a surface that splits a cell's corners (the sphere: Surface::split_corners), a cell
 // takes `lanes` neighbouring threads (a power of two, at most 8): each lane computes every lanes-th
 // corner's arc and fan factor (Surface::cell_corner), and every lane adds them in the cell's order
 // (Surface::add_corner), so the chain of a cell's atan2s is shortened and the bits are
 // cell_measures'. Every thread of the block calls it, with S = Surface.
 template <class S, class Sent>
-__device__ __forceinline__ void tissue_cells(const double* P, const int* cell_vertices, const int* sides,
-                                             int max_sides, typename S::Size s, int cb0, int cb1, int lanes,
-                                             const double* kA, const double* kP, const double* A0,
+__device__ __forceinline__ void tissue_cells(const double* P, KeptNorm norm, const int* cell_vertices,
+                                             const int* sides, int max_sides, typename S::Size s, int cb0, int cb1,
+                                             int lanes, const double* kA, const double* kP, const double* A0,
                                              const double* P0, double* coef, Sent sent)
 {
     const int tid = threadIdx.x, stride = blockDim.x;
@@ -72,12 +76,12 @@ __device__ __forceinline__ void tissue_cells(const double* P, const int* cell_ve
                 const bool mine = c < cb1;
                 const int n = mine ? sides[c] : 0;
                 const int* row = cell_vertices + (long)(mine ? c : cb0) * max_sides;
-                const vec3 a = normalize3(load3(P, row[0]));
+                const vec3 a = S::direction(P, row[0], norm);
                 typename S::CellSum sum = {0.0, 1.0, 0.0};
                 const int rounds = __reduce_max_sync(all, (n + lanes - 1) / lanes);
                 for (int q = 0; q < rounds; ++q) {
                     typename S::Corner k = {0.0, 0.0, 0.0};
-                    if (q * lanes + lane < n) k = S::cell_corner(P, row, n, q * lanes + lane, a);
+                    if (q * lanes + lane < n) k = S::cell_corner(P, row, n, q * lanes + lane, a, norm);
                     for (int l = 0; l < lanes; ++l) {
                         typename S::Corner kl = {__shfl_sync(all, k.half, l, lanes), __shfl_sync(all, k.num, l, lanes),
                                                  __shfl_sync(all, k.den, l, lanes)};
@@ -96,22 +100,33 @@ __device__ __forceinline__ void tissue_cells(const double* P, const int* cell_ve
     }
     for (int c = cb0 + tid; c < cb1; c += stride) {   // one thread a cell
         double A, Pc;
-        S::cell_measures(P, cell_vertices + (long)c * max_sides, sides[c], s, &A, &Pc);
+        S::cell_measures(P, cell_vertices + (long)c * max_sides, sides[c], s, &A, &Pc, norm);
         vm_cell_terms(A, Pc, c, s, kA, kP, A0, P0, coef);
         sent(c);
     }
 }
 
-// Threads a cell in tissue_cells (cb cells): as many as a block of at most 256 threads has for its
+// Threads a cell in tissue_cells (cb cells): as many as a block of at most 512 threads has for its
 // cells, a power of two up to 8. A block of more threads keeps one a cell: its SM is busy with its
-// many warps, and the lanes' shuffles and repeated sums only add work (one H200, 8 x 1,024 cells:
-// the cells' phase took 18 % longer on two lanes a cell; 1,024 x 32 and 64 x 64 cells, 2-5 warps a
-// block, 4-14 % shorter).
+// many warps, and the lanes' shuffles and repeated sums only add work (one H200: 8 x 1,024 cells on
+// 2 blocks of 1,024 threads, 18 % longer on two lanes a cell in session 13; on 4 blocks of 512
+// threads, 6 % shorter with the kept norms; 1,024 x 32 and 64 x 64 cells, 2-5 warps a block, 4-14 %
+// shorter).
 __device__ __forceinline__ int tissue_cell_lanes(int cb)
 {
     int lanes = 1;
-    while (blockDim.x <= 256 && lanes < 8 && blockDim.x / (2 * lanes) >= cb) lanes *= 2;
+    while (blockDim.x <= 512 && lanes < 8 && blockDim.x / (2 * lanes) >= cb) lanes *= 2;
     return lanes;
+}
+
+// Vertex v's 1 / |x| into inv (KeptNorm's array; nothing where the surface's functions use no
+// directions), in every block of the cluster (bases: their shared memory; at: the array's offset).
+__device__ __forceinline__ void keep_norm(double* const* bases, long at, const double* P, long v)
+{
+    if constexpr (Surface::directions) {
+        const double inv = RsqrtNorm()(P, v);
+        for (int q = 0; q < TISSUE_CLUSTER; ++q) bases[q][at + v] = inv;
+    }
 }
 
 // T1's arguments of the fused steps: its parameters (chord2, new_length, length_factor), its
@@ -137,26 +152,35 @@ struct TissueT1 {
     int pass0;
 };
 
-// One T1 pass of tissue r (vertices v0..v1) by the calling block, the `step`-th of the launch:
-// detect, check and claim (a warp a candidate: t1_check_candidate_warp), apply (t1_pass.cuh), barriers
-// between; flipped(e) after each flip.
-// claim: the tissue's claims (all free between passes); n_cand: a shared counter.
+// T1's pass of tissue r (vertices v0..v1), the `step`-th of the launch, in two parts with a barrier
+// between: tissue_t1_detect lists the short edges of vertices vb0..vb1 (every block of the tissue
+// its own), tissue_t1_settle checks and claims (a warp a candidate: t1_check_candidate_warp) and
+// applies them (t1_pass.cuh), in one block. n_cand: the tissue's candidate count (in the settling
+// block's shared memory; zero when a pass begins, settle leaves it so); claim: the tissue's claims
+// (all free between passes).
+__device__ __forceinline__ void tissue_t1_detect(const double* P, const int* vn, const int* vc, Surface::Size s,
+                                                 int r, int vb0, int vb1, int v0, int v1, bool flipping,
+                                                 const TissueT1& t1, int* n_cand, bool settling)
+{
+    const int room0 = (3 * v0) / 2, room = (3 * v1) / 2 - room0;
+    if (settling && threadIdx.x == 0) { t1.flips[r] = 0; t1.refused[r] = 0; }
+    if (flipping)
+        for (int u = vb0 + threadIdx.x; u < vb1; u += blockDim.x)
+            t1_detect_vertex(P, vn, vc, s, t1.chord2[r], r, u, n_cand, t1.cand + (long)room0 * CAND_INTS,
+                             t1.cand_len + room0, room);
+}
+
+// flipped(e) after each flip.
 template <class Flipped>
-__device__ __forceinline__ void tissue_t1_pass(double* P, int* vn, int* vc, int* cell_vertices, int* sides,
-                                               int max_sides, Surface::Size s, int r, int v0, int v1, bool flipping,
-                                               const TissueT1& t1, int* claim, int* n_cand, int step,
-                                               Flipped flipped)
+__device__ __forceinline__ void tissue_t1_settle(double* P, int* vn, int* vc, int* cell_vertices, int* sides,
+                                                 int max_sides, Surface::Size s, int r, int v0, int v1,
+                                                 const TissueT1& t1, int* claim, int* n_cand, int step,
+                                                 Flipped flipped)
 {
     const int tid = threadIdx.x, stride = blockDim.x;
     const int room0 = (3 * v0) / 2, room = (3 * v1) / 2 - room0;
     int* cand = t1.cand + (long)room0 * CAND_INTS;
     double* len = t1.cand_len + room0;
-    if (tid == 0) { *n_cand = 0; t1.flips[r] = 0; t1.refused[r] = 0; }
-    __syncthreads();
-    if (flipping)
-        for (int u = v0 + tid; u < v1; u += stride)
-            t1_detect_vertex(P, vn, vc, s, t1.chord2[r], r, u, n_cand, cand, len, room);
-    __syncthreads();
     const int n = min(*n_cand, room);
     for (int i = tid >> 5; i < n; i += stride >> 5) {   // a warp a candidate (blockDim.x: a multiple of 32)
         int* e = cand + (long)i * CAND_INTS;
@@ -171,6 +195,7 @@ __device__ __forceinline__ void tissue_t1_pass(double* P, int* vn, int* vc, int*
         }
     }
     __syncthreads();
+    if (tid == 0) *n_cand = 0;   // every thread has read it: zero for the next pass
     for (int i = tid; i < n; i += stride) {
         const int* e = cand + (long)i * CAND_INTS;
         if (t1_apply_candidate(P, vn, vc, cell_vertices, sides, max_sides, s,
@@ -182,19 +207,6 @@ __device__ __forceinline__ void tissue_t1_pass(double* P, int* vn, int* vc, int*
         }
     }
 }
-
-// After a flip in a cluster's first block: the flipped edge's new positions to the other blocks.
-struct SendFlipped {
-    double* const* bases;
-    int rank;
-    long offset;
-    const double* P;
-    __device__ void operator()(const int* e) const
-    {
-        to_others(bases, rank, offset, e[0], load3(P, e[0]));
-        to_others(bases, rank, offset, e[2], load3(P, e[2]));
-    }
-};
 
 // The arguments both fused kernels take first (tissue_steps.TissueSteps.run passes them): the
 // State's positions and topology, the per-replica vertex and cell offsets and sizes, the vertex
@@ -213,8 +225,8 @@ struct SendFlipped {
 // At most 1,024 threads a block (tissue_steps.THREADS). Shared memory of each block, in doubles
 // (tissue_steps.py computes the same, in bytes): two copies of the positions (3 nv each: the step's,
 // and the next, which the move writes while other blocks still read the step's), the cell
-// coefficients (2 nc), the forces of the block's vertices (3 ceil(nv / TISSUE_CLUSTER)), then the T1
-// claims (nc ints).
+// coefficients (2 nc), on the sphere two copies of the kept 1 / |x| (nv each, as the positions),
+// the forces of the block's vertices (3 ceil(nv / TISSUE_CLUSTER)), then the T1 claims (nc ints).
 extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_steps(
     TISSUE_COMMON_PARAMS, const double* __restrict__ amp,
     const double* __restrict__ length_unit, double mu, double dt, double max_step, unsigned int seed,
@@ -233,11 +245,18 @@ extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_st
     // the arrays, as offsets from a block's shared memory that global indices address
     const long at_pos[2] = {-3L * v0, 3L * nv - 3L * v0};
     const long at_coef = 6L * nv - 2L * c0;
+    const int kept = Surface::directions ? nv : 0;
+    const long at_inv[2] = {6L * nv + 2L * nc - v0, 6L * nv + 2L * nc + kept - v0};
     double* coef = shared + at_coef;
-    double* F = shared + 6L * nv + 2L * nc - 3L * vb0;
-    int* claim = (int*)(shared + 6L * nv + 2L * nc + 3L * vchunk) - c0;
+    double* F = shared + 6L * nv + 2L * nc + 2L * kept - 3L * vb0;
+    int* claim = (int*)(shared + 6L * nv + 2L * nc + 2L * kept + 3L * vchunk) - c0;
     if (tid < TISSUE_CLUSTER) bases[tid] = cluster_map(shared, tid);
+    if (tid == 0) n_cand = 0;
+    int* const count = cluster_map(&n_cand, 0);   // the first block's
     for (int j = tid; j < 3 * nv; j += stride) shared[j] = pos[3L * v0 + j];
+    __syncthreads();
+    if (Surface::directions)
+        for (int v = v0 + tid; v < v1; v += stride) shared[at_inv[0] + v] = RsqrtNorm()(shared + at_pos[0], v);
     for (int c = c0 + tid; c < c1; c += stride) claim[c] = 0x7fffffff;
     const Surface::Size s = Surface::size(size, r);
     const bool flipping = t1 && active[r];
@@ -250,14 +269,22 @@ extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_st
         unsigned long long timestep = step0 + step;
         double* P = shared + at_pos[now];
         double* next = shared + at_pos[1 - now];
-        if (t1) {   // T1's pass in the first block
+        const KeptNorm norm = {shared + at_inv[now]};
+        if (t1) {   // T1's pass: every block detects on its vertices, the first block settles
+            tissue_t1_detect(P, vn, vc, s, r, vb0, vb1, v0, v1, flipping, t1_args, count, rank == 0);
+            cluster_sync();
             if (rank == 0)
-                tissue_t1_pass(P, vn, vc, cell_vertices, sides, max_sides, s, r, v0, v1, flipping, t1_args, claim,
-                               &n_cand, step, SendFlipped{bases, rank, at_pos[now], P});
+                tissue_t1_settle(P, vn, vc, cell_vertices, sides, max_sides, s, r, v0, v1, t1_args, claim, &n_cand,
+                                 step, [&](const int* e) {   // the flipped edge, everywhere
+                                     for (int k = 0; k < 3; k += 2) {
+                                         to_others(bases, rank, at_pos[now], e[k], load3(P, e[k]));
+                                         keep_norm(bases, at_inv[now], P, e[k]);
+                                     }
+                                 });
             cluster_sync();   // the flips' topology and positions, everywhere
         }
         // the vertex model (vertex_model.cuh): this block's cells, their coefficients to the other blocks
-        tissue_cells<Surface>(P, cell_vertices, sides, max_sides, s, cb0, cb1, lanes, kA, kP, A0, P0, coef,
+        tissue_cells<Surface>(P, norm, cell_vertices, sides, max_sides, s, cb0, cb1, lanes, kA, kP, A0, P0, coef,
                               [&](int c) {
                                   for (int q = 0; q < TISSUE_CLUSTER; ++q)
                                       if (q != rank) {
@@ -267,11 +294,12 @@ extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_st
                               });
         cluster_sync();
         for (int v = vb0 + tid; v < vb1; v += stride) {   // this block's vertices: force, then the move (brownian.cuh)
-            store3(F, v, Surface::vertex_force(P, vn, vc, v, s, coef));
+            store3(F, v, Surface::vertex_force(P, vn, vc, v, s, coef, NoExtra(), norm));
             store3(next, v, load3(P, v));
             brownian_vertex(next, F, v, vc, s, amp[r], length_unit[r], nullptr, 0, mu, dt, 0.0, 0.0, max_step, seed,
                             timestep, error);
             to_others(bases, rank, at_pos[1 - now], v, load3(next, v));
+            keep_norm(bases, at_inv[1 - now], next, v);
         }
         cluster_sync();
         now = 1 - now;
@@ -279,26 +307,14 @@ extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_st
     for (int j = 3 * (vb0 - v0) + tid; j < 3 * (vb1 - v0); j += stride) pos[3L * v0 + j] = shared[at_pos[now] + 3L * v0 + j];
 }
 
-// After a flip in the minimisation with T1's reset_velocities: FIRE forgets the flipped edge's
-// vertices' velocities (fire_reset_vertices).
-struct ResetFlipped {
-    double* V;
-    int reset;
-    __device__ void operator()(const int* e) const
-    {
-        if (!reset) return;
-        store3(V, e[0], v3(0.0, 0.0, 0.0));
-        store3(V, e[2], v3(0.0, 0.0, 0.0));
-    }
-};
-
 // Many FIRE iterations of Simulation.minimize in one launch, a thread block per tissue: each
 // iteration the vertex model's forces, FIRE's per-replica sums (in device_common.cuh's order for
 // a launch of `tile` threads a block: block_segment_warp / block_segment_total), its control
 // (thread 0) and move (fire.cuh), then T1's pass of the next timestep, as minimize orders them.
 // A stopped replica (fire_active false) only has its velocities zeroed (and T1's counters, as each pass
 // does). Shared memory, in doubles (tissue_steps.py computes the same, in bytes): the positions,
-// forces and velocities (3 nv each), the cell coefficients (2 nc), the sums' warp parts
+// forces and velocities (3 nv each), the cell coefficients (2 nc), on the sphere the kept 1 / |x|
+// (nv, KeptNorm: after each move and flip), the sums' warp parts
 // (3 (n_warps + 1), n_warps the warps from v0 & ~31 to v1), then the T1 claims (nc ints).
 extern "C" __global__ void __launch_bounds__(1024) tissue_minimize(
     TISSUE_COMMON_PARAMS, int reset_velocities,
@@ -321,13 +337,16 @@ extern "C" __global__ void __launch_bounds__(1024) tissue_minimize(
     double* F = shared + 3L * nv - 3L * v0;
     double* V = shared + 6L * nv - 3L * v0;
     double* coef = shared + 9L * nv - 2L * c0;
-    double* part = shared + 9L * nv + 2L * nc;
+    const int kept = Surface::directions ? nv : 0;
+    double* inv = shared + 9L * nv + 2L * nc - v0;
+    double* part = shared + 9L * nv + 2L * nc + kept;
     int* claim = (int*)(part + 3 * (n_warps + 1)) - c0;
     for (int j = tid; j < 3 * nv; j += stride) {
         shared[j] = pos[3L * v0 + j];
         shared[6L * nv + j] = vel[3L * v0 + j];
     }
     for (int c = c0 + tid; c < c1; c += stride) claim[c] = 0x7fffffff;
+    if (tid == 0) n_cand = 0;
     const Surface::Size s = Surface::size(size, r);
     const bool running = fire_active[r], flipping = t1 && active[r];
     const FireParams fire = {n_min, f_inc, f_dec, alpha_start, f_alpha, dt_max};
@@ -337,10 +356,14 @@ extern "C" __global__ void __launch_bounds__(1024) tissue_minimize(
     double replica_dt = dt[r], replica_alpha = alpha[r];
     long long positive = n_positive[r];
     const int lanes = tissue_cell_lanes(nc);
+    const KeptNorm norm = {inv};
+    __syncthreads();
+    if (Surface::directions)
+        for (int v = v0 + tid; v < v1; v += stride) inv[v] = RsqrtNorm()(P, v);
     __syncthreads();
     for (int step = 0; step < steps; ++step) {
         if (running) {
-            tissue_cells<Surface>(P, cell_vertices, sides, max_sides, s, c0, c1, lanes, kA, kP, A0, P0, coef,
+            tissue_cells<Surface>(P, norm, cell_vertices, sides, max_sides, s, c0, c1, lanes, kA, kP, A0, P0, coef,
                                   [](int) {});   // the vertex model (vertex_model.cuh)
             __syncthreads();
             for (int k = 0; k < rounds; ++k) {   // forces, and fire_reduce's terms F.v, v.v, F.F
@@ -348,7 +371,7 @@ extern "C" __global__ void __launch_bounds__(1024) tissue_minimize(
                 bool mine = g >= v0 && g < v1;
                 double terms[3] = {0.0, 0.0, 0.0};
                 if (mine) {
-                    vec3 f = Surface::vertex_force(P, vn, vc, g, s, coef), w = load3(V, g);
+                    vec3 f = Surface::vertex_force(P, vn, vc, g, s, coef, NoExtra(), norm), w = load3(V, g);
                     store3(F, g, f);
                     terms[0] = dot3(f, w);
                     terms[1] = dot3(w, w);
@@ -365,16 +388,25 @@ extern "C" __global__ void __launch_bounds__(1024) tissue_minimize(
                                          control, control + 1, control + 2);
             }
             __syncthreads();
-            for (int v = v0 + tid; v < v1; v += stride)   // fire_move's (fire.cuh)
+            for (int v = v0 + tid; v < v1; v += stride) {   // fire_move's (fire.cuh)
                 fire_move_vertex(P, V, F, v, s, control[0], control[1], control[2], length_unit[r], max_step,
                                  step0 + step, error);
+                if (Surface::directions) inv[v] = RsqrtNorm()(P, v);
+            }
         } else {
             for (int j = tid; j < 3 * nv; j += stride) shared[6L * nv + j] = 0.0;
         }
         __syncthreads();
         if (t1) {   // T1's pass of the next timestep
-            tissue_t1_pass(P, vn, vc, cell_vertices, sides, max_sides, s, r, v0, v1, flipping, t1_args, claim, &n_cand,
-                           step, ResetFlipped{V, reset_velocities});
+            tissue_t1_detect(P, vn, vc, s, r, v0, v1, v0, v1, flipping, t1_args, &n_cand, true);
+            __syncthreads();
+            tissue_t1_settle(P, vn, vc, cell_vertices, sides, max_sides, s, r, v0, v1, t1_args, claim, &n_cand,
+                             step, [&](const int* e) {   // the flipped edge's norms; FIRE forgets its velocities
+                               for (int k = 0; k < 3; k += 2) {   // with T1's reset_velocities (fire_reset_vertices)
+                                   if (Surface::directions) inv[e[k]] = RsqrtNorm()(P, e[k]);
+                                   if (reset_velocities) store3(V, e[k], v3(0.0, 0.0, 0.0));
+                               }
+                           });
             __syncthreads();
         }
     }

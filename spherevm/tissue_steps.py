@@ -17,15 +17,16 @@ the two paths' positions, topology and counters exactly (``tests/test_tissue_ste
 It serves ``Simulation.run`` where :func:`why_not` finds nothing against it: the GPU, a sphere or
 periodic plane, a :class:`~spherevm.plugins.integrators.Brownian` integrator (not Active), one
 :class:`~spherevm.plugins.forces.VertexModel`, at most one :class:`~spherevm.plugins.updaters.T1`,
-every operation firing each step, and every tissue small enough for shared memory (about 1,400
-cells on one block, 1,800 on a cluster of blocks, on an H200). ``run(fused=False)`` keeps the
+every operation firing each step, and every tissue small enough for shared memory (on an H200,
+spherical tissues of about 1,150 cells on one block and 1,500 on a cluster of blocks, planar ones of
+1,400 and 1,900: the sphere's blocks also keep every vertex's inverse norm). ``run(fused=False)`` keeps the
 general kernels.
 
 It serves ``Simulation.minimize`` the same way with :class:`~spherevm.plugins.integrators.FIRE`
 (``minimize(fused=False)`` keeps the general kernels): the tissue's block also sums FIRE's power and
 norms per replica in the order the general reduction adds them (``device_common.cuh``:
 ``block_segment_total``), so the minimisation is the general one bit for bit too. One block a
-tissue (about 1,300 cells on an H200): a minimisation's sums would cross the cluster at every
+tissue (about 1,250 cells on the sphere, 1,400 on the plane, on an H200): a minimisation's sums would cross the cluster at every
 iteration.
 """
 from __future__ import annotations
@@ -35,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .constraints import Sphere
 from .device import BLOCK
 from .plugins.base import SURFACE_DEFINES, surface_kernels
 from .plugins.forces import VertexModel
@@ -45,11 +47,13 @@ _KERNELS = Path(__file__).with_suffix(".cu")
 #: threads per tissue's block (at most this many; fewer for a tissue with fewer vertices)
 THREADS = 1024
 #: tissues of up to this many vertices run on one block; larger ones on a cluster of blocks, one
-#: block per about this many vertices. One H200, Brownian + T1 (2026-11-24), ms a step by blocks a
-#: tissue 1 / 2 / 4 / 8: 8 x 1,024 cells 0.033 / 0.024 / 0.024 / 0.029; 1 x 1,000 0.031 / 0.024 /
+#: block per about this many vertices. One H200, Brownian + T1, ms a step by blocks a tissue 1 / 2 /
+#: 4 / 8 (session 12): 8 x 1,024 cells 0.033 / 0.024 / 0.024 / 0.029; 1 x 1,000 0.031 / 0.024 /
 #: 0.025 / 0.027; 8 x 256 0.013 / 0.019: the chains of dependent double-precision operations of one
-#: cell and one vertex set a floor that more blocks do not lower.
-VERTICES_PER_BLOCK = 1024
+#: cell and one vertex set a floor that more blocks do not lower. Since session 14 (kept norms, two
+#: lanes a cell in blocks of 512 threads, T1's detection on every block): 8 x 1,024 cells on 4
+#: blocks 0.0214 against 0.0250 on 2.
+VERTICES_PER_BLOCK = 512
 #: largest cluster (the portable size on Hopper)
 MAX_CLUSTER = 8
 
@@ -68,15 +72,17 @@ def cluster_size(state, n_sm: int | None = None) -> int:
 
 def shared_bytes(state, cluster: int, minimizing: bool = False) -> int:
     """Shared memory of a block of the largest tissue (tissue_steps.cu). Steps: two copies of the
-    positions (3 doubles a vertex each), the cell coefficients (2 doubles a cell), the forces of the
-    block's vertices and the claims (an int a cell). Minimisation (one block): the positions,
-    forces and velocities, the cell coefficients, the sums' warp parts (3 doubles a warp, one more)
-    and the claims."""
+    positions (3 doubles a vertex each), the cell coefficients (2 doubles a cell), on the sphere two
+    copies of the kept inverse norms (a double a vertex each), the forces of the block's vertices and
+    the claims (an int a cell). Minimisation (one block): the positions, forces and velocities, the
+    cell coefficients, on the sphere the kept inverse norms, the sums' warp parts (3 doubles a warp,
+    one more) and the claims."""
     nv, nc = state.vertices_per_replica, state.cells_per_replica
+    kept = nv if isinstance(state.constraint, Sphere) else 0   # Surface::directions
     if minimizing:
         warps = (nv + 62) // 32          # from v0 rounded down to a warp's start, to v1
-        return int(np.max(8 * (9 * nv + 2 * nc + 3 * (warps + 1)) + 4 * nc))
-    return int(np.max(8 * (6 * nv + 2 * nc + 3 * (-(-nv // cluster))) + 4 * nc))
+        return int(np.max(8 * (9 * nv + 2 * nc + kept + 3 * (warps + 1)) + 4 * nc))
+    return int(np.max(8 * (6 * nv + 2 * nc + 2 * kept + 3 * (-(-nv // cluster))) + 4 * nc))
 
 
 def layout(state, minimizing: bool, n_sm: int):

@@ -4,7 +4,7 @@ Each GPU test runs the same Simulation three ways: fused (a thread block per tis
 steps per launch), the general kernels in CUDA graphs (``fused=False``) and step by step
 (``graphs=False``), and compares every array of the State bitwise, T1's counters, the flip log's
 pass number and the table width the host sees. Hot dynamics make T1 flip and widen the cell table
-every few steps; ensembles mix tissue sizes, and a 1,200-cell tissue has more vertices than a
+every few steps; ensembles mix tissue sizes, and a 1,100-cell tissue has more vertices than a
 block has threads. Minimisations (FIRE + T1) are compared the same way: FIRE's state, the
 convergence results and T1's flip-back memory too.
 """
@@ -73,12 +73,14 @@ def test_hot_ensemble_is_the_general_kernels_trajectory(surface):
 @pytest.mark.gpu
 @pytest.mark.parametrize("per_block, cluster", [(10 ** 6, 1), (1200, 2), (600, 4), (300, 8)])
 def test_a_large_tissue_on_one_block_or_a_cluster(monkeypatch, per_block, cluster):
-    """A 1,200-cell tissue beside a small one: on one block (more vertices than threads: each thread
-    loops) and spread over clusters of 2, 4 and 8 blocks (distributed shared memory)."""
+    """A 1,100-cell tissue beside a small one: on one block (more vertices than threads: each thread
+    loops) and spread over clusters of 2, 4 and 8 blocks (distributed shared memory; every block
+    detects T1's candidates on its vertices; on 8 blocks of 288 threads two lanes a cell)."""
     monkeypatch.setattr(tissue_steps, "VERTICES_PER_BLOCK", per_block)
-    state = ensemble("sphere", (1200, 32))
+    state = ensemble("sphere", (1100, 32))
     assert tissue_steps.cluster_size(state) == cluster
     assert state.vertices_per_replica.max() > tissue_steps.THREADS
+    assert tissue_steps.why_not(dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=0.2))) is None
     runs = three_runs(state, 150, T=0.2, check_every=64)
     assert_same(runs)
     assert runs[-1][2][0][0] > 0, "T1 flipped in the large tissue"
@@ -194,13 +196,18 @@ def test_the_fused_steps_need_the_gpu():
     sim = dynamics_simulation(ensemble("plane", (16,)), "cpu", Brownian(dt=0.01))
     assert "GPU" in tissue_steps.why_not(sim)
     state = ensemble("sphere", (40, 100))
-    # 2 x 100 - 4 = 196 vertices on a sphere; on 1 block and on 2
-    assert tissue_steps.shared_bytes(state, 1) == 8 * (6 * 196 + 2 * 100 + 3 * 196) + 4 * 100
-    assert tissue_steps.shared_bytes(state, 2) == 8 * (6 * 196 + 2 * 100 + 3 * 98) + 4 * 100
-    # minimising: positions, forces, velocities; the sums' parts of (196 + 62) // 32 = 8 warps, one more
-    assert tissue_steps.shared_bytes(state, 1, minimizing=True) == 8 * (9 * 196 + 2 * 100 + 3 * 9) + 4 * 100
+    # 2 x 100 - 4 = 196 vertices on a sphere, each with two kept inverse norms; on 1 block and on 2
+    assert tissue_steps.shared_bytes(state, 1) == 8 * (6 * 196 + 2 * 100 + 2 * 196 + 3 * 196) + 4 * 100
+    assert tissue_steps.shared_bytes(state, 2) == 8 * (6 * 196 + 2 * 100 + 2 * 196 + 3 * 98) + 4 * 100
+    # minimising: positions, forces, velocities, one kept inverse norm; the sums' parts of
+    # (196 + 62) // 32 = 8 warps, one more
+    assert tissue_steps.shared_bytes(state, 1, minimizing=True) == 8 * (9 * 196 + 2 * 100 + 196 + 3 * 9) + 4 * 100
+    plane = ensemble("plane", (100,))   # 200 vertices on a torus, no norms kept
+    assert tissue_steps.shared_bytes(plane, 1) == 8 * (6 * 200 + 2 * 100 + 3 * 200) + 4 * 100
+    assert tissue_steps.shared_bytes(plane, 1, minimizing=True) == 8 * (9 * 200 + 2 * 100 + 3 * 9) + 4 * 100
     assert tissue_steps.cluster_size(state) == 1
     big = ensemble("sphere", (1024,))
-    assert tissue_steps.cluster_size(big) == 2                      # 2,044 vertices: two blocks
-    assert tissue_steps.cluster_size(big, n_sm=1) == 1              # ... unless the SMs run out
+    assert tissue_steps.cluster_size(big) == 4                      # 2,044 vertices: four blocks
+    assert tissue_steps.cluster_size(big, n_sm=3) == 2              # ... fewer where the SMs run out
+    assert tissue_steps.cluster_size(big, n_sm=1) == 1
 

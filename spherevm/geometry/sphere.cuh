@@ -48,6 +48,19 @@ __device__ __forceinline__ edge_terms make_edge(vec3 b, vec3 d) {
     return e;
 }
 
+// The edge u -> w (u a unit direction, w at p with inverse norm inv = rsqrt(|p|^2)) as make_edge(u,
+// normalize3(p)) is compiled: w's direction is used only in m, so the compiler fuses its products
+// into the difference, m = u - inv p rounded once; written out so that an inverse norm kept from
+// before (the fused small-tissue steps) gives the same bits.
+__device__ __forceinline__ edge_terms make_edge_to(vec3 u, double inv, vec3 p) {
+    edge_terms e;
+    e.m = fma3_rn(-inv, p, u);
+    e.m2 = dot3(e.m, e.m);
+    e.q = fmax(4.0 - e.m2, 0.0);
+    e.x = cross3(e.m, u);
+    return e;
+}
+
 // half the edge's angle: atan2(|b - d|, |b + d|)
 __device__ __forceinline__ double half_angle(edge_terms e) { return atan2(sqrt(e.m2), sqrt(e.q)); }
 

@@ -6,6 +6,9 @@
 //   Size                      the per-replica size (a radius, or a box (Lx, Ly))
 //   size(s, r)                replica r's size from the State's size array (radius or box)
 //   vertex_size               whether the vertex-force kernel needs each vertex's size
+//   directions                whether the vertex model's functions use the vertices' unit directions
+//                             x / |x| (the sphere), through a Norm: 1 / |x| of vertex i, computed
+//                             (RsqrtNorm, the default) or kept from before (KeptNorm)
 //   cell_measures(...)        a cell's area and perimeter
 //   area_unit, length_unit    what the vertex-force coefficients are scaled by
 //   vertex_force(...)         minus the surface gradient of sum_c a_c A_c + p_c P_c at a vertex (on the
@@ -31,10 +34,34 @@ struct NoExtra {
     __device__ __forceinline__ void add_gradient(vec3&, const double*, const int*, const int*, long, vec3) const {}
 };
 
+// 1 / |x| of vertex i (rsqrt), for a unit direction x / |x|: computed from the position where it is
+// used (RsqrtNorm: the general kernels), or kept from before in an array (KeptNorm: the fused
+// small-tissue steps compute each vertex's once a step, not in each of its three cells and four
+// vertex forces). Both give the same bits: the array holds what RsqrtNorm returns.
+// |x|^2 is written out in the form the compiler gave normalize3's dot3 in these functions (x x + y y
+// fused as fma(x, x, y y)), which it would otherwise choose by where the function is inlined.
+struct RsqrtNorm {
+    __device__ __forceinline__ double operator()(const double* pos, long i) const {
+        vec3 p = load3(pos, i);
+        return rsqrt(__fma_rn(p.z, p.z, __fma_rn(p.x, p.x, __dmul_rn(p.y, p.y))));
+    }
+};
+struct KeptNorm {
+    const double* inv;   // indexed as the positions are
+    __device__ __forceinline__ double operator()(const double*, long i) const { return inv[i]; }
+};
+
 // ------------------------------------------------------------------------------------ the sphere
 struct SphereSurface {
     typedef double Size;
     static constexpr bool vertex_size = false;
+    static constexpr bool directions = true;
+
+    // vertex i's unit direction (the products rounded as written, as normalize3's are compiled here)
+    template <class Norm>
+    __device__ static vec3 direction(const double* pos, long i, const Norm& norm) {
+        return mul3_rn(norm(pos, i), load3(pos, i));
+    }
 
     __device__ static Size size(const double* radius, long r) { return radius[r]; }
     __device__ static double length_scale(Size R) { return R; }
@@ -57,9 +84,10 @@ struct SphereSurface {
         return k;
     }
     // corner i of the cell (row, n sides) whose first vertex's direction is a
-    __device__ static Corner cell_corner(const double* pos, const int* row, int n, int i, vec3 a) {
-        vec3 b = i == 0 ? a : normalize3(load3(pos, row[i]));
-        vec3 d = i + 1 < n ? normalize3(load3(pos, row[i + 1])) : a;
+    template <class Norm>
+    __device__ static Corner cell_corner(const double* pos, const int* row, int n, int i, vec3 a, const Norm& norm) {
+        vec3 b = i == 0 ? a : direction(pos, row[i], norm);
+        vec3 d = i + 1 < n ? direction(pos, row[i + 1], norm) : a;
         return corner(a, b, d);
     }
     // the next corner into the sums, rounded as written (the forms the compiler chose for
@@ -76,13 +104,14 @@ struct SphereSurface {
         *perimeter = sum.P * (2.0 * R);
     }
 
+    template <class Norm = RsqrtNorm>
     __device__ static void cell_measures(const double* pos, const int* row, int n, Size R, double* area,
-                                         double* perimeter) {
-        vec3 a = normalize3(load3(pos, row[0]));
+                                         double* perimeter, const Norm& norm = Norm()) {
+        vec3 a = direction(pos, row[0], norm);
         vec3 b = a;
         CellSum sum = {0.0, 1.0, 0.0};
         for (int i = 0; i < n; ++i) {
-            vec3 d = i + 1 < n ? normalize3(load3(pos, row[i + 1])) : a;
+            vec3 d = i + 1 < n ? direction(pos, row[i + 1], norm) : a;
             add_corner(&sum, corner(a, b, d));
             b = d;
         }
@@ -93,16 +122,16 @@ struct SphereSurface {
     // mod 3): sum_j (coefA[j-1] - coefA[j]) w(v, n_j) + (coefP[j] + coefP[j-1]) d theta_j / dv on
     // the unit sphere (coefficients carry R^2 and R), projected on the tangent plane, as in
     // Sphere.shape_gradient.
-    template <class Extra = NoExtra>
+    template <class Extra = NoExtra, class Norm = RsqrtNorm>
     __device__ static vec3 vertex_force(const double* pos, const int* vn, const int* vc, long v, Size,
-                                        const double* coef, const Extra& extra = Extra()) {
+                                        const double* coef, const Extra& extra = Extra(), const Norm& norm = Norm()) {
         vec3 r = load3(pos, v);
-        double inv_rn = rsqrt(dot3(r, r));
+        double inv_rn = norm(pos, v);
         vec3 u = inv_rn * r;
         vec3 g = v3(0.0, 0.0, 0.0);
         for (int j = 0; j < 3; ++j) {
-            int c_next = vc[3 * v + j], c_prev = vc[3 * v + (j + 2) % 3];
-            edge_terms t = make_edge(u, normalize3(load3(pos, vn[3 * v + j])));
+            int c_next = vc[3 * v + j], c_prev = vc[3 * v + (j + 2) % 3], w = vn[3 * v + j];
+            edge_terms t = make_edge_to(u, norm(pos, w), load3(pos, w));
             g = g + (coef[2 * c_prev] - coef[2 * c_next]) * edge_area_term(t)
                   + (coef[2 * c_next + 1] + coef[2 * c_prev + 1]) * edge_length_term(t);
         }
@@ -173,14 +202,16 @@ struct PlaneSurface {
 
     // the shoelace sum runs on prefix sums of the edges: one thread a cell
     static constexpr bool split_corners = false;
+    static constexpr bool directions = false;   // a Norm is taken and not used
+    template <class Norm = RsqrtNorm>
     __device__ static void cell_measures(const double* pos, const int* row, int n, Size b, double* area,
-                                         double* perimeter) {
+                                         double* perimeter, const Norm& = Norm()) {
         plane_cell_measures(pos, row, n, b, area, perimeter);
     }
 
-    template <class Extra = NoExtra>   // no force is fused into the plane's kernels (bending is zero there)
+    template <class Extra = NoExtra, class Norm = RsqrtNorm>   // no force is fused into the plane's kernels
     __device__ static vec3 vertex_force(const double* pos, const int* vn, const int* vc, long v, Size b,
-                                        const double* coef, const Extra& = Extra()) {
+                                        const double* coef, const Extra& = Extra(), const Norm& = Norm()) {
         return -plane_vertex_gradient(pos, vn, vc, v, b, coef);
     }
 

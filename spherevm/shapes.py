@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .constraints import PeriodicPlane, Sphere
+from .constraints.kernels import KERNEL_SURFACES, cell_measures
 from .constraints.plane import _wrap
 from .device import weighted_bincount
 
@@ -17,9 +18,14 @@ CENTROID_METHODS = ("area", "vertex")
 
 # ======================================================================================== shapes
 def cell_shapes(state):
-    """Per-cell areas and perimeters, as NumPy arrays of length ``n_cells``."""
-    g = state.constraint.cell_geometry(state)
-    return state.device.to_numpy(g.area), state.device.to_numpy(g.perimeter)
+    """Per-cell areas and perimeters, as NumPy arrays of length ``n_cells`` (on the GPU from one
+    kernel, the vertex model's own formulas: :func:`spherevm.constraints.kernels.cell_measures`)."""
+    if state.device.is_gpu and isinstance(state.constraint, KERNEL_SURFACES):
+        area, perimeter = cell_measures(state)
+    else:
+        g = state.constraint.cell_geometry(state)
+        area, perimeter = g.area, g.perimeter
+    return state.device.to_numpy(area), state.device.to_numpy(perimeter)
 
 
 def shape_index_of(area, perimeter):

@@ -38,7 +38,7 @@ import numpy as np
 
 from .constraints import Sphere
 from .device import BLOCK
-from .plugins.base import SURFACE_DEFINES, surface_kernels
+from .constraints.kernels import SURFACE_DEFINES, surface_kernels
 from .plugins.forces import VertexModel
 from .plugins.integrators import FIRE, Brownian
 from .plugins.updaters import T1

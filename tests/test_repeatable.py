@@ -45,7 +45,7 @@ def test_fire_sums_match_numpy_for_any_replica_sizes(sizes):
     from one item to more than 4 x 256 blocks (the finishing block's unrolled loop), repeated."""
     import cupy as cp
     from spherevm.device import BLOCK, launch
-    from spherevm.plugins.base import surface_kernels
+    from spherevm.constraints.kernels import surface_kernels
     from spherevm.plugins.integrators import fire
     start = np.concatenate([[0], np.cumsum(sizes)])
     n, nr = int(start[-1]), len(sizes)

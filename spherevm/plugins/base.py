@@ -5,24 +5,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constraints import PeriodicPlane, Sphere
-from ..device import load_module
 from ..trigger import Always, as_trigger
 from ..validation import integer, non_negative
 from .rows import _host, _index_like, _restored, follow_rows
-
-#: The surfaces with CUDA kernels and the macros that compile geometry/surface.cuh for each: one
-#: kernel source per operation serves them all (``gpu_surfaces`` of the built-in operations).
-SURFACE_DEFINES = {Sphere: (), PeriodicPlane: ("SVM_SURFACE_PLANE",)}
-KERNEL_SURFACES = tuple(SURFACE_DEFINES)
-
-
-def surface_kernels(cu_file, state, defines=()):
-    """``(module, size)``: the kernels of ``cu_file`` compiled for ``state``'s surface (and the macros
-    ``defines``) and the State's per-replica size array they take (``radius`` on the sphere, ``box``
-    on the plane)."""
-    surface = next(d for cls, d in SURFACE_DEFINES.items() if isinstance(state.constraint, cls))
-    return load_module(cu_file, surface + tuple(defines)), getattr(state, state.constraint.size_name)
 
 
 class Operation:

@@ -6,7 +6,8 @@ from pathlib import Path
 import numpy as np
 
 from ...device import launch, segment_sums, weighted_bincount
-from ..base import KERNEL_SURFACES, Force, ForceResult, surface_kernels
+from ...constraints.kernels import KERNEL_SURFACES, surface_kernels
+from ..base import Force, ForceResult
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 

@@ -8,7 +8,8 @@ import numpy as np
 from ... import random as rng
 from ...device import launch
 from ...validation import non_negative, positive
-from ..base import KERNEL_SURFACES, Integrator, raise_flagged_step, surface_kernels
+from ...constraints.kernels import KERNEL_SURFACES, surface_kernels
+from ..base import Integrator, raise_flagged_step
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 

@@ -7,7 +7,8 @@ import numpy as np
 
 from ...device import launch, segment_sums, weighted_bincount
 from ...validation import integer, positive
-from ..base import KERNEL_SURFACES, Minimizer, raise_flagged_step, surface_kernels
+from ...constraints.kernels import KERNEL_SURFACES, surface_kernels
+from ..base import Minimizer, raise_flagged_step
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 

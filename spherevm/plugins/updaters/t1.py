@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 
 from ... import folding, topology
-from ..base import KERNEL_SURFACES, Minimizer, Updater
+from ...constraints.kernels import KERNEL_SURFACES
+from ..base import Minimizer, Updater
 from ...validation import integer, positive
 from .t1_device import DevicePass
 

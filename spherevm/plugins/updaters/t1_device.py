@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ...device import launch
-from ..base import surface_kernels
+from ...constraints.kernels import surface_kernels
 
 _KERNELS = Path(__file__).with_name("t1.cu")
 _CAND_INTS, _LOG_INTS = 13, 6

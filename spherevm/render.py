@@ -70,8 +70,10 @@ def draw(ax, state, values=None, quantity: str = "shape_index", cmap: str = "vir
     else:
         from mpl_toolkits.mplot3d.art3d import Poly3DCollection
         front = (centres @ view_direction(elev, azim)) > 0            # outward normal towards the viewer
+        # autolim=False: the limits are the sphere's, set below; matplotlib (3.10+) would otherwise
+        # scale the view on its np.empty padding of ragged polygons, garbage on some runs
         ax.add_collection3d(Poly3DCollection([p for p, f in zip(polys, front) if f], facecolors=face[front],
-                                             edgecolors="k", linewidths=0.4))
+                                             edgecolors="k", linewidths=0.4), autolim=False)
         r = float(state.constraint.size_np(state)[int(replica)])
         for set_lim in (ax.set_xlim, ax.set_ylim, ax.set_zlim):
             set_lim(-r, r)

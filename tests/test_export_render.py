@@ -93,3 +93,25 @@ def test_render_png(tmp_path, gsd_file, plane):
     img = matplotlib.image.imread(out)
     assert img.shape[:2] == (150, 200)
     assert img[..., :3].std() > 0.05                       # not blank
+
+
+def test_render_ignores_matplotlib_padding(monkeypatch):
+    """matplotlib pads cells of different sides with np.empty; were the view scaled on that padding,
+    a run whose padding held huge numbers failed with 'Axis limits cannot be NaN or Inf' (CI did)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from spherevm.render import draw
+    state = svm.init.random_tiling(30, seed=3)
+    assert len(np.unique(state.cell_sides)) > 1                     # ragged polygons
+    empty = np.empty
+    monkeypatch.setattr(np, "empty", lambda shape, dtype=float, **kw: np.full(shape, np.finfo(dtype).max, dtype)
+                        if np.dtype(dtype).kind == "f" else empty(shape, dtype, **kw))
+    fig = plt.figure()
+    ax = fig.add_subplot(projection="3d")
+    draw(ax, state)
+    monkeypatch.undo()
+    r = state.radius_np()[0]
+    assert np.allclose([ax.get_xlim(), ax.get_ylim(), ax.get_zlim()], [-r, r])
+    fig.savefig(__import__("io").BytesIO(), format="png")
+    plt.close(fig)

@@ -33,8 +33,11 @@ MIN_STEPS = 64
 #: ... and for States of at most this many vertices (graphs hold about 400 more bytes per cell:
 #: T1's room for a candidate per edge and spare cell-table columns)
 MAX_VERTICES = 1 << 22
-#: most steps between two looks of the host (T1 pads its cell table by this many columns)
+#: most steps between two looks of the host (T1 pads its cell table by this many columns)...
 MAX_STRETCH = 64
+#: ... and for the fused small-tissue steps, whose tables are small: a run's default check interval
+#: (100 steps on the GPU) in one launch, so the host looks only at the checks
+FUSED_STRETCH = 128
 
 
 def _every_step(trigger, timestep):
@@ -114,13 +117,17 @@ class StepGraphs:
     def stretch(self, done, steps, check_every):
         """How many steps to run before the host must look: the next check, the end of the run, or
         the next timestep at which a writer is due (evaluated ahead on the host)."""
-        n = min(steps - done, check_every - done % check_every, MAX_STRETCH)
+        n = min(steps - done, check_every - done % check_every, self.max_stretch())
         t = self.sim.timestep
         writers = self.sim.operations.writers
         for i in range(1, n if writers else 1):
             if any(w.trigger(t + i) for w in writers):
                 return i
         return n
+
+    def max_stretch(self) -> int:
+        """Most steps :meth:`advance` takes at once (the cell table's padding bounds it)."""
+        return FUSED_STRETCH if self._fused_ready() else MAX_STRETCH
 
     def _ops(self):
         """The operations that run inside the steps (writers run between stretches)."""
@@ -141,7 +148,8 @@ class StepGraphs:
         return (id(state), tuple(a.data.ptr for a in arrays), tuple(keys)), None
 
     def advance(self, steps) -> bool:
-        """Run ``steps`` steps through graphs; False (nothing run) where an operation cannot."""
+        """Run ``steps`` steps (at most :meth:`max_stretch`) through graphs; False (nothing run)
+        where an operation cannot."""
         sim = self.sim
         if not self.minimizing and sim._updated_at == sim.timestep:   # the updaters ran at this timestep already
             self.pause()
@@ -158,8 +166,7 @@ class StepGraphs:
                 raise ValueError(f"{what}(graphs=True): {refused} cannot run inside a CUDA graph now")
             return False
         if self._fused_ready():
-            for done in range(0, steps, MAX_STRETCH):      # a minimisation's checks may be farther apart
-                self.tissue.run(min(MAX_STRETCH, steps - done))
+            self.tissue.run(steps)
         else:
             steps = self._replay(key, steps)
         sim.timestep += steps
@@ -179,7 +186,7 @@ class StepGraphs:
         if self.fused is False or tissue_steps.why_not(self.sim, self.minimizing) is not None:
             return False
         if self.tissue is None:
-            self.tissue = tissue_steps.TissueSteps(self.sim, MAX_STRETCH, self.minimizing)
+            self.tissue = tissue_steps.TissueSteps(self.sim, FUSED_STRETCH, self.minimizing)
         return True
 
     def _replay(self, key, steps) -> int:

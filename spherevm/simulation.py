@@ -461,7 +461,7 @@ class Simulation:
                             runner.pause()
                         narrowed.append(self._narrow(np.flatnonzero(~fire.stopped)))
                 if runner is not None:   # the iterations up to the next check (or the limit) in graphs
-                    if runner.advance(min(fire.steps_to_check(), limit - fire.iteration)):
+                    if runner.advance(min(fire.steps_to_check(), limit - fire.iteration, runner.max_stretch())):
                         continue
                     runner = None        # an operation cannot: step by step from here
                 self._integrate()

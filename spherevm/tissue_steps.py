@@ -110,7 +110,14 @@ def device_limits(device_id: int):
 
 def why_not(simulation, minimizing: bool = False) -> str | None:
     """Why the fused steps cannot run ``simulation``'s next steps of ``run`` (or of ``minimize``:
-    ``minimizing``); None if they can."""
+    ``minimizing``); None if they can. Asked before every stretch: the answer depends only on the
+    State and the operations' types, so it is kept with the State for those types."""
+    ops = simulation.operations
+    kinds = (type(ops.integrator), tuple(map(type, ops.forces)), tuple((type(u), u.in_minimize) for u in ops.updaters))
+    return simulation.state.cached((why_not, minimizing, kinds), lambda: _why_not(simulation, minimizing))
+
+
+def _why_not(simulation, minimizing):
     state, ops = simulation.state, simulation.operations
     if not simulation.device.is_gpu:
         return "the fused small-tissue steps need the GPU"

@@ -328,8 +328,11 @@ class T1(DevicePass, Updater):
     # ------------------------------------------------------------------ reporting
     def halted(self):
         """Per-replica mask of replicas caught flipping back and forth, for Simulation.minimize (at
-        every convergence check: only the flip log is read back)."""
-        self._sync_flip_backs()
+        every convergence check). On the GPU the flip log is read back and replayed only when it
+        could halt a replica (:meth:`_replay_could_reach`); the counts stay exact for what they
+        decide, and ``_sync_counters`` brings them up to date for anything else."""
+        if self._replay_could_reach(self.max_flip_backs):
+            self._sync_flip_backs()
         return self.flip_backs >= self.max_flip_backs
 
     halt_reason = "t1_oscillation"

@@ -28,14 +28,16 @@ class DevicePass:
             # per-pass counters in one buffer, zeroed by one memset:
             # [candidates (short edges), widen, claimants (candidates not refused) | flips | refused]
             scratch = cp.zeros(3 + 2 * r, dtype=cp.int32)
+            # the table width the graph and fused steps track, and the flip log's count: read together
+            words = cp.zeros(2, dtype=cp.int32)
             buf = dict(state=state, n_cells=state.n_cells, capacity=cap,
                        claim=cp.full(state.n_cells, np.iinfo(np.int32).max, dtype=cp.int32), scratch=scratch,
                        counters=scratch[:3], flips=scratch[3:3 + r], refused=scratch[3 + r:],
-                       log_count=cp.zeros(1, dtype=cp.int32), log_bound=0,
+                       words=words, width=words[:1], log_count=words[1:], log_bound=0,
                        log_pass=cp.zeros(1, dtype=cp.int32),
                        cand=cp.empty((cap, _CAND_INTS), dtype=cp.int32), cand_len=cp.empty(cap),
                        log=cp.empty((cap, _LOG_INTS), dtype=cp.int32), moved=cp.empty(2 * cap, dtype=cp.int32),
-                       all_active=cp.ones(r, dtype=bool), width=cp.zeros(1, dtype=cp.int32), width_host=-1,
+                       all_active=cp.ones(r, dtype=bool), width_host=-1,
                        width_bound=0, table=None, total_flips=cp.asarray(self._host_totals("total_flips", r)),
                        total_refused=cp.asarray(self._host_totals("total_refused", r)))
             self._gpu = buf
@@ -220,6 +222,22 @@ class DevicePass:
         log = buf["log"][:n].get()
         buf["log_count"].fill(0)
         self._count_flip_backs(state, log[:, 1:5].astype(np.int64), log[:, 5], buf["n_cells"], passes=log[:, 0])
+
+    def _replay_could_reach(self, limit) -> bool:
+        """Whether replaying the flip log now could bring a replica's ``flip_backs`` from below
+        ``limit`` to it. A flip re-joins one pair once, so not while the largest count below
+        ``limit`` plus the flips logged since the last replay stays below it: then the log waits
+        (a convergence check reads its count, not the log, and replays nothing). The same read
+        renews the bounds of the log's rows and of the table's width, exact between launches."""
+        buf = getattr(self, "_gpu", None)
+        if buf is None:
+            return False             # nothing logged on the device
+        width, n = (int(x) for x in buf["words"].get())
+        buf["log_bound"] = n
+        if buf["table"] is not None and buf["state"].cell_vertices is buf["table"]:
+            buf["width_bound"] = width
+        below = self.flip_backs[self.flip_backs < limit]
+        return n > 0 and int(below.max(initial=0)) + n >= limit
 
     def _sync_flip_backs(self):
         """Bring the flip-back counts up to date (the flip log replayed; halting needs no more)."""

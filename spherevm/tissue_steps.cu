@@ -22,6 +22,9 @@
 #ifndef TISSUE_CLUSTER
 #define TISSUE_CLUSTER 1
 #endif
+#ifndef TISSUE_THREADS
+#define TISSUE_THREADS 1024
+#endif
 
 #if TISSUE_CLUSTER > 1
 #define TISSUE_CLUSTER_DIMS __cluster_dims__(TISSUE_CLUSTER, 1, 1)
@@ -54,28 +57,30 @@ __device__ __forceinline__ void to_others(double* const* bases, int rank, long o
         if (q != rank) store3(bases[q] + offset, i, x);
 }
 
-// The vertex model's terms (vm_cell_terms into coef) of cells cb0..cb1, by the calling block, the
-// vertices' directions from norm (Surface::directions); sent(c) after each. On a surface that splits a cell's corners (the sphere: Surface::split_corners), a cell
-// takes `lanes` neighbouring threads (a power of two, at most 8): each lane computes every lanes-th
+// The vertex model's terms (vm_cell_terms into coef) of `count` cells, cell(0) .. cell(count - 1),
+// by the calling block, the vertices' directions from norm (Surface::directions); sent(c) after
+// each. On a surface that splits a cell's corners (the sphere: Surface::split_corners), a cell takes
+// `lanes` neighbouring threads (a power of two, at most 8): each lane computes every lanes-th
 // corner's arc and fan factor (Surface::cell_corner), and every lane adds them in the cell's order
 // (Surface::add_corner), so the chain of a cell's atan2s is shortened and the bits are
-// cell_measures'. Every thread of the block calls it, with S = Surface.
-template <class S, class Sent>
+// cell_measures' whatever the lanes. Every thread of the block calls it, with S = Surface.
+template <class S, class Cell, class Sent>
 __device__ __forceinline__ void tissue_cells(const double* P, KeptNorm norm, const int* cell_vertices,
-                                             const int* sides, int max_sides, typename S::Size s, int cb0, int cb1,
-                                             int lanes, const double* kA, const double* kP, const double* A0,
-                                             const double* P0, double* coef, Sent sent)
+                                             const int* sides, int max_sides, typename S::Size s, int count,
+                                             Cell cell, int lanes, const double* kA, const double* kP,
+                                             const double* A0, const double* P0, double* coef, Sent sent)
 {
     const int tid = threadIdx.x, stride = blockDim.x;
     if constexpr (S::split_corners) {
         if (lanes > 1) {
             const unsigned all = 0xffffffffu;
             const int lane = tid & (lanes - 1), groups = stride / lanes;
-            for (int first = cb0; first < cb1; first += groups) {   // the same number of rounds in every thread
-                const int c = first + tid / lanes;
-                const bool mine = c < cb1;
+            for (int first = 0; first < count; first += groups) {   // the same number of rounds in every thread
+                const int i = first + tid / lanes;
+                const bool mine = i < count;
+                const int c = cell(mine ? i : 0);
                 const int n = mine ? sides[c] : 0;
-                const int* row = cell_vertices + (long)(mine ? c : cb0) * max_sides;
+                const int* row = cell_vertices + (long)c * max_sides;
                 const vec3 a = S::direction(P, row[0], norm);
                 typename S::CellSum sum = {0.0, 1.0, 0.0};
                 const int rounds = __reduce_max_sync(all, (n + lanes - 1) / lanes);
@@ -98,7 +103,8 @@ __device__ __forceinline__ void tissue_cells(const double* P, KeptNorm norm, con
             return;
         }
     }
-    for (int c = cb0 + tid; c < cb1; c += stride) {   // one thread a cell
+    for (int i = tid; i < count; i += stride) {   // one thread a cell
+        const int c = cell(i);
         double A, Pc;
         S::cell_measures(P, cell_vertices + (long)c * max_sides, sides[c], s, &A, &Pc, norm);
         vm_cell_terms(A, Pc, c, s, kA, kP, A0, P0, coef);
@@ -156,8 +162,8 @@ struct TissueT1 {
 // between: tissue_t1_detect lists the short edges of vertices vb0..vb1 (every block of the tissue
 // its own), tissue_t1_settle checks and claims (a warp a candidate: t1_check_candidate_warp) and
 // applies them (t1_pass.cuh), in one block. n_cand: the tissue's candidate count (in the settling
-// block's shared memory; zero when a pass begins, settle leaves it so); claim: the tissue's claims
-// (all free between passes).
+// block's shared memory; zero when a pass begins: the caller sets it back to zero once every block
+// has read it); claim: the tissue's claims (all free between passes).
 __device__ __forceinline__ void tissue_t1_detect(const double* P, const int* vn, const int* vc, Surface::Size s,
                                                  int r, int vb0, int vb1, int v0, int v1, bool flipping,
                                                  const TissueT1& t1, int* n_cand, bool settling)
@@ -195,7 +201,6 @@ __device__ __forceinline__ void tissue_t1_settle(double* P, int* vn, int* vc, in
         }
     }
     __syncthreads();
-    if (tid == 0) *n_cand = 0;   // every thread has read it: zero for the next pass
     for (int i = tid; i < n; i += stride) {
         const int* e = cand + (long)i * CAND_INTS;
         if (t1_apply_candidate(P, vn, vc, cell_vertices, sides, max_sides, s,
@@ -222,18 +227,26 @@ __device__ __forceinline__ void tissue_t1_settle(double* P, int* vn, int* vc, in
     unsigned long long* __restrict__ total_refused, int* __restrict__ log_count, int* __restrict__ log, int logging, \
     const int* __restrict__ log_pass, int* __restrict__ step_need
 
-// At most 1,024 threads a block (tissue_steps.THREADS). Shared memory of each block, in doubles
-// (tissue_steps.py computes the same, in bytes): two copies of the positions (3 nv each: the step's,
-// and the next, which the move writes while other blocks still read the step's), the cell
-// coefficients (2 nc), on the sphere two copies of the kept 1 / |x| (nv each, as the positions),
-// the forces of the block's vertices (3 ceil(nv / TISSUE_CLUSTER)), then the T1 claims (nc ints).
-extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_steps(
+// At most TISSUE_THREADS threads a block (tissue_steps.layout's bound). Shared memory of each block, in
+// doubles (tissue_steps.py computes the same, in bytes): two copies of the positions (3 nv each: the
+// step's, and the next, which the move writes while other blocks still read the step's), the cell
+// coefficients (2 nc), on the sphere two copies of the kept 1 / |x| (nv each, as the positions), the
+// forces of the block's vertices (3 ceil(nv / TISSUE_CLUSTER)), then the T1 claims (nc ints) and the
+// pass's flips (ceil(nc / 4) ints).
+//
+// A step: every block lists the short edges of its vertices and computes its cells' coefficients on
+// the step's positions (a barrier); if any edge is short, the first block checks and flips them and
+// computes again the four cells of each flip (a flip moves and re-links only its four cells, and the
+// flips of a pass share no cell: T1's claims), then a barrier; then the forces and the move of every
+// block's vertices (a barrier). The cells are those the general path computes after T1's pass, with
+// two or three barriers a step instead of four.
+extern "C" __global__ void __launch_bounds__(TISSUE_THREADS) TISSUE_CLUSTER_DIMS tissue_steps(
     TISSUE_COMMON_PARAMS, const double* __restrict__ amp,
     const double* __restrict__ length_unit, double mu, double dt, double max_step, unsigned int seed,
     unsigned long long* __restrict__ error, unsigned long long step0, int steps)
 {
     extern __shared__ double shared[];
-    __shared__ int n_cand;
+    __shared__ int n_cand, n_flipped;
     __shared__ double* bases[TISSUE_CLUSTER];
     const int r = blockIdx.x / TISSUE_CLUSTER, rank = blockIdx.x % TISSUE_CLUSTER;   // a 1-D cluster's rank
     const int tid = threadIdx.x, stride = blockDim.x;
@@ -242,69 +255,83 @@ extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_st
     const int vchunk = (nv + TISSUE_CLUSTER - 1) / TISSUE_CLUSTER, cchunk = (nc + TISSUE_CLUSTER - 1) / TISSUE_CLUSTER;
     const int vb0 = min(v1, v0 + rank * vchunk), vb1 = min(v1, vb0 + vchunk);   // this block's vertices
     const int cb0 = min(c1, c0 + rank * cchunk), cb1 = min(c1, cb0 + cchunk);   // and cells
-    // the arrays, as offsets from a block's shared memory that global indices address
-    const long at_pos[2] = {-3L * v0, 3L * nv - 3L * v0};
+    // the arrays, as offsets from a block's shared memory that global indices address (copy k of the
+    // positions at at_pos + 3 nv k, of the kept norms at at_inv + kept k: scalars, not arrays that a
+    // step's index would leave in local memory)
+    const long at_pos = -3L * v0;
     const long at_coef = 6L * nv - 2L * c0;
     const int kept = Surface::directions ? nv : 0;
-    const long at_inv[2] = {6L * nv + 2L * nc - v0, 6L * nv + 2L * nc + kept - v0};
+    const long at_inv = 6L * nv + 2L * nc - v0;
     double* coef = shared + at_coef;
     double* F = shared + 6L * nv + 2L * nc + 2L * kept - 3L * vb0;
     int* claim = (int*)(shared + 6L * nv + 2L * nc + 2L * kept + 3L * vchunk) - c0;
+    int* flipped = claim + c1;   // the first block's: the candidates (indices into t1.cand) its pass flipped
     if (tid < TISSUE_CLUSTER) bases[tid] = cluster_map(shared, tid);
-    if (tid == 0) n_cand = 0;
+    if (tid == 0) { n_cand = 0; n_flipped = 0; }
     int* const count = cluster_map(&n_cand, 0);   // the first block's
     for (int j = tid; j < 3 * nv; j += stride) shared[j] = pos[3L * v0 + j];
     __syncthreads();
     if (Surface::directions)
-        for (int v = v0 + tid; v < v1; v += stride) shared[at_inv[0] + v] = RsqrtNorm()(shared + at_pos[0], v);
+        for (int v = v0 + tid; v < v1; v += stride) shared[at_inv + v] = RsqrtNorm()(shared + at_pos, v);
     for (int c = c0 + tid; c < c1; c += stride) claim[c] = 0x7fffffff;
     const Surface::Size s = Surface::size(size, r);
     const bool flipping = t1 && active[r];
     const TissueT1 t1_args = {chord2, new_length, length_factor, cand, cand_len, flips, refused, total_flips,
                               total_refused, step_need, log_count, log, logging, t1 ? *log_pass : 0};
     const int lanes = tissue_cell_lanes(cb1 - cb0);
+    auto send = [&](int c) {   // a cell's coefficients to the other blocks
+        for (int q = 0; q < TISSUE_CLUSTER; ++q)
+            if (q != rank) {
+                bases[q][at_coef + 2L * c] = coef[2L * c];
+                bases[q][at_coef + 2L * c + 1] = coef[2L * c + 1];
+            }
+    };
     cluster_sync();   // every block of the cluster has started (its shared memory may be written)
     int now = 0;
     for (int step = 0; step < steps; ++step) {
         unsigned long long timestep = step0 + step;
-        double* P = shared + at_pos[now];
-        double* next = shared + at_pos[1 - now];
-        const KeptNorm norm = {shared + at_inv[now]};
-        if (t1) {   // T1's pass: every block detects on its vertices, the first block settles
+        const long pos_now = at_pos + 3L * nv * now, pos_next = at_pos + 3L * nv * (1 - now);
+        const long inv_now = at_inv + (long)kept * now, inv_next = at_inv + (long)kept * (1 - now);
+        double* P = shared + pos_now;
+        double* next = shared + pos_next;
+        const KeptNorm norm = {shared + inv_now};
+        if (t1)   // T1's pass begins: every block lists the short edges of its vertices
             tissue_t1_detect(P, vn, vc, s, r, vb0, vb1, v0, v1, flipping, t1_args, count, rank == 0);
-            cluster_sync();
-            if (rank == 0)
+        // the vertex model (vertex_model.cuh): this block's cells, their coefficients to the other blocks
+        tissue_cells<Surface>(P, norm, cell_vertices, sides, max_sides, s, cb1 - cb0, [=](int i) { return cb0 + i; },
+                              lanes, kA, kP, A0, P0, coef, send);
+        cluster_sync();   // the candidates listed, the coefficients everywhere
+        if (t1 && *count > 0) {   // (the same in every block) T1's check and flips, in the first block
+            if (rank == 0) {
                 tissue_t1_settle(P, vn, vc, cell_vertices, sides, max_sides, s, r, v0, v1, t1_args, claim, &n_cand,
                                  step, [&](const int* e) {   // the flipped edge, everywhere
                                      for (int k = 0; k < 3; k += 2) {
-                                         to_others(bases, rank, at_pos[now], e[k], load3(P, e[k]));
-                                         keep_norm(bases, at_inv[now], P, e[k]);
+                                         to_others(bases, rank, pos_now, e[k], load3(P, e[k]));
+                                         keep_norm(bases, inv_now, P, e[k]);
                                      }
+                                     flipped[atomicAdd(&n_flipped, 1)] = (int)((e - t1_args.cand) / CAND_INTS);
                                  });
-            cluster_sync();   // the flips' topology and positions, everywhere
+                __syncthreads();   // every flip applied and listed: its four cells (C1..C4) again
+                const int fixes = 4 * n_flipped;
+                tissue_cells<Surface>(P, norm, cell_vertices, sides, max_sides, s, fixes,
+                                      [&](int i) { return t1_args.cand[(long)flipped[i >> 2] * CAND_INTS + 7 + (i & 3)]; },
+                                      tissue_cell_lanes(fixes), kA, kP, A0, P0, coef, send);
+            }
+            cluster_sync();   // the flips and their cells everywhere; every block has read the count
+            if (rank == 0 && tid == 0) { n_cand = 0; n_flipped = 0; }
         }
-        // the vertex model (vertex_model.cuh): this block's cells, their coefficients to the other blocks
-        tissue_cells<Surface>(P, norm, cell_vertices, sides, max_sides, s, cb0, cb1, lanes, kA, kP, A0, P0, coef,
-                              [&](int c) {
-                                  for (int q = 0; q < TISSUE_CLUSTER; ++q)
-                                      if (q != rank) {
-                                          bases[q][at_coef + 2L * c] = coef[2L * c];
-                                          bases[q][at_coef + 2L * c + 1] = coef[2L * c + 1];
-                                      }
-                              });
-        cluster_sync();
         for (int v = vb0 + tid; v < vb1; v += stride) {   // this block's vertices: force, then the move (brownian.cuh)
             store3(F, v, Surface::vertex_force(P, vn, vc, v, s, coef, NoExtra(), norm));
             store3(next, v, load3(P, v));
             brownian_vertex(next, F, v, vc, s, amp[r], length_unit[r], nullptr, 0, mu, dt, 0.0, 0.0, max_step, seed,
                             timestep, error);
-            to_others(bases, rank, at_pos[1 - now], v, load3(next, v));
-            keep_norm(bases, at_inv[1 - now], next, v);
+            to_others(bases, rank, pos_next, v, load3(next, v));
+            keep_norm(bases, inv_next, next, v);
         }
         cluster_sync();
         now = 1 - now;
     }
-    for (int j = 3 * (vb0 - v0) + tid; j < 3 * (vb1 - v0); j += stride) pos[3L * v0 + j] = shared[at_pos[now] + 3L * v0 + j];
+    for (int j = 3 * (vb0 - v0) + tid; j < 3 * (vb1 - v0); j += stride) pos[3L * v0 + j] = shared[at_pos + 3L * nv * now + 3L * v0 + j];
 }
 
 // Many FIRE iterations of Simulation.minimize in one launch, a thread block per tissue: each
@@ -316,7 +343,7 @@ extern "C" __global__ void __launch_bounds__(1024) TISSUE_CLUSTER_DIMS tissue_st
 // forces and velocities (3 nv each), the cell coefficients (2 nc), on the sphere the kept 1 / |x|
 // (nv, KeptNorm: after each move and flip), the sums' warp parts
 // (3 (n_warps + 1), n_warps the warps from v0 & ~31 to v1), then the T1 claims (nc ints).
-extern "C" __global__ void __launch_bounds__(1024) tissue_minimize(
+extern "C" __global__ void __launch_bounds__(TISSUE_THREADS) tissue_minimize(
     TISSUE_COMMON_PARAMS, int reset_velocities,
     const bool* __restrict__ fire_active, double* __restrict__ vel, double* __restrict__ dt,
     double* __restrict__ alpha, long long* __restrict__ n_positive, int n_min, double f_inc, double f_dec,
@@ -363,8 +390,8 @@ extern "C" __global__ void __launch_bounds__(1024) tissue_minimize(
     __syncthreads();
     for (int step = 0; step < steps; ++step) {
         if (running) {
-            tissue_cells<Surface>(P, norm, cell_vertices, sides, max_sides, s, c0, c1, lanes, kA, kP, A0, P0, coef,
-                                  [](int) {});   // the vertex model (vertex_model.cuh)
+            tissue_cells<Surface>(P, norm, cell_vertices, sides, max_sides, s, nc, [=](int i) { return c0 + i; },
+                                  lanes, kA, kP, A0, P0, coef, [](int) {});   // the vertex model (vertex_model.cuh)
             __syncthreads();
             for (int k = 0; k < rounds; ++k) {   // forces, and fire_reduce's terms F.v, v.v, F.F
                 long g = base + tid + (long)k * stride;
@@ -408,6 +435,7 @@ extern "C" __global__ void __launch_bounds__(1024) tissue_minimize(
                                }
                            });
             __syncthreads();
+            if (tid == 0) n_cand = 0;   // every thread has read it: zero for the next pass
         }
     }
     for (int j = tid; j < 3 * nv; j += stride) {

@@ -52,7 +52,8 @@ THREADS = 1024
 #: 0.025 / 0.027; 8 x 256 0.013 / 0.019: the chains of dependent double-precision operations of one
 #: cell and one vertex set a floor that more blocks do not lower. Since session 14 (kept norms, two
 #: lanes a cell in blocks of 512 threads, T1's detection on every block): 8 x 1,024 cells on 4
-#: blocks 0.0214 against 0.0250 on 2.
+#: blocks 0.0214 against 0.0250 on 2; session 16 (two or three barriers a step): 16.0 us of GPU
+#: time a step on 4 blocks against 19.4 on 8.
 VERTICES_PER_BLOCK = 512
 #: largest cluster (the portable size on Hopper)
 MAX_CLUSTER = 8
@@ -73,27 +74,34 @@ def cluster_size(state, n_sm: int | None = None) -> int:
 def shared_bytes(state, cluster: int, minimizing: bool = False) -> int:
     """Shared memory of a block of the largest tissue (tissue_steps.cu). Steps: two copies of the
     positions (3 doubles a vertex each), the cell coefficients (2 doubles a cell), on the sphere two
-    copies of the kept inverse norms (a double a vertex each), the forces of the block's vertices and
-    the claims (an int a cell). Minimisation (one block): the positions, forces and velocities, the
-    cell coefficients, on the sphere the kept inverse norms, the sums' warp parts (3 doubles a warp,
-    one more) and the claims."""
+    copies of the kept inverse norms (a double a vertex each), the forces of the block's vertices,
+    the claims (an int a cell) and a pass's flips (an int per four cells). Minimisation (one block):
+    the positions, forces and velocities, the cell coefficients, on the sphere the kept inverse
+    norms, the sums' warp parts (3 doubles a warp, one more) and the claims."""
     nv, nc = state.vertices_per_replica, state.cells_per_replica
     kept = nv if isinstance(state.constraint, Sphere) else 0   # Surface::directions
     if minimizing:
         warps = (nv + 62) // 32          # from v0 rounded down to a warp's start, to v1
         return int(np.max(8 * (9 * nv + 2 * nc + kept + 3 * (warps + 1)) + 4 * nc))
-    return int(np.max(8 * (6 * nv + 2 * nc + 2 * kept + 3 * (-(-nv // cluster))) + 4 * nc))
+    return int(np.max(8 * (6 * nv + 2 * nc + 2 * kept + 3 * (-(-nv // cluster))) + 4 * (nc + -(-nc // 4))))
 
 
 def layout(state, minimizing: bool, n_sm: int):
-    """``(blocks a tissue, shared memory a block, threads a block)`` of the fused kernels for
-    ``state`` (worked out once per State: they are asked before every stretch). Threads: a
-    tissue's vertices over its blocks, from a warp's start when minimising."""
+    """``(blocks a tissue, shared memory a block, threads a block, register bound)`` of the fused
+    kernels for ``state`` (worked out once per State: they are asked before every stretch). Threads:
+    a tissue's vertices over its blocks, from a warp's start when minimising. The kernel is compiled
+    for blocks of at most ``bound`` threads (``__launch_bounds__``): 512 where the launch's blocks
+    take at most 512 threads of each SM, which lets a thread hold 128 registers and spill none, else
+    1,024, whose 64 registers a thread keep more blocks on an SM at once (one H200: 8 x 1,024 cells,
+    Brownian + T1, 16.3 us a step against 17.1; 1,024 x 32 cells, FIRE + T1, 0.025 ms an iteration
+    on a bound of 512 against 0.019)."""
     def build():
         cluster = 1 if minimizing else cluster_size(state, n_sm)
         block_vertices = -(-(int(state.vertices_per_replica.max()) + 31 * minimizing) // cluster)
         threads = int(min(THREADS, -(-block_vertices // 32) * 32))
-        return cluster, shared_bytes(state, cluster, minimizing), threads
+        per_sm = -(-cluster * state.n_replicas // n_sm) * threads
+        bound = THREADS // 2 if per_sm <= THREADS // 2 else THREADS
+        return cluster, shared_bytes(state, cluster, minimizing), threads, bound
     return state.cached((layout, minimizing, n_sm), build)
 
 
@@ -163,8 +171,8 @@ class TissueSteps:
         state = sim.state
         if steps > len(self.step_need):
             raise ValueError(f"at most {len(self.step_need)} fused steps a launch, got {steps}")
-        cluster, shared, threads = layout(state, self.minimizing, self.n_sm)
-        module, size = surface_kernels(_KERNELS, state, (f"TISSUE_CLUSTER={cluster}",))
+        cluster, shared, threads, bound = layout(state, self.minimizing, self.n_sm)
+        module, size = surface_kernels(_KERNELS, state, (f"TISSUE_CLUSTER={cluster}", f"TISSUE_THREADS={bound}"))
         kernel = module.get_function("tissue_minimize" if self.minimizing else "tissue_steps")
         if kernel.max_dynamic_shared_size_bytes < shared:
             kernel.max_dynamic_shared_size_bytes = shared

@@ -196,14 +196,15 @@ def test_the_fused_steps_need_the_gpu():
     sim = dynamics_simulation(ensemble("plane", (16,)), "cpu", Brownian(dt=0.01))
     assert "GPU" in tissue_steps.why_not(sim)
     state = ensemble("sphere", (40, 100))
-    # 2 x 100 - 4 = 196 vertices on a sphere, each with two kept inverse norms; on 1 block and on 2
-    assert tissue_steps.shared_bytes(state, 1) == 8 * (6 * 196 + 2 * 100 + 2 * 196 + 3 * 196) + 4 * 100
-    assert tissue_steps.shared_bytes(state, 2) == 8 * (6 * 196 + 2 * 100 + 2 * 196 + 3 * 98) + 4 * 100
+    # 2 x 100 - 4 = 196 vertices on a sphere, each with two kept inverse norms; on 1 block and on 2;
+    # the claims and a pass's flips (at most 100 / 4: a flip's four cells are its own)
+    assert tissue_steps.shared_bytes(state, 1) == 8 * (6 * 196 + 2 * 100 + 2 * 196 + 3 * 196) + 4 * (100 + 25)
+    assert tissue_steps.shared_bytes(state, 2) == 8 * (6 * 196 + 2 * 100 + 2 * 196 + 3 * 98) + 4 * (100 + 25)
     # minimising: positions, forces, velocities, one kept inverse norm; the sums' parts of
     # (196 + 62) // 32 = 8 warps, one more
     assert tissue_steps.shared_bytes(state, 1, minimizing=True) == 8 * (9 * 196 + 2 * 100 + 196 + 3 * 9) + 4 * 100
     plane = ensemble("plane", (100,))   # 200 vertices on a torus, no norms kept
-    assert tissue_steps.shared_bytes(plane, 1) == 8 * (6 * 200 + 2 * 100 + 3 * 200) + 4 * 100
+    assert tissue_steps.shared_bytes(plane, 1) == 8 * (6 * 200 + 2 * 100 + 3 * 200) + 4 * (100 + 25)
     assert tissue_steps.shared_bytes(plane, 1, minimizing=True) == 8 * (9 * 200 + 2 * 100 + 3 * 9) + 4 * 100
     assert tissue_steps.cluster_size(state) == 1
     big = ensemble("sphere", (1024,))
@@ -211,3 +212,19 @@ def test_the_fused_steps_need_the_gpu():
     assert tissue_steps.cluster_size(big, n_sm=3) == 2              # ... fewer where the SMs run out
     assert tissue_steps.cluster_size(big, n_sm=1) == 1
 
+
+
+def test_the_register_bound_keeps_every_block_of_a_launch_on_the_sms():
+    """layout's bound: 512 threads (128 registers a thread, none spilled) where the launch's blocks
+    take at most 512 threads of each SM, else 1,024 (64 registers: more blocks on an SM at once)."""
+    def blocks_threads_bound(state, minimizing, n_sm):
+        cluster, _, threads, bound = tissue_steps.layout(state, minimizing, n_sm)
+        return cluster, threads, bound
+
+    state = svm.State.concatenate([svm.init.random_tiling(300, seed=1 + i) for i in range(3)])   # 596 vertices each
+    assert blocks_threads_bound(state, False, 12) == (2, 320, 512)    # two blocks a tissue, one an SM
+    assert blocks_threads_bound(state, False, 4) == (1, 608, 1024)    # no SMs to spare: one block a tissue
+    assert blocks_threads_bound(state, True, 12) == (1, 640, 1024)    # minimising: from a warp's start
+    small = ensemble("sphere", (32,) * 24)                            # 60 vertices: blocks of 64 threads
+    assert blocks_threads_bound(small, False, 4) == (1, 64, 512)      # six blocks an SM
+    assert blocks_threads_bound(small, False, 2) == (1, 64, 1024)     # twelve

@@ -141,7 +141,7 @@ def main(argv=None):
     print(f"# spherevm GPU benchmark, {datetime.date.today()}, GPU: {facts.get('gpus')}, CuPy {facts.get('cupy')}, "
           f"CUDA runtime {facts.get('cuda_runtime')}")
     print(f"# device-to-device copy bandwidth: {bw:.0f} GB/s")
-    print("# launches per step: force 2 kernels; FIRE iteration = force + 3 kernels; "
+    print("# launches per step: force 2 kernels; FIRE iteration = force + 2 kernels; "
           "Brownian step with T1 check = T1 pass (1 memset + 2 kernels + 1 read-back of 12 bytes) + force + 1 kernel; "
           "in graphs: the same steps through Simulation.run(graphs=True, fused=False), no read-back, per step; "
           "run: Simulation.run(graphs=True), the fused small-tissue steps where they apply (spherevm.tissue_steps); "

@@ -21,6 +21,12 @@ struct SegmentSum {
     unsigned int* count;
 };
 
+// What a kernel does with a segment once its sums are final (done(s), in one thread of the block
+// that finished them: segment_sum_partial's or segment_sum_finish's): nothing, by default.
+struct SegmentDone {
+    __device__ void operator()(int) const {}
+};
+
 // The (at most two) segments that cross this block's tile edges, found by segment_sum_partial.
 __shared__ int segment_sum_crossing[2];
 
@@ -51,10 +57,11 @@ __device__ __forceinline__ double warp_butterfly_sum(double v)
 // out[j][s] if add) for a segment inside the tile, the parts of the others to the scratch. Each sum
 // is added in the same order as if it were summed alone; together they share the segment shuffles
 // and the block's two barriers. Every thread of the block calls it (it synchronises); a thread
-// without an item passes segment -1 (only after the last item).
-template <int N>
+// without an item passes segment -1 (only after the last item). done(s) after a segment inside the
+// tile is written (the call's N sums of it final).
+template <int N, class Done = SegmentDone>
 __device__ void segment_sum_partial(const double (&value)[N], int segment, const SegmentSum& sums,
-                                    double* const* out, bool add)
+                                    double* const* out, bool add, Done done = Done())
 {
     __shared__ double warp_first_part[N][32];
     __shared__ int warp_first_segment[32];
@@ -89,13 +96,16 @@ __device__ void segment_sum_partial(const double (&value)[N], int segment, const
             }
         }
         if (t0 != t1) segment_sum_crossing[threadIdx.x == 0 ? 0 : 1] = segment;
+        else done(segment);
     }
     __syncthreads();   // the shared scratch may be reused by the next call
 }
 
 // After the block's segment_sum_partial calls (all threads): the segments whose last part this
-// block wrote are added up, outs[j][s] (plus outs[j][s] if add) for the n_sums sums.
-__device__ void segment_sum_finish(const SegmentSum& sums, double* const* outs, int n_sums, bool add)
+// block wrote are added up, outs[j][s] (plus outs[j][s] if add) for the n_sums sums; then done(s).
+template <class Done = SegmentDone>
+__device__ void segment_sum_finish(const SegmentSum& sums, double* const* outs, int n_sums, bool add,
+                                   Done done = Done())
 {
     __shared__ int finishing[2];
     __threadfence();   // this block's parts are visible before its tickets are taken
@@ -138,7 +148,10 @@ __device__ void segment_sum_finish(const SegmentSum& sums, double* const* outs, 
         __syncthreads();
     }
     __syncthreads();
-    if (threadIdx.x < 2 && finishing[threadIdx.x] >= 0) sums.count[finishing[threadIdx.x]] = 0u;
+    if (threadIdx.x < 2 && finishing[threadIdx.x] >= 0) {
+        sums.count[finishing[threadIdx.x]] = 0u;
+        done(finishing[threadIdx.x]);
+    }
 }
 
 // One sum in a kernel: out[s] = the sum of value over segment s (out[s] += it if add).

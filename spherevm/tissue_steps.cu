@@ -407,7 +407,7 @@ extern "C" __global__ void __launch_bounds__(TISSUE_THREADS) tissue_minimize(
                 block_segment_warp<3>(terms, mine, g, v0, n_warps, part);
             }
             __syncthreads();
-            if (tid < 32) {   // the sums, then fire_control's (fire.cuh)
+            if (tid < 32) {   // the sums, then the control (fire.cuh, as fire_reduce)
                 double sums[3];
                 block_segment_total<3>(part, v0, v1, n_warps, tile, sums);
                 if (tid == 0)

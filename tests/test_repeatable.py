@@ -40,9 +40,12 @@ def test_energy_sums_on_ragged_replicas_match_numpy(ragged):
 
 @pytest.mark.parametrize("sizes", [[5, 300, 40, 1], [3, 300_000, 700, 33, 256, 512]])
 @pytest.mark.gpu
-def test_fire_sums_match_numpy_for_any_replica_sizes(sizes):
+def test_fire_sums_and_control_match_numpy_for_any_replica_sizes(sizes):
     """FIRE's per-replica F.v, v.v, F.F (three sums in one kernel) against NumPy, on vertex ranges
-    from one item to more than 4 x 256 blocks (the finishing block's unrolled loop), repeated."""
+    from one item to more than 4 x 256 blocks (the finishing block's unrolled loop), repeated; and
+    each replica's control, which the kernel runs once the replica's sums are final (in the block
+    that finished them), against FIRE's formulas in NumPy on those sums: uphill, mixing, growing
+    after n_min steps, and a stopped replica that keeps its dt, alpha and counter."""
     import cupy as cp
     from spherevm.device import BLOCK, launch
     from spherevm.constraints.kernels import surface_kernels
@@ -52,21 +55,44 @@ def test_fire_sums_match_numpy_for_any_replica_sizes(sizes):
     rep = np.repeat(np.arange(nr), sizes)
     rng = np.random.default_rng(1)
     f, v = rng.normal(size=(2, n, 3))
+    v = np.where((rep == 0)[:, None], -f, 0.5 * f + 0.1 * v)           # replica 0 uphill, the others downhill
     module, _ = surface_kernels(fire._KERNELS, svm.init.random_tiling(8))
     n_tiles = (n + BLOCK - 1) // BLOCK
     args = (cp.asarray(start.astype(np.int32)), np.int32(nr), cp.empty(3 * (n_tiles + nr)), cp.zeros(nr, dtype=np.uint32))
+    active = np.arange(nr) != nr - 1                                   # the last replica has stopped
+    dt0, alpha0 = rng.uniform(0.01, 0.05, nr), rng.uniform(0.01, 0.1, nr)
+    count0 = np.arange(nr, dtype=np.int64) * 3                        # 0, 3, 6, ...: some at n_min = 5 or more
+    n_min, f_inc, f_dec, alpha_start, f_alpha, dt_max = 5, 1.1, 0.5, 0.1, 0.99, 0.04
     runs = []
     for _ in range(2):
-        sums = cp.empty((3, nr))
+        sums, control = cp.empty((3, nr)), cp.empty((3, nr))
+        dt, alpha, count = cp.asarray(dt0), cp.asarray(alpha0), cp.asarray(count0)
         launch(module.get_function("fire_reduce"), n,
                (cp.asarray(f), cp.asarray(v), cp.asarray(rep.astype(np.int32)), np.int32(n), sums[0], sums[1], sums[2],
-                *args))
-        runs.append(to_numpy(sums))
-    assert runs[0].tobytes() == runs[1].tobytes()
+                *args, cp.asarray(active), dt, alpha, count, control[0], control[1], control[2], np.int32(n_min),
+                np.float64(f_inc), np.float64(f_dec), np.float64(alpha_start), np.float64(f_alpha), np.float64(dt_max)))
+        runs.append([to_numpy(a) for a in (sums, control, dt, alpha, count)])
+    for a, b in zip(*runs):
+        assert a.tobytes() == b.tobytes()
     assert not to_numpy(args[3]).any()                    # the tickets are back at zero
     want = [np.bincount(rep, weights=np.einsum("ij,ij->i", a, b)) for a, b in ((f, v), (v, v), (f, f))]
-    for got, ref in zip(runs[0], want):
+    for got, ref in zip(runs[0][0], want):
         assert np.abs(got - ref).max() <= 1e-12 * np.abs(ref).max()
+    (power, vv, ff), (keep, scale, step), dt, alpha, count = runs[0]
+    uphill = power <= 0
+    grow = ~uphill & (count0 >= n_min)
+    mix = np.where(uphill, 0.0, alpha0)
+    want_dt = np.where(uphill, dt0 * f_dec, np.where(grow, np.minimum(dt0 * f_inc, dt_max), dt0))
+    on = active
+    assert uphill[0] and grow[on].any() and (~uphill & ~grow)[on].any()     # every branch taken
+    assert np.array_equal(keep[on], np.where(uphill, 0.0, 1.0 - mix)[on])
+    assert np.array_equal(scale[on], (mix * np.sqrt(vv) / np.sqrt(ff))[on])
+    assert np.array_equal(dt[on], want_dt[on]) and np.array_equal(step[on], want_dt[on])
+    assert np.array_equal(alpha[on], np.where(uphill, alpha_start, np.where(grow, alpha0 * f_alpha, alpha0))[on])
+    assert np.array_equal(count[on], np.where(uphill, 0, count0 + 1)[on])
+    assert not keep[~on].any() and not scale[~on].any() and not step[~on].any()
+    assert np.array_equal(dt[~on], dt0[~on]) and np.array_equal(alpha[~on], alpha0[~on])
+    assert np.array_equal(count[~on], count0[~on])
 
 
 def minimised(state, device):

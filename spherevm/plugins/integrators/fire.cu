@@ -1,15 +1,21 @@
 // FIRE: the CUDA path of fire.py (same update, per-replica control), compiled once per surface
-// (geometry/surface.cuh). The control and the move are fire.cuh's (shared with the fused
-// small-tissue minimisation).
+// (geometry/surface.cuh): two kernels an iteration, the sums with the control, and the move. The
+// control and the move are fire.cuh's (shared with the fused small-tissue minimisation).
 #include "plugins/integrators/fire.cuh"
 #include "device_common.cuh"
 
-// Per vertex: F.v, v.v, F.F summed per replica (device_common.cuh: the same bits on every run).
+// Per vertex: F.v, v.v, F.F summed per replica (device_common.cuh: the same bits on every run);
+// then per replica, once its sums are final, the FIRE control (mixing, dt, alpha, counter: fire.cuh)
+// into keep, scale and step, which fire_move reads. A stopped replica (active false) gets no move,
+// and keeps its dt, alpha and counter.
 extern "C" __global__ void fire_reduce(
     const double* __restrict__ forces, const double* __restrict__ vel, const int* __restrict__ vertex_replica,
     int n_vertices, double* __restrict__ power, double* __restrict__ vnorm2, double* __restrict__ fnorm2,
     const int* __restrict__ vertex_start, int n_replicas, double* __restrict__ scratch,
-    unsigned int* __restrict__ count)
+    unsigned int* __restrict__ count, const bool* __restrict__ active, double* __restrict__ dt,
+    double* __restrict__ alpha, long long* __restrict__ n_positive, double* __restrict__ keep,
+    double* __restrict__ scale, double* __restrict__ step, int n_min, double f_inc, double f_dec,
+    double alpha_start, double f_alpha, double dt_max)
 {
     SegmentSum sums = {vertex_start, n_replicas, scratch, count};
     long v = (long)blockIdx.x * blockDim.x + threadIdx.x;
@@ -24,29 +30,19 @@ extern "C" __global__ void fire_reduce(
     }
     const double values[3] = {p, vv, ff};
     double* outs[3] = {power, vnorm2, fnorm2};
-    segment_sum_partial<3>(values, rep, sums, outs, false);   // the three sums share the block's barriers
-    segment_sum_finish(sums, outs, 3, false);
-}
-
-// Per replica: the FIRE control (mixing, dt, alpha, counter) from the summed power.
-extern "C" __global__ void fire_control(
-    int n_replicas, const double* __restrict__ power, const double* __restrict__ vnorm2,
-    const double* __restrict__ fnorm2, const bool* __restrict__ active, double* __restrict__ dt,
-    double* __restrict__ alpha, long long* __restrict__ n_positive, double* __restrict__ keep,
-    double* __restrict__ scale, double* __restrict__ step, int n_min, double f_inc, double f_dec,
-    double alpha_start, double f_alpha, double dt_max)
-{
-    int r = blockIdx.x * blockDim.x + threadIdx.x;
-    if (r >= n_replicas) return;
-    if (!active[r]) {                      // stopped: no move, dt, alpha and counter kept
-        keep[r] = 0.0;
-        scale[r] = 0.0;
-        step[r] = 0.0;
-        return;
-    }
-    const FireParams p = {n_min, f_inc, f_dec, alpha_start, f_alpha, dt_max};
-    fire_control_replica(power[r], vnorm2[r], fnorm2[r], dt + r, alpha + r, n_positive + r, p, keep + r, scale + r,
-                         step + r);
+    const FireParams params = {n_min, f_inc, f_dec, alpha_start, f_alpha, dt_max};
+    auto control = [&](int r) {
+        if (!active[r]) {
+            keep[r] = 0.0;
+            scale[r] = 0.0;
+            step[r] = 0.0;
+            return;
+        }
+        fire_control_replica(power[r], vnorm2[r], fnorm2[r], dt + r, alpha + r, n_positive + r, params, keep + r,
+                             scale + r, step + r);
+    };
+    segment_sum_partial<3>(values, rep, sums, outs, false, control);   // the three sums share the block's barriers
+    segment_sum_finish(sums, outs, 3, false, control);
 }
 
 // Per vertex: mix, semi-implicit Euler, P_N re-projection and P_T velocity transport.

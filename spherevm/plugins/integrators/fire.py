@@ -181,32 +181,38 @@ class FIRE(Minimizer):
             f"max_step={self.max_step} sqrt(<A>) or became NaN; reduce dt (now {self.dt}) or check the forces"))
 
     def _move_gpu(self, simulation, forces):
-        """Three kernels (fire.cu, compiled for the State's surface): per-replica sums, per-replica
-        control, per-vertex move."""
-        import cupy as cp
+        """Two kernels (fire.cu, compiled for the State's surface): the per-replica sums, each
+        replica's control as soon as its sums are final, and the per-vertex move."""
         state = simulation.state
         module, size = surface_kernels(_KERNELS, state)
-        nv, nr = state.n_vertices, state.n_replicas
+        nv = state.n_vertices
         active = self.active_on_device()
-        sums = cp.empty((3, nr))
+        sums, control = self._scratch(simulation)
         launch(module.get_function("fire_reduce"), nv,
-               (forces, self.velocities, state.vertex_replica, np.int32(nv), sums[0], sums[1], sums[2],
-                *segment_sums(state, "vertices", 3)))
-        keep, scale, step = cp.empty(nr), cp.empty(nr), cp.empty(nr)
-        launch(module.get_function("fire_control"), nr,
-               (np.int32(nr), sums[0], sums[1], sums[2], active, self.replica_dt, self.alpha,
-                self.n_positive, keep, scale, step, np.int32(self.n_min), np.float64(self.f_inc),
-                np.float64(self.f_dec), np.float64(self.alpha_start), np.float64(self.f_alpha),
-                np.float64(self.dt_max)))
+               (forces, self.velocities, state.vertex_replica, np.int32(nv), *sums,
+                *segment_sums(state, "vertices", 3), active, self.replica_dt, self.alpha, self.n_positive, *control,
+                np.int32(self.n_min), np.float64(self.f_inc), np.float64(self.f_dec), np.float64(self.alpha_start),
+                np.float64(self.f_alpha), np.float64(self.dt_max)))
         launch(module.get_function("fire_move"), nv,
-               (state.positions, self.velocities, forces, state.vertex_replica, size, active,
-                keep, scale, step, np.int32(nv), self._length_unit(state), np.float64(self.max_step),
+               (state.positions, self.velocities, forces, state.vertex_replica, size, active, *control,
+                np.int32(nv), self._length_unit(state), np.float64(self.max_step),
                 *simulation.kernel_timestep(), self._error_word()))
         simulation.state_changed()
 
+    def _scratch(self, simulation):
+        """``(sums, control)``: the per-replica F.v, |v|^2, |F|^2 and keep, scale, step of an
+        iteration, three rows of a (3, replicas) array each. Kept with the State between iterations (allocations cost
+        the host as much as a launch); inside a CUDA graph capture made anew, from the graph's pool."""
+        state = simulation.state
+        xp = state.device.xp
+
+        def build():
+            return tuple(xp.empty((3, state.n_replicas))), tuple(xp.empty((3, state.n_replicas)))
+        return build() if simulation.capturing else state.cached((self, "scratch"), build)
+
     def tissue_step_arguments(self, simulation):
         """The minimiser's part of the fused small-tissue minimisation's arguments
-        (:mod:`spherevm.tissue_steps`, which calls fire.cuh's control and move as fire_control and
+        (:mod:`spherevm.tissue_steps`, which calls fire.cuh's control and move as fire_reduce and
         fire_move do): the active mask, velocities, dt, alpha and counters per replica, the
         constants, sqrt(<A>) per replica, max_step and the error word (:meth:`check`)."""
         state = simulation.state

@@ -92,7 +92,7 @@ def layout(state, minimizing: bool, n_sm: int):
     a tissue's vertices over its blocks, from a warp's start when minimising. The kernel is compiled
     for blocks of at most ``bound`` threads (``__launch_bounds__``): 512 where the launch's blocks
     take at most 512 threads of each SM, which lets a thread hold 128 registers (a few dozen bytes
-    spilled, against 200-300 on 64), else 1,024, whose 64 registers a thread keep more blocks on an
+    spilled, against 170-320 on 64), else 1,024, whose 64 registers a thread keep more blocks on an
     SM at once (one H200: 8 x 1,024 cells, Brownian + T1, 16.3 us a step against 17.1; 1,024 x 32
     cells, FIRE + T1, 0.025 ms an iteration on a bound of 512 against 0.019)."""
     def build():

@@ -313,8 +313,10 @@ extern "C" __global__ void __launch_bounds__(TISSUE_THREADS) TISSUE_CLUSTER_DIMS
                                  });
                 __syncthreads();   // every flip applied and listed: its four cells (C1..C4) again
                 const int fixes = 4 * n_flipped;
-                tissue_cells<Surface>(P, norm, cell_vertices, sides, max_sides, s, fixes,
-                                      [&](int i) { return t1_args.cand[(long)flipped[i >> 2] * CAND_INTS + 7 + (i & 3)]; },
+                auto fixed = [&](int i) {   // cell (i & 3) of flip i >> 2: C1..C4 of its candidate
+                    return t1_args.cand[(long)flipped[i >> 2] * CAND_INTS + 7 + (i & 3)];
+                };
+                tissue_cells<Surface>(P, norm, cell_vertices, sides, max_sides, s, fixes, fixed,
                                       tissue_cell_lanes(fixes), kA, kP, A0, P0, coef, send);
             }
             cluster_sync();   // the flips and their cells everywhere; every block has read the count
@@ -331,7 +333,8 @@ extern "C" __global__ void __launch_bounds__(TISSUE_THREADS) TISSUE_CLUSTER_DIMS
         cluster_sync();
         now = 1 - now;
     }
-    for (int j = 3 * (vb0 - v0) + tid; j < 3 * (vb1 - v0); j += stride) pos[3L * v0 + j] = shared[at_pos + 3L * nv * now + 3L * v0 + j];
+    for (int j = 3 * (vb0 - v0) + tid; j < 3 * (vb1 - v0); j += stride)
+        pos[3L * v0 + j] = shared[at_pos + 3L * nv * now + 3L * v0 + j];
 }
 
 // Many FIRE iterations of Simulation.minimize in one launch, a thread block per tissue: each

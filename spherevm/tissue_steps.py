@@ -19,15 +19,15 @@ periodic plane, a :class:`~spherevm.plugins.integrators.Brownian` integrator (no
 :class:`~spherevm.plugins.forces.VertexModel`, at most one :class:`~spherevm.plugins.updaters.T1`,
 every operation firing each step, and every tissue small enough for shared memory (on an H200,
 spherical tissues of about 1,150 cells on one block and 1,500 on a cluster of blocks, planar ones of
-1,400 and 1,900: the sphere's blocks also keep every vertex's inverse norm). ``run(fused=False)`` keeps the
-general kernels.
+1,400 and 1,900: the sphere's blocks also keep every vertex's inverse norm). ``run(fused=False)``
+keeps the general kernels.
 
 It serves ``Simulation.minimize`` the same way with :class:`~spherevm.plugins.integrators.FIRE`
 (``minimize(fused=False)`` keeps the general kernels): the tissue's block also sums FIRE's power and
 norms per replica in the order the general reduction adds them (``device_common.cuh``:
 ``block_segment_total``), so the minimisation is the general one bit for bit too. One block a
-tissue (about 1,250 cells on the sphere, 1,400 on the plane, on an H200): a minimisation's sums would cross the cluster at every
-iteration.
+tissue (about 1,250 cells on the sphere, 1,400 on the plane, on an H200): a minimisation's sums
+would cross the cluster at every iteration.
 """
 from __future__ import annotations
 

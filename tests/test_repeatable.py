@@ -58,7 +58,8 @@ def test_fire_sums_and_control_match_numpy_for_any_replica_sizes(sizes):
     v = np.where((rep == 0)[:, None], -f, 0.5 * f + 0.1 * v)           # replica 0 uphill, the others downhill
     module, _ = surface_kernels(fire._KERNELS, svm.init.random_tiling(8))
     n_tiles = (n + BLOCK - 1) // BLOCK
-    args = (cp.asarray(start.astype(np.int32)), np.int32(nr), cp.empty(3 * (n_tiles + nr)), cp.zeros(nr, dtype=np.uint32))
+    args = (cp.asarray(start.astype(np.int32)), np.int32(nr), cp.empty(3 * (n_tiles + nr)),
+            cp.zeros(nr, dtype=np.uint32))
     active = np.arange(nr) != nr - 1                                   # the last replica has stopped
     dt0, alpha0 = rng.uniform(0.01, 0.05, nr), rng.uniform(0.01, 0.1, nr)
     count0 = np.arange(nr, dtype=np.int64) * 3                        # 0, 3, 6, ...: some at n_min = 5 or more

@@ -201,8 +201,9 @@ class FIRE(Minimizer):
 
     def _scratch(self, simulation):
         """``(sums, control)``: the per-replica F.v, |v|^2, |F|^2 and keep, scale, step of an
-        iteration, three rows of a (3, replicas) array each. Kept with the State between iterations (allocations cost
-        the host as much as a launch); inside a CUDA graph capture made anew, from the graph's pool."""
+        iteration, three rows of a (3, replicas) array each. Kept with the State between iterations
+        (allocations cost the host as much as a launch); inside a CUDA graph capture made anew, from
+        the graph's pool."""
         state = simulation.state
         xp = state.device.xp
 

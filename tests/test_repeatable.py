@@ -96,6 +96,100 @@ def test_fire_sums_and_control_match_numpy_for_any_replica_sizes(sizes):
     assert np.array_equal(count[~on], count0[~on])
 
 
+def ordered_segment_sums(values, segment, start, tile=BLOCK):
+    """NumPy's replay of device_common.cuh's order of additions (``segment_sums``), for a launch of
+    ``tile`` threads a block over ``values`` (one item a thread, item i in segment ``segment[i]``,
+    segments the ranges ``start[s]:start[s + 1]``): each warp's segmented suffix sums, the first
+    thread of a run in a tile adding the warps the run continues into, and a segment over several
+    tiles finished in tile order, thread i of the finishing block adding tiles t0 + 1 + i, t0 + 1 + i
+    + tile, ... (the first part in thread 0), then butterflies in each warp and over the warps."""
+    n, n_seg = len(values), len(start) - 1
+    n_tiles = -(-n // tile)
+    v = np.zeros(n_tiles * tile)
+    s = np.full(n_tiles * tile, -1)
+    v[:n], s[:n] = values, segment
+    lane = np.arange(32)
+    w, ws = v.reshape(-1, 32).copy(), s.reshape(-1, 32)
+    for offset in (1, 2, 4, 8, 16):
+        other, other_segment = np.zeros_like(w), np.full_like(ws, -3)
+        other[:, :32 - offset], other_segment[:, :32 - offset] = w[:, offset:], ws[:, offset:]
+        w = np.where(other_segment == ws, w + other, w)
+    suffix = w.reshape(-1)
+    out, parts = np.zeros(n_seg), {}
+    for i in np.flatnonzero((s >= 0) & ((np.arange(s.size) % tile == 0) | (np.roll(s, 1) != s))):
+        seg, t, total = s[i], i // tile, suffix[i]
+        for first in range((i // 32 + 1) * 32, (t + 1) * tile, 32):      # the next warps' first lanes
+            if s[first] != seg:
+                break
+            total += suffix[first]
+        t0, t1 = start[seg] // tile, (start[seg + 1] - 1) // tile
+        if t0 == t1:
+            out[seg] = total
+        else:
+            parts.setdefault(seg, {})[t] = total
+    for seg, part in parts.items():
+        t0, t1 = start[seg] // tile, (start[seg + 1] - 1) // tile
+        thread = np.zeros(tile)
+        thread[0] = part[t0]
+        for k in range(tile):
+            for t in range(t0 + 1 + k, t1 + 1, tile):
+                thread[k] += part[t]
+        x = thread.reshape(-1, 32)
+        for offset in (16, 8, 4, 2, 1):
+            x = x + x[:, lane ^ offset]
+        y = np.zeros(32)
+        y[:len(x)] = x[:, 0]
+        for offset in (16, 8, 4, 2, 1):
+            y = y + y[lane ^ offset]
+        out[seg] = y[0]
+    return out
+
+
+def test_the_replayed_order_sums_right():
+    """The NumPy replay of the kernels' order (the oracle of the GPU tests below) sums each segment."""
+    rng = np.random.default_rng(4)
+    sizes = [1, 31, 33, 300, 257, 9000, 40, 5000, 2]
+    start = np.concatenate([[0], np.cumsum(sizes)])
+    values = rng.normal(size=start[-1]) * 10.0 ** rng.integers(-6, 6, size=start[-1])
+    got = ordered_segment_sums(values, np.repeat(np.arange(len(sizes)), sizes), start)
+    want = np.add.reduceat(values, start[:-1])
+    assert np.abs(got - want).max() <= 1e-12 * np.abs(values).max()
+
+
+@pytest.mark.gpu
+def test_segment_sums_add_in_one_fixed_order():
+    """The per-replica sums have exactly the bits of ordered_segment_sums' order, on segments inside
+    one block, over a few blocks (a finishing warp), over more than 33 blocks (the finishing block)
+    and over hundreds: FIRE's three sums (vectors along x, so that each item's term F.v is one
+    rounded product, as in NumPy) and the vertex model's energy sums over its cells' energies."""
+    import cupy as cp
+    from spherevm.constraints.kernels import surface_kernels
+    from spherevm.device import launch
+    from spherevm.plugins.integrators import fire
+    sizes = [5, 300, 40, 1, 9000, 700, 33, 256, 512, 300_000, 2000]
+    start = np.concatenate([[0], np.cumsum(sizes)])
+    n, nr = int(start[-1]), len(sizes)
+    rep = np.repeat(np.arange(nr), sizes)
+    rng = np.random.default_rng(5)
+    f, v = np.zeros((2, n, 3))
+    f[:, 0], v[:, 0] = rng.normal(size=(2, n)) * 10.0 ** rng.integers(-4, 4, size=(2, n))
+    module, _ = surface_kernels(fire._KERNELS, svm.init.random_tiling(8))
+    n_tiles = (n + BLOCK - 1) // BLOCK
+    sums = cp.empty((3, nr))
+    launch(module.get_function("fire_reduce"), n,
+           (cp.asarray(f), cp.asarray(v), cp.asarray(rep.astype(np.int32)), np.int32(n), sums[0], sums[1], sums[2],
+            cp.asarray(start.astype(np.int32)), np.int32(nr), cp.empty(3 * (n_tiles + nr)), cp.zeros(nr, dtype=np.uint32),
+            cp.zeros(nr, dtype=bool), cp.ones(nr), cp.ones(nr), cp.zeros(nr, dtype=np.int64), *cp.empty((3, nr)),
+            np.int32(5), np.float64(1.1), np.float64(0.5), np.float64(0.1), np.float64(0.99), np.float64(1.0)))
+    fx, vx = f[:, 0], v[:, 0]
+    for got, terms in zip(to_numpy(sums), (fx * vx, vx * vx, fx * fx)):
+        assert got.tobytes() == ordered_segment_sums(terms, rep, start).tobytes()
+    state = svm.State.concatenate([svm.init.random_tiling(m, seed=k) for k, m in enumerate([12, 9000, 300, 4500, 40])])
+    gpu = model().compute(state.to("gpu"))
+    want = ordered_segment_sums(to_numpy(gpu.cell_energy), state.cell_replica_np(), state.cell_start)
+    assert to_numpy(gpu.energy).tobytes() == want.tobytes()
+
+
 def minimised(state, device):
     sim = svm.Simulation(device=device, seed=2)
     sim.state = state

@@ -17,16 +17,9 @@ struct SegmentSum {
 
 // Threads run in item order, one per call: the sum is a plain running sum, started by the segment's
 // first item (unless add).
-inline void segment_sum_partial(double value, int segment, const SegmentSum& sums, int, double* out, bool add)
+inline void segment_sum(double value, int segment, const SegmentSum& sums, double* out, bool add = false)
 {
     if (segment < 0) return;
     bool first = (long)blockIdx.x == sums.start[segment];
     out[segment] = first && !add ? value : out[segment] + value;
-}
-
-inline void segment_sum_finish(const SegmentSum&, double* const*, int, bool) {}
-
-inline void segment_sum(double value, int segment, const SegmentSum& sums, double* out, bool add = false)
-{
-    segment_sum_partial(value, segment, sums, 0, out, add);
 }

@@ -28,6 +28,19 @@ struct SegmentDone {
     __device__ void operator()(int) const {}
 };
 
+// Sum j's scratch: head[t] holds a segment's part in tile t, head[gridDim.x + s] segment s's part in
+// its first tile.
+__device__ __forceinline__ double* segment_head(const SegmentSum& sums, int j)
+{
+    return sums.scratch + (long)j * (gridDim.x + sums.n_segments);
+}
+
+// A finished sum into out[s] (added to it if add).
+__device__ __forceinline__ void segment_store(double* out, int s, double total, bool add)
+{
+    out[s] = add ? out[s] + total : total;
+}
+
 // Segmented suffix sums inside a warp (every lane calls it): each lane's v[j] ends as the sum from
 // itself to the end of its segment's run in the warp, always in the same order.
 template <int N>
@@ -76,13 +89,13 @@ __device__ __forceinline__ void segment_finish_warp(const SegmentSum& sums, int 
     long t = t0 + 1 + lane;
     double v[N];
     for (int j = 0; j < N; ++j) {
-        const double* head = sums.scratch + (long)j * (gridDim.x + sums.n_segments);
+        const double* head = segment_head(sums, j);
         v[j] = lane == 0 ? __ldcg(head + gridDim.x + s) : 0.0;
         if (t <= t1) v[j] += __ldcg(head + t);
     }
     for (int j = 0; j < N; ++j) {
         double total = first_warp_total(v[j]);
-        if (lane == 0) out[j][s] = add ? out[j][s] + total : total;
+        if (lane == 0) segment_store(out[j], s, total, add);
     }
 }
 
@@ -112,20 +125,18 @@ __device__ void segment_finish_block(const SegmentSum& sums, int s0, int s1, dou
         int k = finishing[f];
         if (k < 0) continue;                      // the same k in every thread
         long t0 = sums.start[k] / tile, t1 = (sums.start[k + 1] - 1) / tile;
-        const double* head = sums.scratch;
-        long row = gridDim.x + sums.n_segments;   // sum j's head at head + j * row
         double v[N];
-        for (int j = 0; j < N; ++j) v[j] = threadIdx.x == 0 ? __ldcg(head + j * row + gridDim.x + k) : 0.0;
+        for (int j = 0; j < N; ++j) v[j] = threadIdx.x == 0 ? __ldcg(segment_head(sums, j) + gridDim.x + k) : 0.0;
         long t = t0 + 1 + threadIdx.x;
         for (; t + 3 * stride <= t1; t += 4 * stride) {
             double part[N][4];
             for (int j = 0; j < N; ++j)
-                for (int q = 0; q < 4; ++q) part[j][q] = __ldcg(head + j * row + t + q * stride);
+                for (int q = 0; q < 4; ++q) part[j][q] = __ldcg(segment_head(sums, j) + t + q * stride);
             for (int j = 0; j < N; ++j)
                 for (int q = 0; q < 4; ++q) v[j] += part[j][q];
         }
         for (; t <= t1; t += stride)
-            for (int j = 0; j < N; ++j) v[j] += __ldcg(head + j * row + t);
+            for (int j = 0; j < N; ++j) v[j] += __ldcg(segment_head(sums, j) + t);
         for (int j = 0; j < N; ++j) {
             double w = warp_butterfly_sum(v[j]);
             if (lane == 0) warp_total[j][warp] = w;
@@ -134,7 +145,7 @@ __device__ void segment_finish_block(const SegmentSum& sums, int s0, int s1, dou
         if (warp == 0) {
             for (int j = 0; j < N; ++j) {
                 double w = warp_butterfly_sum(lane < n_warps ? warp_total[j][lane] : 0.0);
-                if (lane == 0) outs[j][k] = add ? outs[j][k] + w : w;
+                if (lane == 0) segment_store(outs[j], k, w, add);
             }
         }
         __syncthreads();
@@ -196,9 +207,9 @@ __device__ void segment_sums(const double (&value)[N], int segment, const Segmen
             double total = v[j];
             for (int w = warp + 1; w < n_warps && warp_first_segment[w] == segment; ++w) total += warp_first_part[j][w];
             if (inside) {
-                out[j][segment] = add ? out[j][segment] + total : total;
+                segment_store(out[j], segment, total, add);
             } else {
-                double* head = sums.scratch + (long)j * (gridDim.x + sums.n_segments);
+                double* head = segment_head(sums, j);
                 if (blockIdx.x == t0) head[gridDim.x + segment] = total;
                 else head[blockIdx.x] = total;
             }

@@ -213,10 +213,10 @@ def test_the_fused_steps_need_the_gpu():
     assert tissue_steps.cluster_size(big, n_sm=1) == 1
 
 
-
 def test_the_register_bound_keeps_every_block_of_a_launch_on_the_sms():
-    """layout's bound: 512 threads (128 registers a thread, none spilled) where the launch's blocks
-    take at most 512 threads of each SM, else 1,024 (64 registers: more blocks on an SM at once)."""
+    """layout's bound: 512 threads (128 registers a thread, a few dozen bytes spilled) where the
+    launch's blocks take at most 512 threads of each SM, else 1,024 (64 registers: more blocks on an
+    SM at once)."""
     def blocks_threads_bound(state, minimizing, n_sm):
         cluster, _, threads, bound = tissue_steps.layout(state, minimizing, n_sm)
         return cluster, threads, bound

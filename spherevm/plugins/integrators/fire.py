@@ -191,13 +191,18 @@ class FIRE(Minimizer):
         launch(module.get_function("fire_reduce"), nv,
                (forces, self.velocities, state.vertex_replica, np.int32(nv), *sums,
                 *segment_sums(state, "vertices", 3), active, self.replica_dt, self.alpha, self.n_positive, *control,
-                np.int32(self.n_min), np.float64(self.f_inc), np.float64(self.f_dec), np.float64(self.alpha_start),
-                np.float64(self.f_alpha), np.float64(self.dt_max)))
+                *self._control_constants()))
         launch(module.get_function("fire_move"), nv,
                (state.positions, self.velocities, forces, state.vertex_replica, size, active, *control,
                 np.int32(nv), self._length_unit(state), np.float64(self.max_step),
                 *simulation.kernel_timestep(), self._error_word()))
         simulation.state_changed()
+
+    def _control_constants(self):
+        """FIRE's constants as the control (fire.cuh's FireParams) takes them: n_min, f_inc, f_dec,
+        alpha_start, f_alpha, dt_max."""
+        return (np.int32(self.n_min), np.float64(self.f_inc), np.float64(self.f_dec), np.float64(self.alpha_start),
+                np.float64(self.f_alpha), np.float64(self.dt_max))
 
     def _scratch(self, simulation):
         """``(sums, control)``: the per-replica F.v, |v|^2, |F|^2 and keep, scale, step of an
@@ -218,9 +223,7 @@ class FIRE(Minimizer):
         constants, sqrt(<A>) per replica, max_step and the error word (:meth:`check`)."""
         state = simulation.state
         return (self.active_on_device(), self.velocities, self.replica_dt, self.alpha, self.n_positive,
-                np.int32(self.n_min), np.float64(self.f_inc), np.float64(self.f_dec), np.float64(self.alpha_start),
-                np.float64(self.f_alpha), np.float64(self.dt_max), self._length_unit(state),
-                np.float64(self.max_step), self._error_word())
+                *self._control_constants(), self._length_unit(state), np.float64(self.max_step), self._error_word())
 
     def capture_ready(self, simulation, steps):
         """Its kernels read nothing back and take the timestep from ``Simulation.kernel_timestep``;

@@ -141,7 +141,7 @@ class StepGraphs:
             key = op.capture_ready(self.sim, steps)
             if key is None:
                 return None, type(op).__name__
-            keys.append((id(op), key))
+            keys.append((id(op), op.parameter_version, key))   # a parameter change: a new capture
         state = self.sim.state
         arrays = (state.positions, state.cell_vertices, state.cell_sides, state.vertex_neighbors,
                   state.vertex_cells, getattr(state, state.constraint.size_name))

@@ -160,8 +160,10 @@ class State:
         """``build()``, computed once and kept with this State under ``key`` (recomputed after a
         topology edit if ``topology``): the one place constraints and operations keep derived data
         (device copies of parameters, corner maps, edge lists). Keys start with the owner object,
-        e.g. ``(self, "edges")``; the data dies with the State."""
-        version = self.topology_version if topology else None
+        e.g. ``(self, "edges")``; the data dies with the State. An owner with a
+        ``parameter_version`` (an operation, :mod:`spherevm.plugins.parameters`) has its entries
+        rebuilt after each change of its parameters."""
+        version = (self.topology_version if topology else None, getattr(key[0], "parameter_version", None))
         entry = self._cached.get(key)
         if entry is None or entry[0] != version:
             entry = self._cached[key] = (version, build())

@@ -55,7 +55,7 @@ def record(sim):
            ("cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cells", "vertex_start", "cell_start")}
     out.update(radius=sim.state.radius_np(), timestep=np.array([sim.timestep]), lineage=div.lineage,
                divisions=div.total_divisions, division_refusals=div.refusals, extrusions=ext.total_extrusions,
-               extrusion_refusals=ext.refusals, t1=sim.log("t1_total_flips"), area=sched.area,
+               extrusion_refusals=ext.refusals, t1=sim.log("t1_total_flips"), area=sched.target_area,
                counts=sched.counts, **{k: np.asarray(v) for k, v in vm.state_to_save().items()})
     return {k: np.array(v, copy=True) for k, v in out.items()}, to_numpy(sim.state.positions).copy()
 
@@ -136,7 +136,7 @@ def test_the_radius_schedule_keeps_its_area_across_a_restart(tmp_path):
     sim.state = tiling()
     sched = RadiusSchedule("constant_area")
     sim.operations.updaters.append(sched)
-    area = sched.area.copy()
+    area = sched.target_area.copy()
     for c in range(40):              # divide cell c of replica 0 until <A> no longer rounds back
         svm.growth.divide(sim.state, [c], [[0.0, 0.0, 1.0]])
         sched.update(sim, c)
@@ -148,12 +148,12 @@ def test_the_radius_schedule_keeps_its_area_across_a_restart(tmp_path):
     again.operations.updaters.append(RadiusSchedule("constant_area"))
     again.create_state_from_gsd(tmp_path / "r.gsd")
     restored = again.operations.updaters[0]
-    assert restored.area.tobytes() == area.tobytes()
+    assert restored.target_area.tobytes() == area.tobytes()
     assert restored.counts.tolist() == sim.state.cells_per_replica.tolist()
     given = svm.Simulation(device="cpu", seed=7)
     given.operations.updaters.append(RadiusSchedule("constant_area", area=2.0))
     given.create_state_from_gsd(tmp_path / "r.gsd")
-    assert given.operations.updaters[0].area.tolist() == [2.0, 2.0]
+    assert given.operations.updaters[0].target_area.tolist() == [2.0, 2.0]
 
 
 def test_a_growing_tissue_restarts_in_a_new_process(tmp_path):

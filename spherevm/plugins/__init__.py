@@ -15,6 +15,7 @@ from importlib.metadata import entry_points
 
 from . import forces, integrators, updaters, writers
 from .base import Force, ForceResult, Integrator, Operation, Updater, Writer
+from .parameters import Parameter
 
 ENTRY_POINT_GROUP = "spherevm.plugins"
 KINDS = (("force", Force), ("integrator", Integrator), ("updater", Updater), ("writer", Writer))
@@ -113,5 +114,5 @@ def available() -> dict:
     return {name: kind for name, kind, _ in describe()}
 
 
-__all__ = ["ENTRY_POINT_GROUP", "Force", "ForceResult", "Integrator", "Operation", "Updater", "Writer",
+__all__ = ["ENTRY_POINT_GROUP", "Force", "ForceResult", "Integrator", "Operation", "Parameter", "Updater", "Writer",
            "available", "build_force", "describe", "forces", "integrators", "kind_of", "load", "parameters_of", "updaters", "writers"]

@@ -7,6 +7,7 @@ import numpy as np
 
 from ..trigger import Always, as_trigger
 from ..validation import integer, non_negative
+from .parameters import Parameter, parameter_names
 from .rows import _host, _index_like, _restored, follow_rows
 
 
@@ -29,9 +30,31 @@ class Operation:
     #: Constraint methods this operation calls; a surface lacking one is refused at attach.
     surface_needs = ()
 
+    # Parameters (spherevm.plugins.parameters): each public parameter is a class attribute
+    # ``name = Parameter(check)``; an assignment is checked, and a change after attach takes effect at
+    # the next step (``parameter_version`` advances: the State's cache entries keyed by this operation
+    # and the CUDA graphs holding its kernels are renewed; ``parameters_changed`` runs).
+    trigger = Parameter(lambda name, value: Always() if value is None else as_trigger(value))
+    #: advances at every parameter change (see spherevm.plugins.parameters)
+    parameter_version = 0
+
     def __init__(self, trigger=None):
-        self.trigger = Always() if trigger is None else as_trigger(trigger)
+        self.trigger = trigger
         self._simulation = None
+
+    @classmethod
+    def parameter_names(cls) -> tuple:
+        """The names of this operation's public parameters (its :class:`Parameter` attributes)."""
+        return parameter_names(cls)
+
+    def check_parameters(self):
+        """Raise ValueError if the parameters together are inconsistent (each was checked alone
+        already); called after every assignment, once all are set. Default: nothing to check."""
+
+    def parameters_changed(self, name):
+        """Parameter ``name`` has a new value (called after every accepted assignment once all
+        parameters are set, attached or not): bring derived data in line. Caches kept with
+        ``State.cached`` under a key starting with this operation renew by themselves."""
 
     def attach(self, simulation):
         """Called when the operation joins a Simulation whose State is set."""
@@ -299,6 +322,10 @@ class Minimizer(Integrator):
     Subclasses implement :meth:`move` (one iteration) and :meth:`reset_motion`.
     """
 
+    force_tol = Parameter(lambda name, value: float(non_negative(name, value, per_item="a scalar")))
+    energy_tol = Parameter(lambda name, value: float(non_negative(name, value, per_item="a scalar")))
+    check_every = Parameter(lambda name, value: integer(name, value, minimum=1))
+
     def __init__(self, force_tol=1e-10, energy_tol=1e-20, check_every=10, trigger=None):
         super().__init__(trigger)
         self.configure(force_tol=force_tol, energy_tol=energy_tol, check_every=check_every)
@@ -309,12 +336,9 @@ class Minimizer(Integrator):
         """Set the stopping rules (None keeps one as it is); ``Simulation.minimize`` calls it first,
         so each minimisation works out its tolerance units afresh."""
         self._units = None
-        if force_tol is not None:
-            self.force_tol = float(non_negative("force_tol", force_tol, per_item="a scalar"))
-        if energy_tol is not None:
-            self.energy_tol = float(non_negative("energy_tol", energy_tol, per_item="a scalar"))
-        if check_every is not None:
-            self.check_every = integer("check_every", check_every, minimum=1)
+        for name, value in (("force_tol", force_tol), ("energy_tol", energy_tol), ("check_every", check_every)):
+            if value is not None:
+                setattr(self, name, value)
 
     def attach(self, simulation):
         super().attach(simulation)

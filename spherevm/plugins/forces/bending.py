@@ -20,6 +20,7 @@ from ...constraints.cell_rows import cell_blocks, fold, row_table
 from ...constraints.corners import in_parallel
 from ...device import array_module, launch, load_module, segment_sums, weighted_bincount
 from ..base import Force, ForceResult
+from ..parameters import Parameter
 from .vertex_model import VertexModel
 
 _KERNELS = Path(__file__).with_suffix(".cu")
@@ -122,6 +123,15 @@ def _cell_terms(state, B_cell, area_vector):
     return energy, d_area_vector
 
 
+def _bending_stiffness(name, value):
+    arr = np.asarray(value, dtype=np.float64) if not isinstance(value, str) else None
+    if arr is None or arr.ndim > 1:
+        raise ValueError(f"Bending: B must be a scalar or a per-replica 1-D array of numbers, got {value!r}")
+    if arr.size == 0 or not np.all(np.isfinite(arr)) or np.any(arr < 0):
+        raise ValueError(f"Bending: B must be finite and >= 0, got {value!r}")
+    return arr
+
+
 class Bending(Force):
     """``E_b = B sum over neighbouring cell pairs (i, j) of (1 - n_i . n_j)``, each pair once.
 
@@ -141,14 +151,16 @@ class Bending(Force):
     gpu_surfaces = (Sphere,)
     surface_needs = ("cell_geometry", "shape_gradient")
 
+    B = Parameter(_bending_stiffness)
+
     def __init__(self, B=0.0, trigger=None):
         super().__init__(trigger)
-        arr = np.asarray(B, dtype=np.float64) if not isinstance(B, str) else None
-        if arr is None or arr.ndim > 1:
-            raise ValueError(f"Bending: B must be a scalar or a per-replica 1-D array of numbers, got {B!r}")
-        if arr.size == 0 or not np.all(np.isfinite(arr)) or np.any(arr < 0):
-            raise ValueError(f"Bending: B must be finite and >= 0, got {B!r}")
-        self.B = arr
+        self.B = B
+
+    def check_parameters(self):
+        """A per-replica B must have one value per replica of the attached State."""
+        if self._simulation is not None:
+            self.per_replica_B(self._simulation.state)
 
     def per_replica_B(self, state):
         """``B`` for each replica, NumPy ``(n_replicas,)``; raises ValueError for a wrong length."""
@@ -172,7 +184,7 @@ class Bending(Force):
         def build():
             B = state.device.asarray(self.per_replica_B(state))
             return B, B[state.cell_replica]
-        return state.cached((self, "B", self.B.tobytes(), self.B.shape), build)
+        return state.cached((self, "B"), build)
 
     def attach(self, simulation):
         super().attach(simulation)

@@ -8,8 +8,13 @@ import numpy as np
 from ...device import launch, segment_sums, weighted_bincount
 from ...constraints.kernels import KERNEL_SURFACES, surface_kernels
 from ..base import Force, ForceResult
+from ..parameters import Parameter
 
 _KERNELS = Path(__file__).with_suffix(".cu")
+
+
+def _optional_param(name, value):
+    return None if value is None else _param(name, value)
 
 
 def _param(name, value, lower=0.0):
@@ -32,30 +37,49 @@ class VertexModel(Force):
     the unit of length ``sqrt(<A>)`` of each replica.
     """
 
+    kA = Parameter(_param)
+    kP = Parameter(_param)
+    A0 = Parameter(_param)
+    P0 = Parameter(_param)
+    kr = Parameter(_optional_param)
+    p0 = Parameter(_optional_param)
+    a0 = Parameter(_optional_param)
+
     def __init__(self, kA=1.0, kP=1.0, A0=1.0, P0=3.8):
         super().__init__()
-        self.kA, self.kP = _param("kA", kA), _param("kP", kP)
-        self.A0, self.P0 = _param("A0", A0), _param("P0", P0)
-        self._dimensionless = None
+        self._reduced = False
+        self.kA, self.kP, self.A0, self.P0 = kA, kP, A0, P0
+        self.kr = self.p0 = self.a0 = None
 
     @classmethod
     def dimensionless(cls, kr=0.0, p0=3.8, a0=1.0, kP=1.0) -> "VertexModel":
         """The paper's parameters: kr = kA <A>/kP, p0 = P0/sqrt(<A>), a0 = A0/<A>.
 
         Resolved per replica from its mean cell area <A> = 4 pi R^2 / N, so that ensembles of
-        spheres of different sizes share one set of dimensionless parameters.
+        spheres of different sizes share one set of dimensionless parameters. Its ``kr``, ``p0``,
+        ``a0`` and ``kP`` may change later (``kA``, ``A0`` and ``P0`` are not used).
         """
         model = cls(kA=0.0, kP=kP, A0=0.0, P0=0.0)
-        model._dimensionless = (_param("kr", kr), _param("p0", p0), _param("a0", a0))
+        model.__dict__.update(_reduced=True, kr=_param("kr", kr), p0=_param("p0", p0), a0=_param("a0", a0))
         return model
+
+    def check_parameters(self):
+        """A dimensionless model takes kr, p0 and a0 (with kP); a dimensional one kA, kP, A0, P0."""
+        reduced = (self.kr, self.p0, self.a0)
+        if self._reduced:
+            if any(v is None for v in reduced) or any(np.any(v != 0) for v in (self.kA, self.A0, self.P0)):
+                raise ValueError("this VertexModel is dimensionless: set its kr, p0, a0 (and kP); kA, A0 and P0 "
+                                 "are not used")
+        elif any(v is not None for v in reduced):
+            raise ValueError("this VertexModel is dimensional: set its kA, kP, A0 and P0, or build "
+                             "VertexModel.dimensionless(kr=..., p0=..., a0=...)")
 
     def parameters(self, state):
         """Per-cell ``(kA, kP, A0, P0)`` as NumPy arrays of length ``n_cells``."""
         n = state.n_cells
-        if self._dimensionless is not None:
-            kr, p0, a0 = self._dimensionless
+        if self._reduced:
             mean_area = state.mean_cell_area[state.cell_replica_np()]
-            values = (kr * self.kP / mean_area, self.kP, a0 * mean_area, p0 * np.sqrt(mean_area))
+            values = (self.kr * self.kP / mean_area, self.kP, self.a0 * mean_area, self.p0 * np.sqrt(mean_area))
         else:
             values = (self.kA, self.kP, self.A0, self.P0)
         out = []
@@ -83,36 +107,28 @@ class VertexModel(Force):
 
     def narrow(self, selection):
         """Per-cell parameters follow the selected cells."""
-        saved = (self.kA, self.kP, self.A0, self.P0, self._dimensionless)
-
-        def pick(a):
-            return a[selection.cells] if a.ndim == 1 else a
-
-        self.kA, self.kP, self.A0, self.P0 = (pick(a) for a in saved[:4])
-        if self._dimensionless is not None:
-            self._dimensionless = tuple(pick(a) for a in self._dimensionless)
+        saved = self._arrays()
+        for name, a in saved.items():
+            if a.ndim == 1:
+                setattr(self, name, a[selection.cells])
         return saved
 
     def widen(self, selection, saved):
-        self.kA, self.kP, self.A0, self.P0, self._dimensionless = saved
+        for name, a in saved.items():
+            setattr(self, name, a)
 
     def resized(self, change):
         """Per-cell parameters follow their cells: a daughter takes its mother's values."""
-        def follow(a):
-            return a[change.cell_source] if a.ndim == 1 else a
-
-        self.kA, self.kP, self.A0, self.P0 = (follow(a) for a in (self.kA, self.kP, self.A0, self.P0))
-        if self._dimensionless is not None:
-            self._dimensionless = tuple(follow(a) for a in self._dimensionless)
+        for name, a in self._arrays().items():
+            if a.ndim == 1:
+                setattr(self, name, a[change.cell_source])
 
     # Checkpoints: per-cell parameter arrays are state (they follow their cells through divisions
     # and extrusions, so a grown tissue's arrays exist nowhere but here); scalars are the script's.
     def _arrays(self):
-        """``{name: array}`` of every parameter, the dimensionless ones included."""
-        out = dict(kA=self.kA, kP=self.kP, A0=self.A0, P0=self.P0)
-        if self._dimensionless is not None:
-            out.update(zip(("kr", "p0", "a0"), self._dimensionless))
-        return out
+        """``{name: array}`` of every parameter in use (the dimensionless ones for such a model)."""
+        names = ("kr", "kP", "p0", "a0") if self._reduced else ("kA", "kP", "A0", "P0")
+        return {name: getattr(self, name) for name in names}
 
     def state_to_save(self) -> dict:
         """The per-cell (1-D) parameters, in the State's cell order; scalar ones are not saved."""
@@ -123,18 +139,14 @@ class VertexModel(Force):
         (whose length fits the tissue before it grew); a parameter the script gives as a scalar stays
         the script's."""
         n = self._simulation.state.n_cells
-        arrays = self._arrays()
-        for name, saved in data.items():
-            if name not in arrays or arrays[name].ndim == 0:
+        for name, array in self._arrays().items():
+            if name not in data or array.ndim == 0:
                 continue
-            saved = np.asarray(saved, dtype=np.float64)
+            saved = np.asarray(data[name], dtype=np.float64)
             if saved.shape != (n,):
                 raise ValueError(f"VertexModel: saved per-cell {name!r} has shape {saved.shape}, but the State has "
                                  f"{n} cells; the checkpoint belongs to another State")
-            arrays[name] = saved.copy()
-        self.kA, self.kP, self.A0, self.P0 = (arrays[k] for k in ("kA", "kP", "A0", "P0"))
-        if self._dimensionless is not None:
-            self._dimensionless = tuple(arrays[k] for k in ("kr", "p0", "a0"))
+            setattr(self, name, saved.copy())
 
     def device_parameters(self, state):
         """Per-cell ``(kA, kP, A0, P0)`` on the device, cached for the State they were made for."""
@@ -168,9 +180,8 @@ class VertexModel(Force):
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
 
     def __repr__(self):
-        if self._dimensionless is not None:
-            kr, p0, a0 = self._dimensionless
-            return f"VertexModel.dimensionless(kr={kr}, p0={p0}, a0={a0}, kP={self.kP})"
+        if self._reduced:
+            return f"VertexModel.dimensionless(kr={self.kr}, p0={self.p0}, a0={self.a0}, kP={self.kP})"
         return f"VertexModel(kA={self.kA}, kP={self.kP}, A0={self.A0}, P0={self.P0})"
 
     def capture_ready(self, simulation, steps):

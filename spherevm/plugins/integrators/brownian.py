@@ -10,6 +10,7 @@ from ...device import launch
 from ...validation import non_negative, positive
 from ...constraints.kernels import KERNEL_SURFACES, surface_kernels
 from ..base import Integrator, raise_flagged_step
+from ..parameters import Parameter
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
@@ -26,12 +27,17 @@ class Brownian(Integrator):
     vertex stops the run with the step, replica and vertex named.
     """
 
+    dt = Parameter(positive)
+    T = Parameter(non_negative)
+    mu = Parameter(lambda name, value: float(non_negative(name, value, per_item="a scalar")))
+    max_step = Parameter(positive)
+
     def __init__(self, dt, T=0.0, mu=1.0, max_step=0.5):
         super().__init__()
-        self.dt = positive("dt", dt)
-        self.T = non_negative("T", T)
-        self.mu = float(non_negative("mu", mu))
-        self.max_step = positive("max_step", max_step)
+        self.dt = dt
+        self.T = T
+        self.mu = mu
+        self.max_step = max_step
 
     gpu_surfaces = KERNEL_SURFACES
     surface_needs = ("normal", "project_normal", "total_area_np")
@@ -39,9 +45,14 @@ class Brownian(Integrator):
     def attach(self, simulation):
         super().attach(simulation)
         self._step = self.implementation("step", simulation.state)
-        n = simulation.state.n_replicas
-        if self.T.ndim == 1 and len(self.T) != n:
-            raise ValueError(f"T has {len(self.T)} values but the state has {n} replicas")
+        self.check_parameters()
+
+    def check_parameters(self):
+        """A per-replica T must have one value per replica of the attached State."""
+        if self._simulation is not None and self.T.ndim == 1:
+            n = self._simulation.state.n_replicas
+            if len(self.T) != n:
+                raise ValueError(f"T has {len(self.T)} values but the state has {n} replicas")
 
     def _drift(self, simulation, forces):
         """Deterministic velocity of every vertex: mu F (Active adds self-propulsion)."""
@@ -150,6 +161,12 @@ def _tangent_directions(normal, angle):
     return np.cos(angle)[:, None] * e1 + np.sin(angle)[:, None] * e2
 
 
+def _director_mode(name, value):
+    if value not in ("cell", "vertex"):
+        raise ValueError(f"directors must be 'cell' or 'vertex', got {value!r}")
+    return value
+
+
 class Active(Brownian):
     """Self-propelled vertex-model dynamics: velocity ``mu F + v0 p`` plus optional noise T.
 
@@ -173,15 +190,22 @@ class Active(Brownian):
     counted by (timestep, new vertex index)); a T2's merged vertex keeps its own.
     """
 
+    v0 = Parameter(lambda name, value: float(non_negative(name, value, per_item="a scalar")))
+    Dr = Parameter(lambda name, value: float(non_negative(name, value, per_item="a scalar")))
+    mode = Parameter(_director_mode, fixed="the directors are drawn for it at attach; build a new Active "
+                                           "and set it as the integrator")
+
     def __init__(self, dt, v0, Dr, mu=1.0, T=0.0, directors="cell", max_step=0.5):
-        super().__init__(dt, T=T, mu=mu, max_step=max_step)
-        self.v0 = float(non_negative("v0", v0))
-        self.Dr = float(non_negative("Dr", Dr))
-        if directors not in ("cell", "vertex"):
-            raise ValueError(f"directors must be 'cell' or 'vertex', got {directors!r}")
-        self.mode = directors
-        self._mode = 1 if directors == "cell" else 2
         self.directors = None
+        super().__init__(dt, T=T, mu=mu, max_step=max_step)
+        self.v0 = v0
+        self.Dr = Dr
+        self.mode = directors
+
+    @property
+    def _mode(self):
+        """The CUDA kernel's mode: 1 cell directors, 2 vertex directors."""
+        return 1 if self.mode == "cell" else 2
 
     checkpoint_fields = ("directors",)   # a restart takes them back instead of drawing new ones
 

@@ -9,6 +9,7 @@ from ...device import launch, segment_sums, weighted_bincount
 from ...validation import integer, positive
 from ...constraints.kernels import KERNEL_SURFACES, surface_kernels
 from ..base import Minimizer, raise_flagged_step
+from ..parameters import Parameter
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
@@ -46,24 +47,52 @@ class FIRE(Minimizer):
     gpu_surfaces = KERNEL_SURFACES
     surface_needs = ("normal", "project_normal")
 
+    dt = Parameter(positive)
+    dt_max = Parameter(positive)
+    n_min = Parameter(integer)
+    f_inc = Parameter(positive)
+    f_dec = Parameter(positive)
+    alpha_start = Parameter(positive)
+    f_alpha = Parameter(positive)
+    max_step = Parameter(positive)
+
     def __init__(self, dt=0.02, dt_max=None, n_min=5, f_inc=1.1, f_dec=0.5, alpha_start=0.1, f_alpha=0.99,
                  force_tol=1e-10, energy_tol=1e-20, check_every=10, max_step=1.0):
         super().__init__(force_tol=force_tol, energy_tol=energy_tol, check_every=check_every)
-        self.max_step = positive("max_step", max_step)
-        self.dt = positive("dt", dt)
-        self.dt_max = positive("dt_max", dt_max if dt_max is not None else 10 * self.dt)
+        self.velocities = None
+        self._dt_max_follows = dt_max is None       # dt_max = 10 dt, also after dt changes
+        self.max_step = max_step
+        self.dt = dt
+        self.dt_max = 10 * self.dt if dt_max is None else dt_max
+        self.n_min = n_min
+        self.f_inc = f_inc
+        self.f_dec = f_dec
+        self.alpha_start = alpha_start
+        self.f_alpha = f_alpha
+
+    def check_parameters(self):
+        """dt_max >= dt, f_inc >= 1, f_dec < 1, alpha_start < 1 and f_alpha <= 1."""
         if self.dt_max < self.dt:
-            raise ValueError(f"dt_max must be >= dt={self.dt}, got {dt_max!r}")
-        self.n_min = integer("n_min", n_min)
-        self.f_inc = positive("f_inc", f_inc)
+            raise ValueError(f"dt_max must be >= dt={self.dt}, got {self.dt_max!r}")
         if self.f_inc < 1:
-            raise ValueError(f"f_inc must be >= 1, got {f_inc!r}")
-        self.f_dec = positive("f_dec", f_dec)
-        self.alpha_start = positive("alpha_start", alpha_start)
-        self.f_alpha = positive("f_alpha", f_alpha)
+            raise ValueError(f"f_inc must be >= 1, got {self.f_inc!r}")
         if self.f_dec >= 1 or self.alpha_start >= 1 or self.f_alpha > 1:
             raise ValueError("FIRE needs f_dec < 1, alpha_start < 1 and f_alpha <= 1")
-        self.velocities = None
+
+    def parameters_changed(self, name):
+        """A new ``dt`` is the step every running replica takes next (HOOMD's FIRE: ``dt`` is the
+        current step), and ``dt_max`` follows it while it was not given; a new ``dt_max`` caps the
+        replicas' current steps. The other constants act from the next iteration on."""
+        if name == "dt" and self._dt_max_follows:
+            self.__dict__["dt_max"] = 10 * self.dt
+        elif name == "dt_max":
+            self._dt_max_follows = False
+        if self._simulation is None or self.velocities is None:
+            return
+        xp = self._simulation.state.device.xp
+        if name == "dt":
+            self.replica_dt = xp.where(self.active_on_device(), self.dt, self.replica_dt)
+        self.replica_dt = xp.minimum(self.replica_dt, self.dt_max)
 
     def attach(self, simulation):
         state = simulation.state

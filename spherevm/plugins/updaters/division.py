@@ -19,6 +19,7 @@ from ... import random as rng
 from ...device import launch, load_module
 from ...validation import integer
 from ..base import Updater
+from ..parameters import Parameter
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
@@ -80,6 +81,22 @@ def active_cells(simulation, cells):
     return cells[integrator.active[simulation.state.cell_replica_np()[cells]]]
 
 
+def _optional_rate(name, value):
+    return None if value is None else _rate(name, value)
+
+
+def _division_rule(name, value):
+    if not callable(value) and value not in ("rate", "area"):
+        raise ValueError(f"rule must be 'rate', 'area' or a callable rule(simulation) -> cell ids, got {value!r}")
+    return value
+
+
+def _division_axis(name, value):
+    if not callable(value) and value not in ("hertwig", "random"):
+        raise ValueError(f"axis must be 'hertwig', 'random' or a callable axis(simulation, cells), got {value!r}")
+    return value
+
+
 class Division(Updater):
     """Divide cells chosen by a rule, each through its centre across a chosen axis.
 
@@ -119,25 +136,27 @@ class Division(Updater):
     per_replica = ("last_divisions", "total_divisions", "refusals")
     checkpoint_fields = ("lineage",) + per_replica
 
+    rule = Parameter(_division_rule)
+    rate = Parameter(_optional_rate)
+    area_threshold = Parameter(_optional_rate)
+    axis = Parameter(_division_axis)
+    max_cells = Parameter(lambda name, value: None if value is None else integer(name, value, minimum=1))
+    dt = Parameter(_optional_rate)
+
     def __init__(self, rule="rate", rate=None, area_threshold=None, axis="hertwig", max_cells=None, dt=None,
                  trigger=1):
         super().__init__(trigger)
-        if not callable(rule) and rule not in ("rate", "area"):
-            raise ValueError(f"rule must be 'rate', 'area' or a callable rule(simulation) -> cell ids, got {rule!r}")
-        if rule == "rate":
-            if rate is None:
-                raise ValueError("rule='rate' needs rate (divisions per cell per unit time)")
-            rate = _rate("rate", rate)
-        if rule == "area":
-            if area_threshold is None:
-                raise ValueError("rule='area' needs area_threshold (cells with A > area_threshold * <A> divide)")
-            area_threshold = _rate("area_threshold", area_threshold)
-        if not callable(axis) and axis not in ("hertwig", "random"):
-            raise ValueError(f"axis must be 'hertwig', 'random' or a callable axis(simulation, cells), got {axis!r}")
         self.rule, self.rate, self.area_threshold, self.axis = rule, rate, area_threshold, axis
-        self.max_cells = None if max_cells is None else integer("max_cells", max_cells, minimum=1)
-        self.dt = None if dt is None else _rate("dt", dt)
+        self.max_cells = max_cells
+        self.dt = dt
         self.lineage = None
+
+    def check_parameters(self):
+        """The rule's own parameter is given: ``rate`` for "rate", ``area_threshold`` for "area"."""
+        if self.rule == "rate" and self.rate is None:
+            raise ValueError("rule='rate' needs rate (divisions per cell per unit time)")
+        if self.rule == "area" and self.area_threshold is None:
+            raise ValueError("rule='area' needs area_threshold (cells with A > area_threshold * <A> divide)")
 
     def attach(self, simulation):
         super().attach(simulation)

@@ -5,7 +5,14 @@ import numpy as np
 
 from ... import growth
 from ..base import Updater
-from .division import _rate, active_cells, by_area, follow, tally
+from ..parameters import Parameter
+from .division import _optional_rate, active_cells, by_area, follow, tally
+
+
+def _extrusion_rule(name, value):
+    if not callable(value) and value != "area":
+        raise ValueError(f"rule must be 'area' or a callable rule(simulation) -> cell ids, got {value!r}")
+    return value
 
 
 class Extrusion(Updater):
@@ -31,15 +38,17 @@ class Extrusion(Updater):
     per_replica = ("last_extrusions", "total_extrusions", "refusals")
     checkpoint_fields = per_replica
 
+    rule = Parameter(_extrusion_rule)
+    area_threshold = Parameter(_optional_rate)
+
     def __init__(self, rule="area", area_threshold=None, trigger=1):
         super().__init__(trigger)
-        if not callable(rule) and rule != "area":
-            raise ValueError(f"rule must be 'area' or a callable rule(simulation) -> cell ids, got {rule!r}")
-        if rule == "area":
-            if area_threshold is None:
-                raise ValueError("rule='area' needs area_threshold (cells with A < area_threshold * <A> are removed)")
-            area_threshold = _rate("area_threshold", area_threshold)
         self.rule, self.area_threshold = rule, area_threshold
+
+    def check_parameters(self):
+        """The area rule needs ``area_threshold``."""
+        if self.rule == "area" and self.area_threshold is None:
+            raise ValueError("rule='area' needs area_threshold (cells with A < area_threshold * <A> are removed)")
 
     def attach(self, simulation):
         super().attach(simulation)

@@ -5,7 +5,23 @@ import numpy as np
 
 from ...constraints import Sphere
 from ..base import Updater
+from ..parameters import Parameter
 from .division import _rate
+
+
+def _radius_mode(name, value):
+    if not callable(value) and value not in ("fixed", "constant_area"):
+        raise ValueError(f"mode must be 'fixed', 'constant_area' or a callable f(simulation) -> R, got {value!r}")
+    return value
+
+
+def _target_area(name, value):
+    if value is None:
+        return None
+    value = _rate(name, value)
+    if value == 0:
+        raise ValueError("area must be > 0")
+    return value
 
 
 class RadiusSchedule(Updater):
@@ -28,31 +44,35 @@ class RadiusSchedule(Updater):
 
     narrowable = True
     in_minimize = False
-    per_replica = ("area", "counts")
+    per_replica = ("target_area", "counts")
     surface_needs = ("total_area_np",)
+
+    mode = Parameter(_radius_mode)
+    area = Parameter(_target_area)
 
     def __init__(self, mode="constant_area", area=None, trigger=1):
         super().__init__(trigger)
-        if not callable(mode) and mode not in ("fixed", "constant_area"):
-            raise ValueError(f"mode must be 'fixed', 'constant_area' or a callable f(simulation) -> R, got {mode!r}")
+        self.target_area = None
         self.mode = mode
-        self._area = None if area is None else _rate("area", area)
-        if self._area == 0:
-            raise ValueError("area must be > 0")
-        self.area = None
+        self.area = area
+
+    def parameters_changed(self, name):
+        """A new ``area`` is every replica's target <A> from the next pass on."""
+        if name == "area" and self.area is not None and self.target_area is not None:
+            self.target_area = np.full(len(self.target_area), self.area)
 
     def attach(self, simulation):
         super().attach(simulation)
         if not isinstance(simulation.state.constraint, Sphere):
             raise ValueError(f"RadiusSchedule needs a Sphere, got {simulation.state.constraint!r}")
         state = simulation.state
-        self.area = (np.full(state.n_replicas, self._area) if self._area is not None
-                     else np.array(state.mean_cell_area, dtype=np.float64))
+        self.target_area = (np.full(state.n_replicas, self.area) if self.area is not None
+                            else np.array(state.mean_cell_area, dtype=np.float64))
         self.counts = np.full(state.n_replicas, -1, dtype=np.int64)   # N at the last "constant_area" pass
 
     def state_to_save(self) -> dict:
         """The target <A> per replica and the cell counts of the last "constant_area" pass."""
-        return {"area": self.area.copy(), "counts": self.counts.copy()}
+        return {"area": self.target_area.copy(), "counts": self.counts.copy()}
 
     def restore_state(self, data: dict):
         """``counts`` always; ``area`` unless the script gives one (the default, each replica's <A> at
@@ -63,8 +83,8 @@ class RadiusSchedule(Updater):
                 raise ValueError(f"RadiusSchedule: saved {name!r} has shape {np.shape(data[name])}, but the State "
                                  f"has {n} replicas")
         self.counts = np.asarray(data["counts"], dtype=np.int64).copy()
-        if self._area is None:
-            self.area = np.asarray(data["area"], dtype=np.float64).copy()
+        if self.area is None:
+            self.target_area = np.asarray(data["area"], dtype=np.float64).copy()
 
     def target(self, simulation):
         """The radius each replica should have now (NumPy, per replica)."""
@@ -72,7 +92,7 @@ class RadiusSchedule(Updater):
         if self.mode == "fixed":
             return state.radius_np()
         if self.mode == "constant_area":
-            return np.sqrt(state.cells_per_replica * self.area / (4.0 * np.pi))
+            return np.sqrt(state.cells_per_replica * self.target_area / (4.0 * np.pi))
         r = np.broadcast_to(np.asarray(self.mode(simulation), dtype=np.float64), (state.n_replicas,)).copy()
         if not np.all(np.isfinite(r)) or np.any(r <= 0):
             raise ValueError(f"the radius schedule returned {r.tolist()}; radii must be positive and finite")

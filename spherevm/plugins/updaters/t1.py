@@ -6,6 +6,7 @@ import numpy as np
 from ... import folding, topology
 from ...constraints.kernels import KERNEL_SURFACES
 from ..base import Minimizer, Updater
+from ..parameters import Parameter
 from ...validation import integer, positive
 from .t1_device import DevicePass
 
@@ -13,6 +14,18 @@ PRESETS = {
     # The rules of the paper's own code: threshold 0.1, new edge twice the old length.
     "reference": dict(threshold=0.1, new_length=None, length_factor=2.0),
 }
+
+
+def _preset(name, value):
+    if value is not None and value not in PRESETS:
+        raise ValueError(f"preset must be one of {sorted(PRESETS)} or None, got {value!r}")
+    return value
+
+
+def _count_flip_backs(name, value):
+    if value not in (None, True, False):
+        raise ValueError(f"count_flip_backs must be None (auto), True or False, got {value!r}")
+    return value
 
 
 class T1(DevicePass, Updater):
@@ -52,34 +65,57 @@ class T1(DevicePass, Updater):
     immediately short again). See docs/t1.md.
     """
 
+    preset = Parameter(_preset)
+    threshold = Parameter(positive)
+    new_length = Parameter(lambda name, value: None if value is None else positive(name, value))
+    length_factor = Parameter(lambda name, value: None if value is None else positive(name, value))
+    max_flip_backs = Parameter(lambda name, value: integer(name, value, minimum=1))
+    reset_velocities = Parameter(lambda name, value: bool(value))
+    count_flip_backs = Parameter(_count_flip_backs)
+
     def __init__(self, threshold=0.04, new_length=0.12, length_factor=None, preset=None, trigger=1,
                  reset_velocities=True, max_flip_backs=100, count_flip_backs=None):
         super().__init__(trigger)
         if preset is not None:
-            if preset not in PRESETS:
-                raise ValueError(f"preset must be one of {sorted(PRESETS)} or None, got {preset!r}")
-            threshold, new_length, length_factor = (PRESETS[preset][k] for k in
+            threshold, new_length, length_factor = (PRESETS[_preset("preset", preset)][k] for k in
                                                     ("threshold", "new_length", "length_factor"))
+        if new_length is None and length_factor is None:
+            raise ValueError("give new_length (in units of sqrt(<A>)) or length_factor")
+        self.threshold = threshold
+        self.length_factor = length_factor
+        self.new_length = None if length_factor is not None else new_length
+        self.max_flip_backs = max_flip_backs
+        self.reset_velocities = reset_velocities
+        self.count_flip_backs = count_flip_backs
         self.preset = preset
-        self.threshold = positive("threshold", threshold)
-        if length_factor is not None:
-            self.length_factor, self.new_length = positive("length_factor", length_factor), None
+        self._reset_counters(0)
+
+    def check_parameters(self):
+        """Exactly one of new_length (> threshold) and length_factor (> 1)."""
+        if self.length_factor is not None:
             if self.length_factor <= 1:
                 raise ValueError(f"length_factor must be > 1 (a shorter new edge is short again and flips "
-                                 f"straight back), got {length_factor!r}")
-        else:
-            if new_length is None:
-                raise ValueError("give new_length (in units of sqrt(<A>)) or length_factor")
-            self.new_length, self.length_factor = positive("new_length", new_length), None
-            if self.new_length <= self.threshold:
-                raise ValueError(f"new_length must be finite and > threshold={self.threshold} "
-                                 f"(else the new edge flips straight back), got {new_length!r}")
-        self.max_flip_backs = integer("max_flip_backs", max_flip_backs, minimum=1)
-        self.reset_velocities = bool(reset_velocities)
-        if count_flip_backs not in (None, True, False):
-            raise ValueError(f"count_flip_backs must be None (auto), True or False, got {count_flip_backs!r}")
-        self.count_flip_backs = count_flip_backs
-        self._reset_counters(0)
+                                 f"straight back), got {self.length_factor!r}")
+        elif self.new_length is None:
+            raise ValueError("give new_length (in units of sqrt(<A>)) or length_factor")
+        elif self.new_length <= self.threshold:
+            raise ValueError(f"new_length must be finite and > threshold={self.threshold} "
+                             f"(else the new edge flips straight back), got {self.new_length!r}")
+
+    def parameters_changed(self, name):
+        """A preset sets threshold, new_length and length_factor; setting one of those leaves the
+        preset (``preset`` becomes None); new_length and length_factor replace each other."""
+        if name == "preset":
+            if self.preset is not None:
+                self.__dict__.update({k: v for k, v in PRESETS[self.preset].items()
+                                      if k in ("threshold", "new_length", "length_factor")})
+            return
+        if name in ("threshold", "new_length", "length_factor"):
+            self.__dict__["preset"] = None
+        if name == "new_length" and self.new_length is not None:
+            self.__dict__["length_factor"] = None
+        elif name == "length_factor" and self.length_factor is not None:
+            self.__dict__["new_length"] = None
 
     def _reset_counters(self, n_replicas):
         self.last_flips = np.zeros(n_replicas, dtype=np.int64)

@@ -80,8 +80,8 @@ def fire_t1_sim(n_cells, replicas, device):
 
 
 def brownian_step(sim):
-    sim._update()
-    sim._integrate()
+    sim.run_updaters()
+    sim.integrate()
 
 
 def device_bytes_per_cell(n_cells, replicas, gpu):

@@ -11,7 +11,7 @@ Rows:
   (KA = KP = A0 = 1, p0 = 3.8, T1 threshold 0.01, Brownian T = dt = 1e-3): VertexModel(kA=1, kP=1,
   A0=1, P0=3.8) on random tilings with <A> = 1, T1(threshold=0.01, new_length=0.03) every step,
   Brownian(dt=1e-3, T=1e-3), FIRE(dt=0.01). A step is the updaters then the forces and the move
-  (Simulation._update, _integrate), as cellGPU's performTimestep is its forces, move and topology.
+  (Simulation.run_updaters, integrate), as cellGPU's performTimestep is its forces, move and topology.
   "minimize ms/it": a FIRE + T1 iteration as ``Simulation.minimize`` runs it (1,000 iterations, 200
   at 1e6 cells, in CUDA graphs, with a convergence check every 10; :func:`minimize_iteration_time`).
 * cellGPU (``--cellgpu PATH``): the peer binary (../shared/tools/peers/README.md) run in the same
@@ -65,8 +65,8 @@ def simulation(state, device, integrator):
 
 
 def step(sim):
-    sim._update()
-    sim._integrate()
+    sim.run_updaters()
+    sim.integrate()
 
 
 def cpu_force(surface, n_cells=1000, reps=200, warm=20):

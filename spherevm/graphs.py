@@ -22,9 +22,14 @@ time.
 """
 from __future__ import annotations
 
+import logging
+
 from . import tissue_steps
-from .plugins.base import Minimizer
+from .plan import DeviceClock, Plan
+from .plugins.base import Minimizer, Operation
 from .trigger import Always, Periodic
+
+log = logging.getLogger("spherevm")
 
 #: steps per captured graph; the rest of a stretch replays a one-step graph
 GRAPH_STEPS = 8
@@ -53,66 +58,90 @@ def _end_quietly(stream):
         pass
 
 
-def why_not(simulation) -> str | None:
-    """Why ``simulation.run`` cannot use CUDA graphs now (None if it can, as far as triggers tell:
-    each operation is asked when the first stretch starts)."""
+def why_not(simulation, minimizing: bool = False, steps=None) -> str | None:
+    """Why CUDA graphs cannot run ``simulation``'s next steps of ``run`` (or of ``minimize``:
+    ``minimizing``) now: None if they can, as far as triggers and the operations' kinds tell (each
+    operation's :meth:`~spherevm.plugins.base.Operation.capture_ready` is asked when the first
+    stretch starts). ``steps``: the length of the run, for the auto mode's rules."""
+    plan = Plan(simulation, minimizing)
     if not simulation.device.is_gpu:
         return "CUDA graphs need the GPU; this Simulation runs on the CPU"
-    ops = list(simulation.operations.updaters) + [simulation.operations.integrator]
-    for op in ops:
+    for op in [*plan.updaters, plan.integrator]:
         if not _every_step(op.trigger, simulation.timestep):
             return (f"{type(op).__name__} runs on a trigger ({op.trigger!r}) that does not fire every step; a graph "
                     "replays the same steps")
+    for op in plan.device_operations():
+        if type(op).capture_ready is Operation.capture_ready:
+            return f"{type(op).__name__} has no capture_ready (it cannot run inside a CUDA graph)"
+    if plan.minimizing and plan.writers:
+        return "a writer is attached (minimize writes between a move and the next updaters)"
+    if steps is not None and steps < MIN_STEPS:   # auto mode's rules
+        return f"the run has {steps} steps, fewer than graphs.MIN_STEPS = {MIN_STEPS} (a capture costs about ten)"
+    if steps is not None and simulation.state.n_vertices > MAX_VERTICES:
+        return f"the State has more than graphs.MAX_VERTICES = {MAX_VERTICES} vertices"
     return None
 
 
 class StepGraphs:
-    """The CUDA graphs of one ``Simulation.run`` or ``minimize``: ``advance(n)`` runs n steps (a
-    stretch between checks and writes) as replays; ``pause()`` before anything on the host looks at
-    the State."""
+    """The CUDA graphs of one ``Simulation.run`` or ``minimize``: ``advance(n)`` runs n cycles of the
+    plan (a stretch between checks and writes) as replays, or as one launch of the fused steps;
+    ``pause()`` before anything on the host looks at the State."""
 
-    def __init__(self, simulation, required: bool, minimizing: bool = False, fused=None):
+    def __init__(self, plan, required: bool, fused=None):
         import cupy as cp
-        self.sim, self.required, self.minimizing = simulation, required, minimizing
-        self.fused = fused          # None: the fused small-tissue steps where they can run; False: never
+        self.plan, self.sim, self.required = plan, plan.simulation, required
+        self.minimizing = plan.minimizing
+        self.fused = fused          # None: the fused small-tissue steps where they can run; True: must; False: never
         self.tissue = None
         self.stream = cp.cuda.Stream()          # blocking: ordered with the default stream both ways
         self.pool = cp.cuda.MemoryPool()        # the graphs' temporaries, never lent to anything else
         self.counter = cp.zeros(1, dtype=cp.uint64)
         self.graphs = {}
+        self._fell_back = False
 
     @classmethod
-    def for_run(cls, simulation, steps, graphs, fused=None):
+    def reasons(cls, plan, steps):
+        """``(why not CUDA graphs, why not fused)`` for ``plan`` and a run of ``steps`` (None: they
+        can); :meth:`spherevm.plan.Plan.explain` words them."""
+        graphs = why_not(plan.simulation, plan.minimizing, steps)
+        fused = graphs if graphs is not None else tissue_steps.why_not(plan.simulation, plan.minimizing)
+        return graphs, fused
+
+    @classmethod
+    def for_run(cls, plan, steps, graphs, fused=None):
         """The runner for ``run(steps, graphs=..., fused=...)``: None where graphs are off (``graphs=None``:
         on the GPU for runs of at least MIN_STEPS steps on at most MAX_VERTICES vertices)."""
-        return cls._for(simulation, steps, graphs, fused, why_not(simulation), "run")
+        return cls._for(plan, steps, graphs, fused, "run")
 
     @classmethod
-    def for_minimize(cls, simulation, max_steps, graphs, fused=None):
+    def for_minimize(cls, plan, max_steps, graphs, fused=None):
         """The runner for ``minimize(max_steps, graphs=..., fused=...)``: as :meth:`for_run`, and never
         with a writer attached (a writer sees the State between the move and the updaters)."""
-        reason = why_not(simulation)
-        if reason is None and simulation.operations.writers:
-            reason = "a writer is attached (minimize writes between a move and the next updaters)"
-        return cls._for(simulation, max_steps, graphs, fused, reason, "minimize")
+        return cls._for(plan, max_steps, graphs, fused, "minimize")
 
     @classmethod
-    def _for(cls, simulation, steps, graphs, fused, reason, what):
-        if fused not in (None, False):
-            raise ValueError(f"fused must be None (auto) or False, got {fused!r}")
+    def _for(cls, plan, steps, graphs, fused, what):
+        if fused not in (None, True, False):
+            raise ValueError(f"fused must be None (auto), True or False, got {fused!r}")
+        if graphs not in (None, True, False):
+            raise ValueError(f"graphs must be None (auto), True or False, got {graphs!r}")
+        if fused is True:
+            if graphs is False:
+                raise ValueError(f"{what}(fused=True, graphs=False): the fused steps run in the graphs' stretches")
+            reason = why_not(plan.simulation, plan.minimizing) or tissue_steps.why_not(plan.simulation, plan.minimizing)
+            if reason is not None:
+                raise ValueError(f"{what}(fused=True): {reason}")
+            return cls(plan, True, fused)
         if graphs is False:
             return None
-        minimizing = what == "minimize"
-        if graphs is None:
-            small = simulation.state.n_vertices <= MAX_VERTICES
-            if reason is None and small and steps >= MIN_STEPS:
-                return cls(simulation, False, minimizing, fused)
-            return None
-        if graphs is not True:
-            raise ValueError(f"graphs must be None (auto), True or False, got {graphs!r}")
-        if reason is not None:
+        reason = why_not(plan.simulation, plan.minimizing, steps if graphs is None else None)
+        if graphs is True and reason is not None:
             raise ValueError(f"{what}(graphs=True): {reason}")
-        return cls(simulation, True, minimizing, fused)
+        if reason is not None:
+            if plan.simulation.device.is_gpu:
+                log.debug("%s runs step by step: %s", what, reason)
+            return None
+        return cls(plan, graphs is True, fused)
 
     def stretch(self, done, steps, check_every):
         """How many steps to run before the host must look: the next check, the end of the run, or
@@ -129,15 +158,10 @@ class StepGraphs:
         """Most steps :meth:`advance` takes at once (the cell table's padding bounds it)."""
         return FUSED_STRETCH if self._fused_ready() else MAX_STRETCH
 
-    def _ops(self):
-        """The operations that run inside the steps (writers run between stretches)."""
-        ops = self.sim.operations
-        return [*ops.updaters, *ops.forces, ops.integrator]
-
     def _ready(self, steps):
         """Every operation's key for the next ``steps`` steps, or None (naming the one that refused)."""
         keys = []
-        for op in self._ops():
+        for op in self.plan.device_operations():
             key = op.capture_ready(self.sim, steps)
             if key is None:
                 return None, type(op).__name__
@@ -148,13 +172,12 @@ class StepGraphs:
         return (id(state), tuple(a.data.ptr for a in arrays), tuple(keys)), None
 
     def advance(self, steps) -> bool:
-        """Run ``steps`` steps (at most :meth:`max_stretch`) through graphs; False (nothing run)
-        where an operation cannot."""
+        """Run ``steps`` cycles of the plan (at most :meth:`max_stretch`) through graphs or the fused
+        steps; False (nothing run) where an operation cannot."""
         sim = self.sim
-        if not self.minimizing and sim._updated_at == sim.timestep:   # the updaters ran at this timestep already
+        if not self.minimizing and sim.updated_now():   # the updaters ran at this timestep already
             self.pause()
-            sim._update_once()
-            sim._integrate()
+            self.plan.cycle()
             steps -= 1
         if steps == 0:
             return True
@@ -169,21 +192,21 @@ class StepGraphs:
             self.tissue.run(steps)
         else:
             steps = self._replay(key, steps)
-        sim.timestep += steps
-        integrator = sim.operations.integrator
-        if isinstance(integrator, Minimizer):   # its iteration count, which its steps advance on the host
-            integrator.iteration += steps
-        if self.minimizing:          # the updaters of the last timestep ran, those not in_minimize held back
-            sim._updated_at, sim._held_back = sim.timestep, True
-        else:
-            sim._updated_at, sim._held_back = sim.timestep - 1, False
-        sim.state.topology_changed()
-        sim.state_changed()
+        sim.advanced(steps, self.minimizing)
         return True
 
     def _fused_ready(self) -> bool:
-        """Whether this stretch goes to the fused small-tissue steps (:mod:`spherevm.tissue_steps`)."""
-        if self.fused is False or tissue_steps.why_not(self.sim, self.minimizing) is not None:
+        """Whether this stretch goes to the fused small-tissue steps (:mod:`spherevm.tissue_steps`);
+        a fall-back from them is logged once."""
+        if self.fused is False:
+            return False
+        reason = tissue_steps.why_not(self.sim, self.minimizing)
+        if reason is not None:
+            if self.fused is True:
+                raise ValueError(f"{'minimize' if self.minimizing else 'run'}(fused=True): {reason}")
+            if not self._fell_back:
+                log.info("not fused (CUDA graphs of the general kernels instead): %s", reason)
+                self._fell_back = True
             return False
         if self.tissue is None:
             self.tissue = tissue_steps.TissueSteps(self.sim, FUSED_STRETCH, self.minimizing)
@@ -205,28 +228,21 @@ class StepGraphs:
         return steps
 
     def _steps(self, k, capture):
-        """``k`` steps in graph mode: run at once, or captured into a graph (returned; the host's
-        timestep is then put back, the graph has not run yet)."""
+        """``k`` cycles of the plan in graph mode: run at once, or captured into a graph (returned;
+        the host's timestep is then put back, the graph has not run yet)."""
         import cupy as cp
         sim = self.sim
         integrator = sim.operations.integrator
         t0, i0 = sim.timestep, integrator.iteration if isinstance(integrator, Minimizer) else None
-        sim._step_counter = self.counter
+        sim.device_clock = DeviceClock(self.counter, t0)
         sim.state_changed()                  # the first step computes its forces inside the graph
         try:
             with cp.cuda.using_allocator(self.pool.malloc), self.stream:
                 if capture:
                     self.stream.begin_capture()
                 try:
-                    for i in range(k):
-                        sim._step_offset = i
-                        if self.minimizing:   # the move, then the updaters of the next timestep
-                            sim._integrate()
-                            sim._step_offset = i + 1
-                            sim._update(minimizing=True)
-                        else:
-                            sim._update()
-                            sim._integrate()
+                    for _ in range(k):
+                        self.plan.cycle()
                     self.counter += k
                 except Exception as exc:
                     if not capture:
@@ -237,7 +253,7 @@ class StepGraphs:
                                        "runs step by step") from exc
                 graph = self.stream.end_capture() if capture else None
         finally:
-            sim._step_counter, sim._step_offset = None, 0
+            sim.device_clock = None
             sim.state_changed()
         if capture:
             sim.timestep = t0
@@ -247,7 +263,7 @@ class StepGraphs:
 
     def pause(self):
         """Before the host looks at the State: each operation leaves it as the step-by-step path would."""
-        for op in self._ops():
+        for op in self.plan.device_operations():
             op.capture_done(self.sim)
 
     def forget(self):

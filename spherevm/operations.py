@@ -28,9 +28,9 @@ class Operations:
     def integrator(self, value):
         if value is not None and not isinstance(value, Integrator):
             raise TypeError(f"integrator must be a spherevm.plugins.Integrator, got {type(value).__name__}")
-        if value is not None and self._sim._state is not None:
+        if value is not None and self._sim.state is not None:
             value.attach(self._sim)             # a refused integrator leaves the old one in place
-            self._sim._restore_pending(value, "integrator")
+            self._sim.restore_saved_state(value, "integrator")
         if self._integrator is not None:
             self._integrator.detach()
         self._integrator = value
@@ -66,12 +66,12 @@ class _OperationList(MutableSequence):
         return op
 
     def _attach(self, ops, start=0):
-        if self._sim._state is not None:
+        if self._sim.state is not None:
             kind = next(k for k in ("forces", "updaters", "writers")
                         if getattr(self._sim.operations, k, None) is self)
             for i, op in enumerate(ops):
                 op.attach(self._sim)
-                self._sim._restore_pending(op, f"{kind}.{start + i}")
+                self._sim.restore_saved_state(op, f"{kind}.{start + i}")
 
     def __getitem__(self, i):
         return self._items[i]

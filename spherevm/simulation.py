@@ -1,13 +1,16 @@
 """Simulation: owns the State and the operations, runs steps and minimisations."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from . import shapes
 from .device import read_replica_summary, replica_summary, resolve
+from .graphs import StepGraphs
 from .operations import Operations
+from .minimization import Minimization, MinimizeResult
+from .plan import Plan
 from .plugins.base import Minimizer, compute_all
 from .validation import GPU_RUN_BYTES_PER_CELL, check_memory, integer
 
@@ -21,31 +24,6 @@ class _ForceCache:
     cell_energy: object
     summary: object = None
     summary_host: tuple = None
-
-
-@dataclass
-class MinimizeResult:
-    """Outcome of :meth:`Simulation.minimize`, one entry per replica (NumPy arrays)."""
-    converged: np.ndarray
-    reason: np.ndarray          # "force", "energy", "max_steps" or an operation's halt reason
-    energy: np.ndarray          # total energy per replica
-    energy_per_cell: np.ndarray
-    max_force: np.ndarray
-    steps: np.ndarray
-    mean_shape_index: np.ndarray = field(default=None)
-
-    @property
-    def all_converged(self) -> bool:
-        return bool(np.all(self.converged))
-
-    def table(self) -> str:
-        """A plain-text table, one row per replica."""
-        rows = ["replica   energy/cell  <P/sqrt(A)>     max|F|  converged  reason          steps"]
-        for r in range(len(self.converged)):
-            rows.append(f"{r:7d}  {self.energy_per_cell[r]:12.6e}  {self.mean_shape_index[r]:11.6f}  "
-                        f"{self.max_force[r]:9.3e}  {'yes' if self.converged[r] else 'no':9s}  "
-                        f"{self.reason[r]:14s}  {int(self.steps[r]):5d}")
-        return "\n".join(rows)
 
 
 class Simulation:
@@ -67,8 +45,8 @@ class Simulation:
         self._pending = {}          # operation state from a checkpoint, by key, until picked up
         self._updated_at = None     # the timestep at which the updaters last ran
         self._held_back = False     # ... in a minimisation, which held back those with in_minimize False
-        self._step_counter = None   # inside CUDA graphs: the device's timestep (spherevm.graphs) ...
-        self._step_offset = 0       # ... plus this step's place in the graph
+        #: inside CUDA graphs: the device's timestep (:class:`spherevm.plan.DeviceClock`), else None
+        self.device_clock = None
         self._zero_step = None
         self.operations = Operations(self)
 
@@ -95,10 +73,18 @@ class Simulation:
         self._updated_at, self._held_back = updated_at, held_back
         for key, op in list(self.operations.keyed()):
             op.attach(self)
-            self._restore_pending(op, key, keyed=True)
+            self.restore_saved_state(op, key, keyed=True)
 
-    def _restore_pending(self, op, where, keyed=False):
-        """Hand ``op`` (just attached) its saved state from the checkpoint, if there is one."""
+    def restore_saved_state(self, op, where, keyed=False):
+        """Hand ``op`` (just attached) its saved state from the checkpoint, if there is one.
+
+        Parameters
+        ----------
+        op : spherevm.plugins.Operation
+            The operation that just attached.
+        where : str
+            Its place (``"integrator"``, ``"forces.0"``, ...), or its checkpoint key if ``keyed``.
+        """
         key = where if keyed else op.checkpoint_key(where)
         data = self._pending.pop(key, None)
         if data is not None:
@@ -147,7 +133,8 @@ class Simulation:
                 out.setdefault(f"op/{key}/{field_name}", value)
         return out
 
-    def _require_state(self):
+    def require_state(self):
+        """Raise RuntimeError saying how to set one if the Simulation has no State yet."""
         if self._state is None:
             raise RuntimeError("set sim.state first, for example sim.state = spherevm.init.random_tiling(64)")
 
@@ -155,15 +142,16 @@ class Simulation:
     def capturing(self) -> bool:
         """Whether steps now run in CUDA-graph mode (:mod:`spherevm.graphs`): operations then read
         nothing back and take the timestep from :meth:`kernel_timestep`."""
-        return self._step_counter is not None
+        return self.device_clock is not None
 
     def kernel_timestep(self):
         """The timestep as two kernel arguments ``(step0, step_add)``, a device array: the kernel
         takes ``step0 + *step_add``. Step by step ``(timestep, 0)``; in CUDA graphs ``(the step's
         place in the graph, a device counter the graph advances by its length)``, so a replayed
         step draws its own Philox numbers."""
-        if self._step_counter is not None:
-            return np.uint64(self._step_offset), self._step_counter
+        clock = self.device_clock
+        if clock is not None:
+            return np.uint64(self.timestep - clock.start), clock.counter
         if self._zero_step is None:
             self._zero_step = self.device.xp.zeros(1, dtype=np.uint64)
         return np.uint64(self.timestep), self._zero_step
@@ -175,7 +163,7 @@ class Simulation:
     # ------------------------------------------------------------------ forces and logging
     def compute_forces(self):
         """Summed forces ``(V, 3)`` and energy per replica on the device, cached until the state changes."""
-        self._require_state()
+        self.require_state()
         if self._cache is None:
             if not self.operations.forces:   # free vertices: zero force, zero energy
                 xp = self.device.xp
@@ -247,18 +235,18 @@ class Simulation:
             raise ValueError(f"unknown loggable {name!r}; available: {sorted(table)}")
         return table[name](self)
 
-    # ------------------------------------------------------------------ running
-    def _update_once(self, minimizing=False):
-        """The updaters of this timestep, unless they ran at it already (a ``minimize`` stops right
-        after they ran; a resumed one, or a restart from its last frame, must not run them twice).
-        ``minimizing``: those that sit minimisations out (``Updater.in_minimize`` False: growth) are
-        held back; a ``run`` that goes on at the same timestep runs them."""
+    # ------------------------------------------------------------------ stepping (the executors' API)
+    def update(self, minimizing=False):
+        """Run the updaters of this timestep, unless they ran at it already (a ``minimize`` stops
+        right after they ran; a resumed one, or a restart from its last frame, must not run them
+        twice). ``minimizing``: those that sit minimisations out (``Updater.in_minimize`` False:
+        growth) are held back; a ``run`` that goes on at the same timestep runs them."""
         if self._updated_at != self.timestep:
-            self._update(minimizing)
+            self.run_updaters(minimizing)
         elif self._held_back and not minimizing:
-            self._update(held_only=True)
+            self.run_updaters(held_only=True)
 
-    def _update(self, minimizing=False, held_only=False):
+    def run_updaters(self, minimizing=False, held_only=False):
         """Run the updaters whose trigger fires now: every one, those with ``in_minimize`` while
         ``minimizing``, or (``held_only``) those a minimisation held back at this timestep."""
         self._updated_at, self._held_back = self.timestep, minimizing
@@ -267,24 +255,45 @@ class Simulation:
             if runs and u.trigger(self.timestep):
                 u.update(self, self.timestep)
 
-    def _integrate(self):
+    def updated_now(self) -> bool:
+        """Whether the updaters already ran at the current timestep."""
+        return self._updated_at == self.timestep
+
+    def integrate(self):
+        """The forces and the integrator's step (if its trigger fires), then the timestep advances."""
         integrator = self.operations.integrator
         if integrator.trigger(self.timestep):
             forces, _ = self.compute_forces()
             integrator.step(self, forces)
         self.timestep += 1
 
-    def _write(self, final=False):
+    def advanced(self, steps: int, minimizing: bool):
+        """An executor ran ``steps`` whole cycles of the plan on the device (the timestep and the
+        minimiser's iteration count advance on the host; the updaters count as run at the last
+        timestep, those not ``in_minimize`` held back when ``minimizing``; topology and forces go
+        stale)."""
+        self.timestep += steps
+        integrator = self.operations.integrator
+        if isinstance(integrator, Minimizer):
+            integrator.iteration += steps
+        if minimizing:
+            self._updated_at, self._held_back = self.timestep, True
+        else:
+            self._updated_at, self._held_back = self.timestep - 1, False
+        self._state.topology_changed()
+        self.state_changed()
+
+    def write(self, final=False):
         """Run the writers whose trigger fires now (``final``: also those whose ``final`` is set, at
         the end of a run or minimisation), each at most once per timestep."""
         ts = self.timestep
         due = [w for w in self.operations.writers
-               if (w.trigger(ts) or (final and getattr(w, "final", False))) and getattr(w, "_last_written", None) != ts]
+               if (w.trigger(ts) or (final and w.final)) and w.last_written != ts]
         if due and self.operations.integrator is not None:
             self.operations.integrator.check(self)   # a step the GPU flagged: no frame of a broken state
         for w in due:
             w.write(self, ts)
-            w._last_written = ts
+            w.last_written = ts
 
     def run(self, steps: int, check_every=None, progress=None, graphs=None, fused=None):
         """Advance ``steps`` timesteps: updaters, forces, integrator, writers on each.
@@ -305,24 +314,23 @@ class Simulation:
         bit). None (default): wherever ``tissue_steps.why_not`` finds nothing against it; False:
         graph replays of the general kernels.
         """
-        from .graphs import StepGraphs
-        self._require_state()
+        self.require_state()
         steps = integer("steps", steps)
         if self.operations.integrator is None:
             raise RuntimeError("set sim.operations.integrator before run()")
         if check_every is None:
             check_every = 100 if self.device.is_gpu else 1
         check_every = integer("check_every", check_every, minimum=1)
-        runner = StepGraphs.for_run(self, steps, graphs, fused)
-        self._write()   # the frame a run starts from (writers skip timesteps they already wrote)
+        plan = Plan(self)
+        runner = StepGraphs.for_run(plan, steps, graphs, fused)
+        self.write()   # the frame a run starts from (writers skip timesteps they already wrote)
         try:
             done = 0
             while done < steps:
                 n = runner.stretch(done, steps, check_every) if runner is not None else 1
                 if runner is None or not runner.advance(n):
                     for _ in range(n):
-                        self._update_once()
-                        self._integrate()
+                        plan.cycle()
                 done += n
                 if done % check_every == 0 or done == steps:
                     self.check_finite()
@@ -331,16 +339,36 @@ class Simulation:
                             runner.pause()
                             runner.forget()
                         progress(done, int(steps))
-                if runner is not None and any(w.trigger(self.timestep) for w in self.operations.writers):
+                if runner is not None and any(w.trigger(self.timestep) for w in plan.writers):
                     runner.pause()
-                self._write()
+                self.write()
             if runner is not None:
                 runner.pause()
-            self._write(final=True)   # the state the run ends in, for writers that ask for it
+            self.write(final=True)   # the state the run ends in, for writers that ask for it
         finally:
             if runner is not None:
                 runner.pause()
             self.flush()
+
+    def explain(self, minimize: bool = False, steps: int = 1000) -> str:
+        """Which executor would run each operation in a ``run(steps)`` (or ``minimize(max_steps=
+        steps)``) now, and why: step by step, CUDA graphs or the fused small-tissue steps.
+
+        Parameters
+        ----------
+        minimize : bool
+            Explain a minimisation instead of a run.
+        steps : int
+            The length of the run (CUDA graphs serve runs of at least ``graphs.MIN_STEPS``).
+
+        Returns
+        -------
+        str
+            The order of a step, then one line per operation.
+        """
+        self.require_state()
+        plan = Plan(self, minimizing=minimize)
+        return plan.explain(*StepGraphs.reasons(plan, steps))
 
     def check_finite(self):
         """Raise FloatingPointError naming the first vertex with a non-finite position (or the
@@ -358,16 +386,17 @@ class Simulation:
             raise FloatingPointError(f"non-finite position at timestep {self.timestep}: replica {r}, vertex {v}; "
                                      "reduce dt or check the forces (the last good frame is on disk)")
 
-    def _narrow(self, keep):
-        """Step only replicas ``keep`` (of the stepped State) from now on; returns what _widen needs."""
+    def narrow(self, keep):
+        """Step only replicas ``keep`` (of the stepped State) from now on (a minimisation's finished
+        replicas cost nothing more); returns what :meth:`widen` needs."""
         selection = self._state.selection(keep)
         part = self._state.select(selection)
         saved = [op.narrow(selection) for op in self.operations]   # they still see the wider State
         wider, self._state, self._cache = self._state, part, None
         return selection, wider, saved
 
-    def _widen(self, selection, wider, saved):
-        """Undo one :meth:`_narrow`: the narrow State's replicas go back into the wider one."""
+    def widen(self, selection, wider, saved):
+        """Undo one :meth:`narrow`: the narrow State's replicas go back into the wider one."""
         wider.write_back(selection, self._state)
         self._state, self._cache = wider, None
         for op, data in zip(self.operations, saved):
@@ -418,9 +447,8 @@ class Simulation:
         minimisation bit for bit). None (default): wherever ``tissue_steps.why_not`` finds nothing
         against it; False: graph replays of the general kernels.
         """
-        from .graphs import StepGraphs
         from .plugins.integrators import FIRE   # the default minimiser
-        self._require_state()
+        self.require_state()
         if not self.operations.forces:
             raise RuntimeError("no force in sim.operations.forces; append one, e.g. "
                                "spherevm.plugins.forces.VertexModel.dimensionless(kr=1, p0=3.8)")
@@ -438,43 +466,10 @@ class Simulation:
                 op.reset_halted()
         limit = fire.iteration + max_steps
         narrow = narrow and not self.operations.writers and all(op.narrowable for op in self.operations)
-        n_rep, n_cells = self._state.n_replicas, self._state.cells_per_replica
-        narrowed = []
-        runner = StepGraphs.for_minimize(self, max_steps, graphs, fused)
-        self._write()
-        try:
-            while True:
-                self._update_once(minimizing=True)
-                if fire.check_due() or (fire.iteration >= limit and fire._checked_at != fire.iteration):
-                    fire.check_convergence(self)
-                if fire._checked_at == fire.iteration:
-                    self.check_finite()   # NaN, or an exploding step the GPU kernel flagged
-                    running = int((~fire.stopped).sum())
-                    if progress is not None:
-                        if runner is not None:
-                            runner.pause()
-                        progress(fire.iteration, n_rep - running, n_rep)
-                    if running == 0 or fire.iteration >= limit:
-                        break
-                    if narrow and 2 * running <= len(fire.stopped):
-                        if runner is not None:
-                            runner.pause()
-                        narrowed.append(self._narrow(np.flatnonzero(~fire.stopped)))
-                if runner is not None:   # the iterations up to the next check (or the limit) in graphs
-                    if runner.advance(min(fire.steps_to_check(), limit - fire.iteration, runner.max_stretch())):
-                        continue
-                    runner = None        # an operation cannot: step by step from here
-                self._integrate()
-                self._write()
-        finally:
-            if runner is not None:
-                runner.pause()
-            while narrowed:
-                self._widen(*narrowed.pop())
-            for u in self.operations.updaters:
-                if not u.in_minimize:
-                    u.after_minimize(self)
-        self._write(final=True)   # the state the minimisation ends in, for writers that ask for it
+        n_cells = self._state.cells_per_replica
+        plan = Plan(self, minimizing=True)
+        Minimization(plan, StepGraphs.for_minimize(plan, max_steps, graphs, fused), limit, narrow, progress).run()
+        self.write(final=True)   # the state the minimisation ends in, for writers that ask for it
         self.flush()
         _, energy = self.compute_forces()
         e = self.device.to_numpy(energy)

@@ -211,7 +211,7 @@ class State:
 
     def to(self, device) -> "State":
         """A copy of this State on another device (``"cpu"``, ``"gpu"``, ``"auto"`` or a Device)."""
-        return State(**self._arrays_np(), constraint=self.constraint, device=device, validate=False)
+        return State(**self.arrays_np(), constraint=self.constraint, device=device, validate=False)
 
     def copy(self) -> "State":
         return State(**self._arrays(), constraint=self.constraint, device=self.device, validate=False)
@@ -222,7 +222,8 @@ class State:
                     vertex_cells=self.vertex_cells.copy(), vertex_start=self.vertex_start.copy(),
                     cell_start=self.cell_start.copy(), **{self.size_name: getattr(self, self.size_name).copy()})
 
-    def _arrays_np(self):
+    def arrays_np(self):
+        """Every array of the State by its constructor's name, as NumPy copies."""
         return {k: self.device.to_numpy(v) for k, v in self._arrays().items()}
 
     def replica(self, r: int) -> "State":
@@ -295,7 +296,7 @@ class State:
                                  "vertex_cells", size)}
         vstart, cstart = [0], [0]
         for s in states:
-            a = s._arrays_np()
+            a = s.arrays_np()
             v0, c0 = vstart[-1], cstart[-1]
             cv = np.full((s.n_cells, width), -1, dtype=np.int32)
             cv[:, :s.max_sides] = np.where(a["cell_vertices"] >= 0, a["cell_vertices"] + v0, -1)

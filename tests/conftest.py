@@ -94,12 +94,12 @@ STATE_TOPOLOGY = ("cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cel
 
 def snapshot(state):
     """NumPy copies of every array of a State (either device)."""
-    return {k: np.array(v, copy=True) for k, v in state._arrays_np().items()}
+    return {k: np.array(v, copy=True) for k, v in state.arrays_np().items()}
 
 
 def assert_same_state(restored, ref, where=""):
     """``restored`` holds exactly the arrays of the snapshot ``ref``: positions bitwise."""
-    a = restored._arrays_np()
+    a = restored.arrays_np()
     assert a["positions"].dtype == np.float64
     assert a["positions"].tobytes() == ref["positions"].tobytes(), f"positions {where}"
     for k in STATE_TOPOLOGY:

@@ -131,9 +131,9 @@ def fuzz(state, seed, passes, device, check_every, kick=0.08, threshold=0.25, fo
                                           st.radius[st.vertex_replica])
         sim.state_changed()
         if folds is None:
-            sim._update()
+            sim.run_updaters()
         else:
-            folds.around(sim.state, sim._update)
+            folds.around(sim.state, sim.run_updaters)
         if k % check_every == 0 or k == passes:
             check_network(sim.state)
     return int(sim.log("t1_total_flips").sum()), int(sim.log("t1_total_refused").sum())
@@ -171,8 +171,8 @@ def hot_brownian_folds(device, steps=100):
     sim.operations.integrator = svm.plugins.integrators.Brownian(dt=0.01, T=0.2)
     folds = FoldCounter()
     for _ in range(steps):
-        folds.around(sim.state, sim._update)
-        sim._integrate()
+        folds.around(sim.state, sim.run_updaters)
+        sim.integrate()
         sim.check_finite()
     return folds, int(sim.log("t1_total_flips").sum())
 

@@ -118,7 +118,7 @@ def test_t1_passes_match_numpy_flip_for_flip(rules, radius):
         version = sims["gpu"].state.topology_version
         for sim in sims.values():
             kick_on_surface(sim, kick)
-            sim._update()
+            sim.run_updaters()
         c, g = sims["cpu"], sims["gpu"]
         if c.log("t1_flips").sum():
             assert g.state.topology_version > version, "a pass that flips makes topology caches stale"
@@ -182,7 +182,7 @@ def test_flip_back_memory_matches_numpy_across_passes(read_half_way):
         kick = rng.normal(scale=0.08, size=state.positions.shape)
         for sim in sims.values():
             kick_on_surface(sim, kick)
-            sim._update()
+            sim.run_updaters()
         if i == 29 and read_half_way:
             g._sync_counters()          # a read half-way: the log starts again from empty
     rows = len(g._gpu["log"])
@@ -210,7 +210,7 @@ def test_flip_log_is_replayed_before_a_pass_could_write_past_its_end():
         kick = rng.normal(scale=0.08, size=state.positions.shape)
         for sim in sims.values():
             kick_on_surface(sim, kick)
-            sim._update()
+            sim.run_updaters()
         assert bool((guard[4:] == -7).all()), f"pass {i} wrote past the end of the log"
         if i == 0:
             assert c.total_flips.sum() > 4, "the first pass flips more than the small log holds"

@@ -8,6 +8,8 @@ widen the cell table, so the device-side candidate count and width are exercised
 import numpy as np
 import pytest
 
+from spherevm.plan import Plan
+
 import spherevm as svm
 from spherevm import graphs
 from spherevm.plugins.forces import Bending
@@ -152,8 +154,8 @@ def test_graphs_need_the_gpu_and_a_clear_choice():
     with pytest.raises(ValueError, match="need the GPU"):
         sim.run(5, graphs=True)
     with pytest.raises(ValueError, match="graphs must be None"):
-        graphs.StepGraphs.for_run(sim, 5, "yes")
-    assert graphs.StepGraphs.for_run(sim, 10_000, None) is None      # auto on the CPU: step by step
+        graphs.StepGraphs.for_run(Plan(sim), 5, "yes")
+    assert graphs.StepGraphs.for_run(Plan(sim), 10_000, None) is None      # auto on the CPU: step by step
     sim.run(5)
     assert sim.timestep == 5
 

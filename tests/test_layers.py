@@ -20,7 +20,7 @@ LAYERS = [
     ["state"],
     ["shapes", "gsdio", "init", "init_plane"],
     ["plugins", "testing"],
-    ["operations", "tissue_steps", "graphs"],
+    ["operations", "plan", "minimization", "tissue_steps", "graphs"],
     ["simulation"],
     ["analysis", "protocols", "sweeps", "export", "render", "ovito"],
     ["cli", "__main__"],

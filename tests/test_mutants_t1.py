@@ -215,8 +215,8 @@ def test_gpu_pass_with_more_candidates_than_room_matches_numpy():
     sims = t1_simulations(state, threshold=1.0, new_length=1.5, max_flip_backs=10 ** 6)
     c, g = sims["cpu"], sims["gpu"]
     for _ in range(3):
-        c._update()
-        g._update()
+        c.run_updaters()
+        g.run_updaters()
         for name in ("t1_flips", "t1_refused", "t1_total_flips", "t1_total_refused", "t1_flip_backs"):
             assert np.array_equal(g.log(name), c.log(name)), name
         assert np.array_equal(g.state.vertex_neighbors.get(), c.state.vertex_neighbors)

@@ -25,13 +25,13 @@ def mixed_ensemble(device="cpu", replicas=8, n_cells=32):
 
 def counting_narrowings(monkeypatch):
     calls = []
-    original = Simulation._narrow
+    original = Simulation.narrow
 
     def spy(self, keep):
         calls.append(len(keep))
         return original(self, keep)
 
-    monkeypatch.setattr(Simulation, "_narrow", spy)
+    monkeypatch.setattr(Simulation, "narrow", spy)
     return calls
 
 

@@ -107,7 +107,7 @@ def test_planar_t1_passes_match_numpy_flip_for_flip():
         kick = rng.normal(scale=0.06, size=state.positions.shape)
         for sim in sims.values():
             kick_on_surface(sim, kick)
-            sim._update()
+            sim.run_updaters()
         c, g = sims["cpu"], sims["gpu"]
         assert np.array_equal(g.log("t1_flips"), c.log("t1_flips"))
         assert np.array_equal(g.log("t1_refused"), c.log("t1_refused"))

@@ -377,8 +377,8 @@ def test_prefetched_tilings_are_the_chunk_states(surface):
     prefetch = TilingPrefetch(sweep, chunks, workers=2, ahead=1)
     try:
         for c in chunks:
-            got = prefetch.get(c)._arrays_np()
-            ref = sweeps.build_chunk_state(sweep, c)[0]._arrays_np()
+            got = prefetch.get(c).arrays_np()
+            ref = sweeps.build_chunk_state(sweep, c)[0].arrays_np()
             assert got.keys() == ref.keys()
             for key in ref:
                 assert np.array_equal(got[key], ref[key]), (c.id, key)

@@ -141,7 +141,7 @@ def test_conflicting_flips_lowest_edge_first_one_per_cell(device):
     index = 3 * u + slot
     sim = _sim_with_t1(s, t1, device=device)
     sim.run(0)
-    sim._update()
+    sim.run_updaters()
     assert sim.log("t1_flips").tolist() == [1]
     low = int(np.argmin(index))
     high = 1 - low
@@ -152,7 +152,7 @@ def test_conflicting_flips_lowest_edge_first_one_per_cell(device):
     hi_pair = [u[high], s.vertex_neighbors[u[high], slot[high]]]
     assert moved[lo_pair].all() and not moved[hi_pair].any()
     # the flipped edge's ends now have other neighbours; the higher edge waits for the next pass
-    sim._update()
+    sim.run_updaters()
     assert sim.log("t1_flips").tolist() == [1]
     assert sim.log("t1_total_flips").tolist() == [2]
     sim.state.validate()
@@ -186,7 +186,7 @@ def _random_walk_with_t1(state, seed, passes, kick=0.08, threshold=0.25, device=
         noise = st.device.asarray(rng.normal(scale=kick, size=st.positions.shape))
         rad = st.radius[st.vertex_replica]
         st.positions = con.project_normal(st.positions + con.project_tangent(st.positions, noise), rad)
-        sim._update()
+        sim.run_updaters()
         yield sim, t1
 
 
@@ -222,7 +222,7 @@ def test_reference_preset(device):
     s = svm.init.random_tiling(100, seed=3)
     sim = _sim_with_t1(s, t1, device=device)
     u, slot, lengths = t1.short_edges(sim.state)
-    sim._update()
+    sim.run_updaters()
     if len(u):
         assert sim.log("t1_flips").sum() >= 1
 

@@ -84,7 +84,7 @@ def _dodecahedron_pass(new_length):
     t1 = T1(threshold=0.75, new_length=new_length)
     sim.operations.updaters.append(t1)
     before = sim.state.positions.copy()
-    sim._update()
+    sim.run_updaters()
     return sim, t1, before
 
 
@@ -137,7 +137,7 @@ def test_an_edge_turned_past_its_cells_flips_the_other_way():
     sim.state = st
     t1 = T1()
     sim.operations.updaters.append(t1)
-    sim._update()
+    sim.run_updaters()
     assert t1.last_flips.tolist() == [1] and t1.last_refused.tolist() == [0]
     sim.state.validate()
     assert not inverted_corners(sim.state).any()                # the flip cured the swapped edge
@@ -149,11 +149,11 @@ def test_a_folding_flip_on_the_plane_is_refused():
     sim.state = state
     t1 = T1(threshold=2.0, new_length=5.0)
     sim.operations.updaters.append(t1)
-    sim._update()
+    sim.run_updaters()
     assert t1.last_flips.sum() == 0 and t1.last_refused.sum() > 0
     t1b = T1(threshold=2.0, new_length=2.05)
     sim.operations.updaters[:] = [t1b]
-    sim._update()
+    sim.run_updaters()
     assert t1b.last_flips.sum() >= 1
     sim.state.validate()
 

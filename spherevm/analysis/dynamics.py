@@ -99,7 +99,7 @@ def _planar_displacements(traj, origin, remove_drift, scaled):
     pos = traj.positions
     dr = pos[origin:] - pos[origin]
     if remove_drift:
-        dr = dr - replica_mean(dr, rep, traj._order, traj._starts)[:, rep, :]
+        dr = dr - replica_mean(dr, rep, traj.replica_order, traj.replica_starts)[:, rep, :]
     d = np.linalg.norm(dr, axis=-1)
     if scaled:
         d = d / traj.length_unit[rep]
@@ -158,7 +158,7 @@ def _correlate(traj, func, origins, remove_rotation, geodesic, scaled, name, rem
     cells = traj.cells_per_replica
     for i in frames:                     # loop over time origins; each is vectorised over lags and cells
         d = _displacements(traj, int(i), remove_rotation, geodesic, scaled, remove_drift)
-        per_rep = _replica_sum(func(d), traj._order, traj._starts) / cells
+        per_rep = _replica_sum(func(d), traj.replica_order, traj.replica_starts) / cells
         np.add.at(sums, inverse[int(i)], per_rep)
         np.add.at(count, inverse[int(i)], 1)
     per_replica = sums / count[:, None]

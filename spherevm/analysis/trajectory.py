@@ -38,8 +38,8 @@ class Trajectory:
     cell_replica: np.ndarray
     radius: np.ndarray = None
     box: np.ndarray = None
-    _order: np.ndarray = field(default=None, init=False, repr=False, compare=False)
-    _starts: np.ndarray = field(default=None, init=False, repr=False, compare=False)
+    replica_order: np.ndarray = field(default=None, init=False, repr=False, compare=False)
+    replica_starts: np.ndarray = field(default=None, init=False, repr=False, compare=False)
     _unwrapped: np.ndarray = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self):
@@ -83,7 +83,7 @@ class Trajectory:
             raise ValueError(f"replica {int(np.flatnonzero(counts == 0)[0])} has no cells")
         if not np.all(np.isfinite(self.centroids)):
             raise ValueError("centroids contain NaN or inf")
-        self._order, self._starts = _replica_layout(self.cell_replica, n_rep)
+        self.replica_order, self.replica_starts = _replica_layout(self.cell_replica, n_rep)
         if self.box is not None:
             self._unwrapped = unwrap_trajectory(self.centroids, self.box[self.cell_replica])
 
@@ -218,7 +218,7 @@ class Trajectory:
             raise ValueError("without_drift: a tissue on a sphere has no centre-of-mass drift (the centre is fixed); "
                              "use without_rotation()")
         pos = self._unwrapped
-        shift = replica_mean(pos - pos[reference], self.cell_replica, self._order, self._starts)
+        shift = replica_mean(pos - pos[reference], self.cell_replica, self.replica_order, self.replica_starts)
         moved = pos - shift[:, self.cell_replica, :]
         out = moved.copy()
         out[..., :2] = _wrap(np, moved[..., :2], self.box[self.cell_replica])

@@ -130,7 +130,9 @@ class Operation:
     per_vertex = ()
     per_cell = ()
 
-    def _rows(self):
+    def row_attributes(self):
+        """``[(attribute, "replicas" | "vertices" | "cells")]``: the attributes holding one row per
+        replica, vertex or cell (``per_replica``, ``per_vertex``, ``per_cell``)."""
         return [(name, "replicas") for name in self.per_replica] + \
             [(name, "vertices") for name in self.per_vertex] + [(name, "cells") for name in self.per_cell]
 
@@ -139,7 +141,7 @@ class Operation:
         of the State it stepped so far): keep the rows of those replicas, and return what
         :meth:`widen` needs to restore the others."""
         saved = {}
-        for name, axis in self._rows():
+        for name, axis in self.row_attributes():
             full = getattr(self, name)
             saved[name] = full
             setattr(self, name, full[_index_like(full, getattr(selection, axis))])
@@ -148,7 +150,7 @@ class Operation:
     def widen(self, selection, saved):
         """Undo :meth:`narrow`: merge the current rows of the selected replicas into ``saved`` and
         go back to it (the Simulation steps the wider State again)."""
-        for name, axis in self._rows():
+        for name, axis in self.row_attributes():
             full = saved[name]
             full[_index_like(full, getattr(selection, axis))] = getattr(self, name)
             setattr(self, name, full)
@@ -356,7 +358,7 @@ class Minimizer(Integrator):
         """Every replica runs again; the iteration count restarts at 0."""
         n = self._simulation.state.n_replicas
         self.iteration = 0
-        self._checked_at = None
+        self.checked_at = None
         self.replica_converged = np.zeros(n, dtype=bool)
         self.stopped = np.zeros(n, dtype=bool)
         self.reason = np.full(n, "running", dtype=object)
@@ -371,7 +373,7 @@ class Minimizer(Integrator):
         out = super().state_to_save()
         reason = "\n".join(str(r) for r in self.reason)
         out.update(iteration=np.array([self.iteration], dtype=np.int64),
-                   checked_at=np.array([-1 if self._checked_at is None else self._checked_at], dtype=np.int64),
+                   checked_at=np.array([-1 if self.checked_at is None else self.checked_at], dtype=np.int64),
                    replica_converged=self.replica_converged.astype(np.uint8), stopped=self.stopped.astype(np.uint8),
                    steps=self.steps.copy(), active=self.active.astype(np.uint8),
                    reason=np.frombuffer(reason.encode("utf-8"), dtype=np.uint8).copy())
@@ -385,7 +387,7 @@ class Minimizer(Integrator):
             raise ValueError(f"{type(self).__name__}: the checkpoint holds {len(reason)} replicas, the State {n}")
         self.iteration = int(data["iteration"][0])
         checked = int(data["checked_at"][0])
-        self._checked_at = None if checked < 0 else checked
+        self.checked_at = None if checked < 0 else checked
         self.replica_converged = np.asarray(data["replica_converged"]).astype(bool)
         self.stopped = np.asarray(data["stopped"]).astype(bool)
         self.steps = np.asarray(data["steps"]).astype(np.int64)
@@ -412,7 +414,7 @@ class Minimizer(Integrator):
 
     def check_convergence(self, simulation):
         """Stop the replicas that reached a tolerance now, or that an operation halts."""
-        self._checked_at = self.iteration
+        self.checked_at = self.iteration
         state = simulation.state
         fmax, energy, _ = simulation.replica_summary()     # one read-back
         epc = energy / state.cells_per_replica
@@ -438,7 +440,7 @@ class Minimizer(Integrator):
         self.set_active(~self.stopped)
 
     def check_due(self) -> bool:
-        return self.iteration % self.check_every == 0 and self._checked_at != self.iteration
+        return self.iteration % self.check_every == 0 and self.checked_at != self.iteration
 
     def steps_to_check(self) -> int:
         """Iterations that can run before the next convergence check falls due."""
@@ -484,6 +486,8 @@ class Writer(Operation):
     """
 
     final = False
+    #: the timestep this writer last wrote (the Simulation sets it; at most one write a timestep)
+    last_written = None
 
     def write(self, simulation, timestep):
         raise NotImplementedError

@@ -9,7 +9,7 @@ def follow_rows(op, change):
     """Rebuild ``op``'s ``per_cell`` arrays through ``change.cell_source`` (a daughter cell takes
     its mother's row) and its ``per_vertex`` arrays through ``change.vertex_source`` (a created
     vertex gets a zero row); ``per_replica`` rows stay (replicas are neither added nor removed)."""
-    for name, axis in op._rows():
+    for name, axis in op.row_attributes():
         full = getattr(op, name)
         if axis == "replicas" or full is None:
             continue

@@ -49,7 +49,7 @@ def build_tilings(surface: str, n_cells: int, seeds):
 def _tiling_arrays(surface: str, n_cells: int, seeds):
     """:func:`build_tilings` as plain arrays and the constraint (what a process pool can send back)."""
     state = build_tilings(surface, n_cells, seeds)
-    return state._arrays_np(), state.constraint
+    return state.arrays_np(), state.constraint
 
 
 def _tiling_worker():

@@ -210,7 +210,7 @@ def write_gsd(simulation, filename, mode="wb", **options):
     """Write the Simulation's current state as one frame (a checkpoint by default) to ``filename``,
     at ``simulation.timestep``, and close the file: the one-shot form of :class:`GSD` (``mode``
     and ``options`` as there; ``"ab"`` appends a frame to an existing file)."""
-    simulation._require_state()
+    simulation.require_state()
     writer = GSD(1, filename, mode=mode, **options)
     try:
         writer.write(simulation, simulation.timestep)

@@ -209,6 +209,17 @@ def load_module(cu_file, defines=()):
     return _MODULES[key]
 
 
+def load_source(code: str, defines=()):
+    """Compile (once per process, source text and set of ``defines``) generated CUDA source that may
+    include the package's headers and ``.cu`` files, and return it as a :class:`CompiledModule`."""
+    import cupy
+    key = ("source", code, tuple(defines))
+    if key not in _MODULES:
+        options = ("-std=c++17", f"-I{_PACKAGE_DIR}") + tuple(f"-D{name}" for name in defines)
+        _MODULES[key] = CompiledModule(cupy.RawModule(code=code, options=options))
+    return _MODULES[key]
+
+
 def launch(kernel, n, args, block=BLOCK):
     """Launch ``kernel`` with one thread per item over ``n`` items."""
     if n > 0:

@@ -468,7 +468,9 @@ class Simulation:
         narrow = narrow and not self.operations.writers and all(op.narrowable for op in self.operations)
         n_cells = self._state.cells_per_replica
         plan = Plan(self, minimizing=True)
-        Minimization(plan, StepGraphs.for_minimize(plan, max_steps, graphs, fused), limit, narrow, progress).run()
+        runner = StepGraphs.for_minimize(plan, max_steps, graphs, fused)
+        self.write()   # the frame a minimisation starts from
+        Minimization(plan, runner, limit, narrow, progress).run()
         self.write(final=True)   # the state the minimisation ends in, for writers that ask for it
         self.flush()
         _, energy = self.compute_forces()

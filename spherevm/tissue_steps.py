@@ -1,33 +1,34 @@
-"""Many Brownian steps or FIRE iterations of small tissues in one launch: a thread block (or a
-cluster of them) per tissue (tissue_steps.cu).
+"""Many steps of small tissues in one launch, assembled from the operations' fused stages: a thread
+block (or a cluster of them) per tissue (tissue_steps.cu).
 
 Inside CUDA graphs (:mod:`spherevm.graphs`) a small tissue's Brownian step with T1 is still seven
 kernels of a few microseconds each (T1's memset and three kernels, the vertex model's two, the
 move), and the GPU idles between them: about 0.03 ms a step for 8 tissues of 1,024 cells on an
-H200, whatever the size below ~1e4 cells. Here one launch runs a whole stretch of steps (up to the
-next check or write): each tissue's block (or cluster of blocks, for tissues of more than
-VERTICES_PER_BLOCK vertices) keeps its positions, forces, cell coefficients and T1 claims in shared
-memory and runs the phases of every step one after another, with a barrier between them.
+H200, whatever the size below ~1e4 cells. Here one launch runs a whole stretch of the plan's cycles
+(up to the next check or write): each tissue's block (or cluster of blocks, for tissues of more
+than VERTICES_PER_BLOCK vertices) keeps its positions, forces, cell coefficients and the pass's
+claims in shared memory and runs the phases of every step one after another, with a barrier
+between them.
 
-The trajectory is the general kernels' bit for bit: every phase calls the same device function
-(``vertex_model.cuh``, ``t1_pass.cuh``, ``brownian.cuh``) with the same global indices, so the
-Philox draws, the flips (lowest edge index wins) and the arithmetic are the same. The tests compare
-the two paths' positions, topology and counters exactly (``tests/test_tissue_steps.py``).
+The kernel is assembled from the stages of the operations present
+(:meth:`spherevm.plugins.base.Operation.fused_stage`, :mod:`spherevm.plugins.fusion`): the forces'
+stages, the integrator's (a run's move, or a minimiser's sums, control and move) and at most one
+updater's pass. It is compiled once per combination of stages, surface and cluster size. Nothing
+here names an operation: an operation without a stage (None) keeps the steps on CUDA graphs of
+the general kernels, and :func:`why_not` says which. Each stage calls the same device functions as
+its operation's general kernels with the same global indices, so the trajectory is the general
+kernels' bit for bit: the same Philox draws, the same flips (lowest edge index wins), the same
+arithmetic, the forces summed in the operations' order (``tests/test_tissue_steps.py``).
 
-It serves ``Simulation.run`` where :func:`why_not` finds nothing against it: the GPU, a sphere or
-periodic plane, a :class:`~spherevm.plugins.integrators.Brownian` integrator (not Active), one
-:class:`~spherevm.plugins.forces.VertexModel`, at most one :class:`~spherevm.plugins.updaters.T1`,
-every operation firing each step, and every tissue small enough for shared memory (on an H200,
-spherical tissues of about 1,150 cells on one block and 1,500 on a cluster of blocks, planar ones of
-1,400 and 1,900: the sphere's blocks also keep every vertex's inverse norm). ``run(fused=False)``
-keeps the general kernels.
+Kernel arguments are structs declared from one Python definition each
+(:class:`~spherevm.kernel_struct.KernelStruct`: :data:`TISSUE_STATE` and each stage's), and each
+shared-memory layout is written once (:data:`STEP_LAYOUT`, :data:`MINIMIZE_LAYOUT`): the kernel's
+offsets and the bytes asked for at launch come from it.
 
-It serves ``Simulation.minimize`` the same way with :class:`~spherevm.plugins.integrators.FIRE`
-(``minimize(fused=False)`` keeps the general kernels): the tissue's block also sums FIRE's power and
-norms per replica in the order the general reduction adds them (``device_common.cuh``:
-``block_segment_total``), so the minimisation is the general one bit for bit too. One block a
-tissue (about 1,250 cells on the sphere, 1,400 on the plane, on an H200): a minimisation's sums
-would cross the cluster at every iteration.
+Sizes (on an H200): spherical tissues of about 1,150 cells on one block and 1,500 on a cluster of
+blocks, planar ones of 1,400 and 1,900, for the vertex model, T1 and Brownian dynamics; a
+minimisation uses one block a tissue (about 1,250 cells on the sphere, 1,400 on the plane): its
+sums would cross the cluster at every iteration.
 """
 from __future__ import annotations
 
@@ -37,26 +38,91 @@ from pathlib import Path
 import numpy as np
 
 from .constraints import Sphere
-from .device import BLOCK
-from .constraints.kernels import SURFACE_DEFINES, surface_kernels
-from .plugins.forces import VertexModel
-from .plugins.integrators import FIRE, Brownian
-from .plugins.updaters import T1
+from .constraints.kernels import SURFACE_DEFINES
+from .device import BLOCK, load_source
+from .kernel_struct import KernelStruct
+from .plan import Plan
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 #: threads per tissue's block (at most this many; fewer for a tissue with fewer vertices)
 THREADS = 1024
 #: tissues of up to this many vertices run on one block; larger ones on a cluster of blocks, one
-#: block per about this many vertices. One H200, Brownian + T1, ms a step by blocks a tissue 1 / 2 /
-#: 4 / 8 (session 12): 8 x 1,024 cells 0.033 / 0.024 / 0.024 / 0.029; 1 x 1,000 0.031 / 0.024 /
-#: 0.025 / 0.027; 8 x 256 0.013 / 0.019: the chains of dependent double-precision operations of one
-#: cell and one vertex set a floor that more blocks do not lower. Since session 14 (kept norms, two
-#: lanes a cell in blocks of 512 threads, T1's detection on every block): 8 x 1,024 cells on 4
-#: blocks 0.0214 against 0.0250 on 2; session 16 (two or three barriers a step): 16.0 us of GPU
-#: time a step on 4 blocks against 19.4 on 8.
+#: block per about this many vertices. One H200, Brownian + T1, ms a step by blocks a tissue
+#: 1 / 2 / 4 / 8 before the kept norms: 8 x 1,024 cells 0.033 / 0.024 / 0.024 / 0.029; 1 x 1,000
+#: 0.031 / 0.024 / 0.025 / 0.027; 8 x 256 0.013 / 0.019: the chains of dependent double-precision
+#: operations of one cell and one vertex set a floor that more blocks do not lower. With the kept
+#: norms and two lanes a cell: 8 x 1,024 cells on 4 blocks 0.0214 against 0.0250 on 2; with two or
+#: three barriers a step, 16.0 us of GPU time a step on 4 blocks against 19.4 on 8.
 VERTICES_PER_BLOCK = 512
 #: largest cluster (the portable size on Hopper)
 MAX_CLUSTER = 8
+
+#: The State's part of the kernels' arguments, and the engine's per-step room (step_need).
+TISSUE_STATE = KernelStruct("TissueState", [
+    ("pos", "double*"), ("vn", "int*"), ("vc", "int*"), ("cell_vertices", "int*"), ("sides", "int*"),
+    ("vertex_start", "const int*"), ("cell_start", "const int*"), ("size", "const double*"), ("max_sides", "int"),
+    ("active", "const bool*"), ("step_need", "int*")])
+#: The arguments of NoPass (no updater in the steps).
+NO_PASS = KernelStruct("NoPassArgs", [("unused", "int")])
+
+
+class Layout:
+    """A shared-memory layout, written once: regions of doubles, then regions of ints, each sized
+    by an expression in the layout's variables (``//`` is integer division). :attr:`cuda` declares
+    a struct of the regions' offsets and a device function computing it; :meth:`bytes` evaluates the
+    same expressions in Python (NumPy arrays of tissues allowed).
+
+    Parameters
+    ----------
+    name : str
+        The struct's C name; the function is ``tissue_<...>_layout`` (:attr:`function`).
+    function : str
+        The C function's name.
+    variables : sequence of str
+        The function's arguments, in order.
+    doubles, ints : sequence of (str, str)
+        ``(region, size expression)``.
+    """
+
+    def __init__(self, name, function, variables, doubles, ints):
+        self.name, self.function, self.variables = name, function, tuple(variables)
+        self.doubles, self.ints = tuple(doubles), tuple(ints)
+
+    @property
+    def cuda(self) -> str:
+        fields = [r for r, _ in self.doubles] + ["ints"] + [r for r, _ in self.ints]
+        lines = [f"struct {self.name} {{ long {', '.join(fields)}; }};",
+                 f"__device__ __forceinline__ {self.name} {self.function}("
+                 + ", ".join(f"long {v}" for v in self.variables) + ") {",
+                 f"    {self.name} at;", "    long d = 0, i = 0;"]
+        lines += [f"    at.{r} = d; d += {size.replace('//', '/')};" for r, size in self.doubles]
+        lines += ["    at.ints = d;"]
+        lines += [f"    at.{r} = i; i += {size.replace('//', '/')};" for r, size in self.ints]
+        lines += ["    return at;", "}"]
+        return "\n".join(lines) + "\n"
+
+    def bytes(self, **values):
+        """Bytes of shared memory for the variables' ``values``."""
+        env = {"__builtins__": {}}
+        doubles = sum(eval(size, env, values) for _, size in self.doubles)   # noqa: S307 - fixed expressions
+        ints = sum(eval(size, env, values) for _, size in self.ints)         # noqa: S307
+        return 8 * doubles + 4 * ints
+
+
+#: A run's steps: two copies of the positions, the forces' cell coefficients (cd a cell), on the
+#: sphere two copies of the kept inverse norms (kept: nv, else 0), the forces of the block's vertices
+#: (vchunk of them); the pass's claims (an int a cell) and a pass's flips (an int per four cells).
+STEP_LAYOUT = Layout("TissueStepLayout", "tissue_step_layout", ("nv", "nc", "kept", "vchunk", "cd"),
+                     [("pos", "6 * nv"), ("coef", "cd * nc"), ("inv", "2 * kept"), ("force", "3 * vchunk")],
+                     [("claim", "nc"), ("flipped", "(nc + 3) // 4")])
+#: A minimisation (one block a tissue): the positions, forces and the minimiser's vertex state (vd
+#: doubles a vertex), the forces' cell coefficients, the kept inverse norms, the sums' warp parts
+#: (n_sums (n_warps + 1), n_warps the warps from v0 rounded down to a warp's start to v1); the claims.
+MINIMIZE_LAYOUT = Layout("TissueMinimizeLayout", "tissue_minimize_layout",
+                         ("nv", "nc", "kept", "n_warps", "cd", "n_sums", "vd"),
+                         [("pos", "3 * nv"), ("force", "3 * nv"), ("velocity", "vd * nv"), ("coef", "cd * nc"),
+                          ("inv", "kept"), ("part", "n_sums * (n_warps + 1)")],
+                         [("claim", "nc")])
 
 
 def cluster_size(state, n_sm: int | None = None) -> int:
@@ -71,38 +137,38 @@ def cluster_size(state, n_sm: int | None = None) -> int:
     return size
 
 
-def shared_bytes(state, cluster: int, minimizing: bool = False) -> int:
-    """Shared memory of a block of the largest tissue (tissue_steps.cu). Steps: two copies of the
-    positions (3 doubles a vertex each), the cell coefficients (2 doubles a cell), on the sphere two
-    copies of the kept inverse norms (a double a vertex each), the forces of the block's vertices,
-    the claims (an int a cell) and a pass's flips (an int per four cells). Minimisation (one block):
-    the positions, forces and velocities, the cell coefficients, on the sphere the kept inverse
-    norms, the sums' warp parts (3 doubles a warp, one more) and the claims."""
+def shared_bytes(state, cluster: int, minimizing: bool, stages) -> int:
+    """Shared memory of a block of the largest tissue (:data:`STEP_LAYOUT` or :data:`MINIMIZE_LAYOUT`)."""
+    forces, move, _ = stages
     nv, nc = state.vertices_per_replica, state.cells_per_replica
     kept = nv if isinstance(state.constraint, Sphere) else 0   # Surface::directions
+    cd = sum(s.cell_doubles for s in forces)
     if minimizing:
-        warps = (nv + 62) // 32          # from v0 rounded down to a warp's start, to v1
-        return int(np.max(8 * (9 * nv + 2 * nc + kept + 3 * (warps + 1)) + 4 * nc))
-    return int(np.max(8 * (6 * nv + 2 * nc + 2 * kept + 3 * (-(-nv // cluster))) + 4 * (nc + -(-nc // 4))))
+        return int(np.max(MINIMIZE_LAYOUT.bytes(nv=nv, nc=nc, kept=kept, n_warps=(nv + 62) // 32, cd=cd,
+                                                n_sums=move.sums, vd=move.vertex_doubles)))
+    return int(np.max(STEP_LAYOUT.bytes(nv=nv, nc=nc, kept=kept, vchunk=-(-nv // cluster), cd=cd)))
 
 
-def layout(state, minimizing: bool, n_sm: int):
+def layout(state, minimizing: bool, n_sm: int, stages):
     """``(blocks a tissue, shared memory a block, threads a block, register bound)`` of the fused
-    kernels for ``state`` (worked out once per State: they are asked before every stretch). Threads:
-    a tissue's vertices over its blocks, from a warp's start when minimising. The kernel is compiled
-    for blocks of at most ``bound`` threads (``__launch_bounds__``): 512 where the launch's blocks
-    take at most 512 threads of each SM, which lets a thread hold 128 registers (a few dozen bytes
-    spilled, against 170-320 on 64), else 1,024, whose 64 registers a thread keep more blocks on an
-    SM at once (one H200: 8 x 1,024 cells, Brownian + T1, 16.3 us a step against 17.1; 1,024 x 32
-    cells, FIRE + T1, 0.025 ms an iteration on a bound of 512 against 0.019)."""
+    kernels for ``state`` (worked out once per State and stages' shape). Threads: a tissue's vertices
+    over its blocks, from a warp's start when minimising. The kernel is compiled for blocks of at
+    most ``bound`` threads (``__launch_bounds__``): 512 where the launch's blocks take at most 512
+    threads of each SM, which lets a thread hold 128 registers (a few dozen bytes spilled, against
+    170-320 on 64), else 1,024, whose 64 registers a thread keep more blocks on an SM at once (one
+    H200: 8 x 1,024 cells, Brownian + T1, 16.3 us a step against 17.1; 1,024 x 32 cells, FIRE + T1,
+    0.025 ms an iteration on a bound of 512 against 0.019)."""
+    forces, move, _ = stages
+    shape = (sum(s.cell_doubles for s in forces), move.sums, move.vertex_doubles)
+
     def build():
         cluster = 1 if minimizing else cluster_size(state, n_sm)
         block_vertices = -(-(int(state.vertices_per_replica.max()) + 31 * minimizing) // cluster)
         threads = int(min(THREADS, -(-block_vertices // 32) * 32))
         per_sm = -(-cluster * state.n_replicas // n_sm) * threads
         bound = THREADS // 2 if per_sm <= THREADS // 2 else THREADS
-        return cluster, shared_bytes(state, cluster, minimizing), threads, bound
-    return state.cached((layout, minimizing, n_sm), build)
+        return cluster, shared_bytes(state, cluster, minimizing, stages), threads, bound
+    return state.cached((layout, minimizing, n_sm, shape), build)
 
 
 @functools.lru_cache(maxsize=None)
@@ -116,54 +182,138 @@ def device_limits(device_id: int):
             attributes["MultiProcessorCount"])
 
 
+def stages(plan):
+    """``((force stages...), move stage, pass stage or None)`` of ``plan``'s operations, or a string
+    saying which operation has no stage (or what else stands in the way)."""
+    sim = plan.simulation
+    forces, move, passes = [], None, []
+    for op in plan.device_operations():
+        stage = op.fused_stage(sim, plan.minimizing)
+        if stage is None:
+            return (f"{type(op).__name__} has no fused stage for {'minimize' if plan.minimizing else 'run'} "
+                    "(Operation.fused_stage; docs/plugins.md, making your plugin fusable)")
+        if op is plan.integrator:
+            if stage.role != "move":
+                return f"the integrator {type(op).__name__}'s fused stage has role {stage.role!r}, not 'move'"
+            move = stage
+        elif stage.role == "force" and op in plan.forces:
+            forces.append(stage)
+        elif stage.role == "pass" and op in plan.updaters:
+            passes.append(stage)
+        else:
+            return f"{type(op).__name__}'s fused stage has role {stage.role!r}, which its kind cannot take"
+    if len(passes) > 1:
+        return "more than one updater's pass (the fused steps take at most one)"
+    if not any(s.measures for s in forces):
+        return "no force stage computes the cells (the fused steps need one, such as the vertex model's)"
+    return tuple(forces), move, (passes[0] if passes else None)
+
+
 def why_not(simulation, minimizing: bool = False) -> str | None:
     """Why the fused steps cannot run ``simulation``'s next steps of ``run`` (or of ``minimize``:
-    ``minimizing``); None if they can. Asked before every stretch: the answer depends only on the
-    State and the operations' types, so it is kept with the State for those types."""
-    ops = simulation.operations
-    kinds = (type(ops.integrator), tuple(map(type, ops.forces)), tuple((type(u), u.in_minimize) for u in ops.updaters))
-    return simulation.state.cached((why_not, minimizing, kinds), lambda: _why_not(simulation, minimizing))
-
-
-def _why_not(simulation, minimizing):
-    state, ops = simulation.state, simulation.operations
+    ``minimizing``); None if they can. Asked before every stretch."""
     if not simulation.device.is_gpu:
         return "the fused small-tissue steps need the GPU"
+    state = simulation.state
     if not isinstance(state.constraint, tuple(SURFACE_DEFINES)):
         return f"no kernels for {type(state.constraint).__name__}"
-    wanted = FIRE if minimizing else Brownian
-    if type(ops.integrator) is not wanted:
-        return f"the integrator is {type(ops.integrator).__name__}, not {wanted.__name__}"
-    if len(ops.forces) != 1 or type(ops.forces[0]) is not VertexModel:
-        return "the forces are not one VertexModel"
-    updaters = [u for u in ops.updaters if u.in_minimize or not minimizing]
-    if len(updaters) > 1 or (updaters and type(updaters[0]) is not T1):
-        return "the updaters are not at most one T1"
+    plan = Plan(simulation, minimizing)
+    found = stages(plan)
+    if isinstance(found, str):
+        return found
     if minimizing and -(-int(state.vertices_per_replica.max()) // BLOCK) >= 32:
         return "a tissue spans more than 31 tiles of the general kernels' sums"
     import cupy as cp
     capability, room, n_sm = device_limits(cp.cuda.Device().id)
     if capability < 90:
         return "the fused small-tissue steps need thread block clusters (compute capability 9.0, Hopper)"
-    need = layout(state, minimizing, n_sm)[1]
+    need = layout(state, minimizing, n_sm, found)[1]
     if need > room:
         return f"a tissue needs {need} bytes of shared memory a block, a block has {room}"
     return None
 
 
+def _unique(items):
+    return list(dict.fromkeys(items))
+
+
+def _signature(found, minimizing):
+    forces, move, pas = found
+    return (minimizing,) + tuple((s.role, s.struct, s.source, s.arguments.cuda, s.cell_doubles, s.measures, s.sums,
+                                  s.vertex_doubles) for s in (*forces, move, *([pas] if pas is not None else [])))
+
+
+_SOURCES = {}
+
+
+def kernel_source(found, minimizing: bool) -> str:
+    """The CUDA source of the fused kernel for the stages ``found`` (see :func:`stages`): the
+    argument structs, the layouts, tissue_steps.cu, the stages' sources, the forces' aggregate
+    (each stage's coefficient region in turn, the forces summed in order) and the extern "C"
+    kernel."""
+    forces, move, pas = found
+    structs = _unique([TISSUE_STATE.cuda, NO_PASS.cuda] + [s.arguments.cuda for s in (*forces, move)]
+                      + ([pas.arguments.cuda] if pas is not None else []))
+    sources = _unique([s.source for s in (*forces, move)] + ([pas.source] if pas is not None else []))
+    out = structs + [STEP_LAYOUT.cuda, MINIMIZE_LAYOUT.cuda, '#include "tissue_steps.cu"'] + sources
+    members, cells, vertex, copies, offset = [], [], [], [], 0
+    for k, s in enumerate(forces):
+        region = f"{offset}L * nc - {s.cell_doubles}L * c0"
+        members.append(f"    {s.struct} s{k};")
+        if s.measures:
+            cells.append(f"        s{k}.cell(A, P, c, s, data + {region});")
+        term = f"s{k}.vertex(pos, vn, vc, v, s, data + {region}, norm)"
+        vertex.append(f"        vec3 f = {term};" if k == 0 else f"        f = add3_rn(f, {term});")
+        if s.cell_doubles:
+            copies.append(f"        for (int j = 0; j < {s.cell_doubles}; ++j) {{ long i = {region} + "
+                          f"{s.cell_doubles}L * c + j; to[i] = from[i]; }}")
+        offset += s.cell_doubles
+    out.append("struct TissueForcesArgs {\n" + "".join(f"    {s.arguments.name} s{k};\n"
+                                                       for k, s in enumerate(forces)) + "};")
+    out.append("\n".join([
+        "struct TissueForces {",
+        f"    static constexpr int cell_doubles = {offset};",
+        f"    static constexpr bool measures = {'true' if any(s.measures for s in forces) else 'false'};",
+        *members,
+        "    __device__ explicit TissueForces(const TissueForcesArgs& a) : "
+        + ", ".join(f"s{k}{{a.s{k}}}" for k in range(len(forces))) + " {}",
+        "    __device__ __forceinline__ void cell(double A, double P, long c, Surface::Size s, double* data, long nc,",
+        "                                         long c0) const {", *cells, "    }",
+        "    __device__ __forceinline__ vec3 vertex(const double* pos, const int* vn, const int* vc, long v,",
+        "                                           Surface::Size s, const double* data, long nc, long c0,",
+        "                                           KeptNorm norm) const {", *vertex, "        return f;", "    }",
+        "    __device__ static __forceinline__ void copy_cell(long c, const double* from, double* to, long nc,",
+        "                                                     long c0) {", *copies, "    }",
+        "};"]))
+    pass_type, pass_args = (pas.struct, pas.arguments.name) if pas is not None else ("NoPass", NO_PASS.name)
+    out.append(f"using TissueMove = {move.struct};\nusing TissuePass = {pass_type};")
+    head = "extern \"C\" __global__ void __launch_bounds__(TISSUE_THREADS)"
+    common = f"TissueState st, TissueForcesArgs fa, {move.arguments.name} ma, {pass_args} pa"
+    build = ("    const TissueForces forces(fa);\n    const TissueMove move{ma};\n"
+             "    const TissuePass pass(pa, st.step_need);\n")
+    if minimizing:
+        out.append(f"static_assert(TissueMove::n_sums == {move.sums} && TissueMove::vertex_doubles == "
+                   f"{move.vertex_doubles}, \"the minimiser's stage and its FusedStage disagree\");")
+        out.append(f"{head} tissue_minimize({common}, int tile, unsigned long long step0, int steps)\n{{\n"
+                   f"{build}    tissue_minimize_body(st, forces, move, pass, tile, step0, steps);\n}}")
+    else:
+        out.append(f"{head} TISSUE_CLUSTER_DIMS tissue_steps({common}, unsigned long long step0, int steps)\n{{\n"
+                   f"{build}    tissue_steps_body(st, forces, move, pass, step0, steps);\n}}")
+    return "\n".join(out) + "\n"
+
+
 class TissueSteps:
-    """The fused steps of one Simulation: :meth:`run` advances the State ``steps`` steps of ``run``
-    (or iterations of ``minimize``: ``minimizing``; the caller, :class:`spherevm.graphs.StepGraphs`,
-    has made T1's room and padded the cell table for them, and does the Simulation's bookkeeping)."""
+    """The fused steps of one Simulation: :meth:`run` advances the State ``steps`` cycles of the
+    plan of ``run`` (or iterations of ``minimize``: ``minimizing``; the caller,
+    :class:`spherevm.graphs.StepGraphs`, has made T1's room and padded the cell table for them, and
+    does the Simulation's bookkeeping)."""
 
     def __init__(self, simulation, max_steps: int, minimizing: bool = False):
         import cupy as cp
         self.sim, self.minimizing = simulation, minimizing
         self.n_sm = device_limits(cp.cuda.Device().id)[2]
-        self.step_need = cp.full(max_steps, -1, dtype=cp.int32)   # per step of a launch (tissue_steps_finish)
-        zero, none = cp.zeros(1, dtype=cp.int32), cp.zeros(1)
-        self.no_t1 = (zero.view(bool), none, none, np.float64(0.0), zero, none, zero, zero, zero, zero, zero, zero,
-                      np.int32(0), zero)
+        self.step_need = cp.full(max_steps, -1, dtype=cp.int32)   # per step of a launch (the pass's finish)
+        self.no_pass = NO_PASS.pack(unused=0)
 
     def run(self, steps: int):
         import cupy as cp
@@ -171,28 +321,33 @@ class TissueSteps:
         state = sim.state
         if steps > len(self.step_need):
             raise ValueError(f"at most {len(self.step_need)} fused steps a launch, got {steps}")
-        cluster, shared, threads, bound = layout(state, self.minimizing, self.n_sm)
-        module, size = surface_kernels(_KERNELS, state, (f"TISSUE_CLUSTER={cluster}", f"TISSUE_THREADS={bound}"))
+        found = stages(Plan(sim, self.minimizing))
+        if isinstance(found, str):
+            raise ValueError(f"the fused steps cannot run: {found}")
+        forces, move, pas = found
+        cluster, shared, threads, bound = layout(state, self.minimizing, self.n_sm, found)
+        surface = next(d for cls, d in SURFACE_DEFINES.items() if isinstance(state.constraint, cls))
+        key = _signature(found, self.minimizing)
+        if key not in _SOURCES:
+            _SOURCES[key] = kernel_source(found, self.minimizing)
+        module = load_source(_SOURCES[key],
+                             surface + (f"TISSUE_CLUSTER={cluster}", f"TISSUE_THREADS={bound}"))
         kernel = module.get_function("tissue_minimize" if self.minimizing else "tissue_steps")
         if kernel.max_dynamic_shared_size_bytes < shared:
             kernel.max_dynamic_shared_size_bytes = shared
-        model = sim.operations.forces[0]
-        kA, kP, A0, P0 = model.device_parameters(state)
-        t1 = next((u for u in sim.operations.updaters if u.in_minimize or not self.minimizing), None)
-        if t1 is not None:
-            t1_args, (width, log_pass) = t1.tissue_step_arguments(sim)
-        else:                        # t1 = 0: the kernel reads none of T1's arguments
-            t1_args = self.no_t1
-        integrator = sim.operations.integrator.tissue_step_arguments(sim)
-        if self.minimizing:          # the tile of the general sums, whose order the kernel keeps
-            integrator = (np.int32(t1 is not None and t1.reset_velocities), *integrator, np.int32(BLOCK))
         vertex_start, cell_start = state.cached((TissueSteps, "starts"), lambda: (
             cp.asarray(state.vertex_start.astype(np.int32)), cp.asarray(state.cell_start.astype(np.int32))))
-        kernel((cluster * state.n_replicas,), (threads,),
-               (state.positions, state.vertex_neighbors, state.vertex_cells, state.cell_vertices, state.cell_sides,
-                vertex_start, cell_start, size, np.int32(state.max_sides), kA, kP, A0, P0,
-                np.int32(t1 is not None), *t1_args, self.step_need, *integrator, np.uint64(sim.timestep),
-                np.int32(steps)),
+        st = TISSUE_STATE.pack(
+            pos=state.positions, vn=state.vertex_neighbors, vc=state.vertex_cells, cell_vertices=state.cell_vertices,
+            sides=state.cell_sides, vertex_start=vertex_start, cell_start=cell_start,
+            size=getattr(state, state.constraint.size_name), max_sides=state.max_sides,
+            active=sim.operations.integrator.active_on_device(), step_need=self.step_need)
+        fa = np.zeros((), dtype=np.dtype([(f"s{k}", s.arguments.dtype) for k, s in enumerate(forces)], align=True))
+        for k, s in enumerate(forces):
+            fa[f"s{k}"] = s.packed()
+        args = (st, fa[()], move.packed(), pas.packed() if pas is not None else self.no_pass)
+        tail = (np.int32(BLOCK),) if self.minimizing else ()
+        kernel((cluster * state.n_replicas,), (threads,), (*args, *tail, np.uint64(sim.timestep), np.int32(steps)),
                shared_mem=shared)
-        if t1 is not None:
-            module.get_function("tissue_steps_finish")((1,), (1,), (width, self.step_need, np.int32(steps), log_pass))
+        if pas is not None and pas.finish is not None:
+            pas.finish(module, self.step_need, steps)

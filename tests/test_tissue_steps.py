@@ -13,7 +13,7 @@ import pytest
 
 import spherevm as svm
 from spherevm import tissue_steps
-from spherevm.plugins.forces import Bending
+from spherevm.plugins.forces import Bending, VertexModel
 from spherevm.plugins.integrators import FIRE, Active, Brownian
 from spherevm.plugins.updaters import T1
 
@@ -29,11 +29,12 @@ def ensemble(surface, sizes):
     return svm.State.concatenate([tiling(n, seed=3 + i) for i, n in enumerate(sizes)])
 
 
-def three_runs(state, steps, t1=True, T=0.3, **run):
-    """``(snapshot, timestep, T1 counters)`` of the same run, fused, in graphs and step by step."""
+def three_runs(state, steps, t1=True, T=0.3, integrator=None, **run):
+    """``(snapshot, timestep, T1 counters)`` of the same run, fused, in graphs and step by step
+    (``integrator()``: another than Brownian; its directors join the snapshot)."""
     out = []
     for way in WAYS:
-        sim = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=T))
+        sim = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=T) if integrator is None else integrator())
         if not t1:
             sim.operations.updaters.clear()
         sim.run(steps, **run, **way)
@@ -43,7 +44,10 @@ def three_runs(state, steps, t1=True, T=0.3, **run):
             u._sync_counters()
             counters = (u.total_flips, u.total_refused, u.last_flips, u.last_refused,
                         int(u._gpu["log_pass"].get()[0]))
-        out.append((snapshot(sim.state), sim.timestep, counters))
+        snap = snapshot(sim.state)
+        if integrator is not None:
+            snap["directors"] = sim.operations.integrator.directors.get()
+        out.append((snap, sim.timestep, counters))
     return out
 
 
@@ -87,6 +91,19 @@ def test_a_large_tissue_on_one_block_or_a_cluster(monkeypatch, per_block, cluste
 
 
 @pytest.mark.gpu
+@pytest.mark.parametrize("directors", ["cell", "vertex"])
+@pytest.mark.parametrize("per_block", [10 ** 6, 300])
+def test_active_dynamics_fuse_with_the_general_kernels_bits(monkeypatch, directors, per_block):
+    """Active + T1 (cell directors: each cell's director after the move, a phase of its own; vertex
+    directors: with each vertex's move), on one block and on clusters: the general kernels' bits."""
+    monkeypatch.setattr(tissue_steps, "VERTICES_PER_BLOCK", per_block)
+    state = ensemble("sphere", (300, 60))
+    active = lambda: Active(dt=0.01, v0=0.5, Dr=0.5, T=0.05, directors=directors)   # noqa: E731
+    assert tissue_steps.why_not(dynamics_simulation(state, "gpu", active())) is None
+    assert_same(three_runs(state, 150, integrator=active, check_every=64))
+
+
+@pytest.mark.gpu
 def test_small_tissues_split_their_cells_corners():
     """Blocks of at most 256 threads give a spherical cell 2, 4 or 8 threads (tissue_cell_lanes: the
     12-cell tissue 8, the 32-cell one 4, the others 2), which compute its corners apart and add
@@ -111,21 +128,24 @@ def test_without_t1_and_between_writes():
 def test_the_fused_steps_are_chosen_only_where_they_apply():
     sim = dynamics_simulation(ensemble("sphere", (40, 50)), "gpu", Brownian(dt=0.01, T=0.1))
     assert tissue_steps.why_not(sim) is None
-    assert "not FIRE" in tissue_steps.why_not(sim, minimizing=True)
+    assert "Brownian has no fused stage for minimize" in tissue_steps.why_not(sim, minimizing=True)
     sim.operations.integrator = FIRE()
     assert tissue_steps.why_not(sim, minimizing=True) is None
-    assert "not Brownian" in tissue_steps.why_not(sim)
+    assert "FIRE has no fused stage for run" in tissue_steps.why_not(sim)
     sim = dynamics_simulation(ensemble("sphere", (1500,)), "gpu", FIRE())
     assert "shared memory" in tissue_steps.why_not(sim, minimizing=True)     # one block a tissue
     sim = dynamics_simulation(ensemble("sphere", (40,)), "gpu", Active(dt=0.01, v0=0.1, Dr=0.1))
-    assert "Active" in tissue_steps.why_not(sim)
+    assert tissue_steps.why_not(sim) is None                                 # cell directors: a stage too
     sim = dynamics_simulation(ensemble("sphere", (40,)), "gpu", Brownian(dt=0.01))
     sim.operations.forces.append(Bending(0.1))
-    assert "one VertexModel" in tissue_steps.why_not(sim)
+    assert "Bending has no fused stage" in tissue_steps.why_not(sim)
+    with pytest.raises(ValueError, match=r"run\(fused=True\): Bending has no fused stage"):
+        sim.run(10, fused=True)
+    assert "Bending" in sim.explain() and "CUDA graphs" in sim.explain()
     sim = dynamics_simulation(ensemble("sphere", (2500,)), "gpu", Brownian(dt=0.01))
     assert "shared memory" in tissue_steps.why_not(sim)
-    with pytest.raises(ValueError, match="fused must be None"):
-        sim.run(10, fused=True)
+    with pytest.raises(ValueError, match=r"fused must be None \(auto\), True or False"):
+        sim.run(10, fused="yes")
 
 
 @pytest.mark.gpu
@@ -192,20 +212,29 @@ def test_fused_minimisation_halts_resumes_and_explodes_as_the_general_one():
     assert messages[0] == messages[1] and "exploding step at timestep" in messages[0]
 
 
+def shapes(minimizing=False):
+    """The stages' shapes of the vertex model with Brownian dynamics (or FIRE), as the layout sees them."""
+    from spherevm.plugins.fusion import FusedStage
+    vm = FusedStage("force", "VertexModelStage", "", VertexModel.FUSED_ARGS, cell_doubles=2, measures=True)
+    move = FusedStage("move", "FireStage", "", FIRE.FUSED_ARGS, sums=3, vertex_doubles=3) if minimizing else \
+        FusedStage("move", "BrownianStage<0>", "", Brownian.FUSED_ARGS)
+    return (vm,), move, None
+
+
 def test_the_fused_steps_need_the_gpu():
     sim = dynamics_simulation(ensemble("plane", (16,)), "cpu", Brownian(dt=0.01))
     assert "GPU" in tissue_steps.why_not(sim)
     state = ensemble("sphere", (40, 100))
     # 2 x 100 - 4 = 196 vertices on a sphere, each with two kept inverse norms; on 1 block and on 2;
     # the claims and a pass's flips (at most 100 / 4: a flip's four cells are its own)
-    assert tissue_steps.shared_bytes(state, 1) == 8 * (6 * 196 + 2 * 100 + 2 * 196 + 3 * 196) + 4 * (100 + 25)
-    assert tissue_steps.shared_bytes(state, 2) == 8 * (6 * 196 + 2 * 100 + 2 * 196 + 3 * 98) + 4 * (100 + 25)
+    assert tissue_steps.shared_bytes(state, 1, False, shapes()) == 8 * (6 * 196 + 2 * 100 + 2 * 196 + 3 * 196) + 4 * (100 + 25)
+    assert tissue_steps.shared_bytes(state, 2, False, shapes()) == 8 * (6 * 196 + 2 * 100 + 2 * 196 + 3 * 98) + 4 * (100 + 25)
     # minimising: positions, forces, velocities, one kept inverse norm; the sums' parts of
     # (196 + 62) // 32 = 8 warps, one more
-    assert tissue_steps.shared_bytes(state, 1, minimizing=True) == 8 * (9 * 196 + 2 * 100 + 196 + 3 * 9) + 4 * 100
+    assert tissue_steps.shared_bytes(state, 1, True, shapes(True)) == 8 * (9 * 196 + 2 * 100 + 196 + 3 * 9) + 4 * 100
     plane = ensemble("plane", (100,))   # 200 vertices on a torus, no norms kept
-    assert tissue_steps.shared_bytes(plane, 1) == 8 * (6 * 200 + 2 * 100 + 3 * 200) + 4 * (100 + 25)
-    assert tissue_steps.shared_bytes(plane, 1, minimizing=True) == 8 * (9 * 200 + 2 * 100 + 3 * 9) + 4 * 100
+    assert tissue_steps.shared_bytes(plane, 1, False, shapes()) == 8 * (6 * 200 + 2 * 100 + 3 * 200) + 4 * (100 + 25)
+    assert tissue_steps.shared_bytes(plane, 1, True, shapes(True)) == 8 * (9 * 200 + 2 * 100 + 3 * 9) + 4 * 100
     assert tissue_steps.cluster_size(state) == 1
     big = ensemble("sphere", (1024,))
     assert tissue_steps.cluster_size(big) == 4                      # 2,044 vertices: four blocks
@@ -218,7 +247,7 @@ def test_the_register_bound_keeps_every_block_of_a_launch_on_the_sms():
     launch's blocks take at most 512 threads of each SM, else 1,024 (64 registers: more blocks on an
     SM at once)."""
     def blocks_threads_bound(state, minimizing, n_sm):
-        cluster, _, threads, bound = tissue_steps.layout(state, minimizing, n_sm)
+        cluster, _, threads, bound = tissue_steps.layout(state, minimizing, n_sm, shapes(minimizing))
         return cluster, threads, bound
 
     state = svm.State.concatenate([svm.init.random_tiling(300, seed=1 + i) for i in range(3)])   # 596 vertices each

@@ -165,6 +165,12 @@ class Operation:
         ``Simulation.kernel_timestep``). Default: None."""
         return None
 
+    def fused_stage(self, simulation, minimizing: bool):
+        """This operation's part of the fused small-tissue steps of ``run`` (or of ``minimize``:
+        ``minimizing``), a :class:`spherevm.plugins.fusion.FusedStage`, or None (the default): the
+        steps then run as CUDA graphs of the general kernels. Asked before every stretch."""
+        return None
+
     def capture_done(self, simulation):
         """Steps in graphs pause here (a writer, a callback or the end of the run follows): leave
         what the host sees as the step-by-step path would."""

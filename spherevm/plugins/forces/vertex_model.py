@@ -7,7 +7,9 @@ import numpy as np
 
 from ...device import launch, segment_sums, weighted_bincount
 from ...constraints.kernels import KERNEL_SURFACES, surface_kernels
+from ...kernel_struct import KernelStruct
 from ..base import Force, ForceResult
+from ..fusion import FusedStage, overrides
 from ..parameters import Parameter
 
 _KERNELS = Path(__file__).with_suffix(".cu")
@@ -187,6 +189,18 @@ class VertexModel(Force):
     def capture_ready(self, simulation, steps):
         """Its two kernels take nothing that changes from step to step: CUDA graphs may hold them."""
         return ()
+
+    #: the fused stage's arguments (vertex_model_stage.cuh): the per-cell parameters on the device
+    FUSED_ARGS = KernelStruct("VertexModelArgs", [(name, "const double*") for name in ("kA", "kP", "A0", "P0")])
+
+    def fused_stage(self, simulation, minimizing):
+        """vertex_model_stage.cuh: each cell's two coefficients and each vertex's force, the general
+        kernels' functions. None for a subclass that computes something else."""
+        if overrides(self, VertexModel, ("compute", "_compute_gpu", "cell_terms", "parameters")):
+            return None
+        kA, kP, A0, P0 = self.device_parameters(simulation.state)
+        return FusedStage("force", "VertexModelStage", '#include "plugins/forces/vertex_model_stage.cuh"',
+                          self.FUSED_ARGS, dict(kA=kA, kP=kP, A0=A0, P0=P0), cell_doubles=2, measures=True)
 
     def _compute_gpu(self, state) -> ForceResult:
         """Two fused kernels (vertex_model.cu, compiled for the State's surface): cell geometry and

@@ -9,7 +9,9 @@ from ... import random as rng
 from ...device import launch
 from ...validation import non_negative, positive
 from ...constraints.kernels import KERNEL_SURFACES, surface_kernels
+from ...kernel_struct import KernelStruct
 from ..base import Integrator, raise_flagged_step
+from ..fusion import FusedStage, overrides
 from ..parameters import Parameter
 
 _KERNELS = Path(__file__).with_suffix(".cu")
@@ -111,13 +113,25 @@ class Brownian(Integrator):
         """Its kernels take the timestep through ``Simulation.kernel_timestep``: CUDA graphs may hold them."""
         return ()
 
-    def tissue_step_arguments(self, simulation):
-        """The move's part of the fused small-tissue steps' arguments (:mod:`spherevm.tissue_steps`,
-        which calls brownian.cuh's move as brownian_move does): noise amplitudes and sqrt(<A>) per
-        replica, mu, dt, max_step, the seed and the error flag (:meth:`check`)."""
+    #: the fused stage's arguments (brownian_stage.cuh), brownian_move's without the State's
+    FUSED_ARGS = KernelStruct("BrownianArgs", [
+        ("amp", "const double*"), ("length_unit", "const double*"), ("directors", "double*"), ("mu", "double"),
+        ("dt", "double"), ("v0", "double"), ("rot_amp", "double"), ("max_step", "double"), ("seed", "unsigned int"),
+        ("error", "unsigned long long*")])
+
+    def fused_stage(self, simulation, minimizing):
+        """brownian_stage.cuh: each vertex's move (and, with cell directors, each cell's director
+        after it), brownian.cu's functions. None in a minimisation, and for a subclass that moves
+        otherwise."""
+        if minimizing or overrides(self, Brownian, ("step", "_step_gpu", "_per_replica")):
+            return None
         unit, amp = self._per_replica(simulation.state)
-        return (amp, unit, np.float64(self.mu), np.float64(self.dt), np.float64(self.max_step),
-                np.uint32(simulation.seed), self._error_flag())
+        values = dict(amp=amp, length_unit=unit, directors=self.directors if self._mode else None, mu=self.mu,
+                      dt=self.dt, v0=getattr(self, "v0", 0.0),
+                      rot_amp=float(np.sqrt(2.0 * self.Dr * self.dt)) if self._mode else 0.0,
+                      max_step=self.max_step, seed=simulation.seed, error=self._error_flag())
+        return FusedStage("move", f"BrownianStage<{self._mode}>",
+                          '#include "plugins/integrators/brownian_stage.cuh"', self.FUSED_ARGS, values)
 
     def _per_replica(self, state):
         """sqrt(<A>) and the noise amplitude sqrt(2 mu T dt) per replica, on the device (computed

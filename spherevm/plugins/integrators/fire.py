@@ -8,7 +8,9 @@ import numpy as np
 from ...device import launch, segment_sums, weighted_bincount
 from ...validation import integer, positive
 from ...constraints.kernels import KERNEL_SURFACES, surface_kernels
+from ...kernel_struct import KernelStruct
 from ..base import Minimizer, raise_flagged_step
+from ..fusion import FusedStage, overrides
 from ..parameters import Parameter
 
 _KERNELS = Path(__file__).with_suffix(".cu")
@@ -245,14 +247,24 @@ class FIRE(Minimizer):
             return tuple(xp.empty((3, state.n_replicas))), tuple(xp.empty((3, state.n_replicas)))
         return build() if simulation.capturing else state.cached((self, "scratch"), build)
 
-    def tissue_step_arguments(self, simulation):
-        """The minimiser's part of the fused small-tissue minimisation's arguments
-        (:mod:`spherevm.tissue_steps`, which calls fire.cuh's control and move as fire_reduce and
-        fire_move do): the active mask, velocities, dt, alpha and counters per replica, the
-        constants, sqrt(<A>) per replica, max_step and the error word (:meth:`check`)."""
-        state = simulation.state
-        return (self.active_on_device(), self.velocities, self.replica_dt, self.alpha, self.n_positive,
-                *self._control_constants(), self._length_unit(state), np.float64(self.max_step), self._error_word())
+    #: the fused stage's arguments (fire_stage.cuh): fire_reduce's and fire_move's without the State's
+    FUSED_ARGS = KernelStruct("FireArgs", [
+        ("vel", "double*"), ("dt", "double*"), ("alpha", "double*"), ("n_positive", "long long*"), ("n_min", "int"),
+        ("f_inc", "double"), ("f_dec", "double"), ("alpha_start", "double"), ("f_alpha", "double"),
+        ("dt_max", "double"), ("length_unit", "const double*"), ("max_step", "double"),
+        ("error", "unsigned long long*")])
+
+    def fused_stage(self, simulation, minimizing):
+        """fire_stage.cuh: the terms of FIRE's sums, its control and move, fire.cu's functions. None
+        outside a minimisation, and for a subclass that moves otherwise."""
+        if not minimizing or overrides(self, FIRE, ("move", "_move_gpu", "step")):
+            return None
+        values = dict(vel=self.velocities, dt=self.replica_dt, alpha=self.alpha, n_positive=self.n_positive,
+                      n_min=self.n_min, f_inc=self.f_inc, f_dec=self.f_dec, alpha_start=self.alpha_start,
+                      f_alpha=self.f_alpha, dt_max=self.dt_max, length_unit=self._length_unit(simulation.state),
+                      max_step=self.max_step, error=self._error_word())
+        return FusedStage("move", "FireStage", '#include "plugins/integrators/fire_stage.cuh"', self.FUSED_ARGS,
+                          values, sums=3, vertex_doubles=3)
 
     def capture_ready(self, simulation, steps):
         """Its kernels read nothing back and take the timestep from ``Simulation.kernel_timestep``;

@@ -6,8 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ...device import launch
 from ...constraints.kernels import surface_kernels
+from ...device import launch
+from ...kernel_struct import KernelStruct
+from ..fusion import FusedStage
 
 _KERNELS = Path(__file__).with_name("t1.cu")
 _CAND_INTS, _LOG_INTS = 13, 6
@@ -185,21 +187,34 @@ class DevicePass:
         buf["width_host"] = -1               # the step-by-step path sets it again
         return table
 
-    def tissue_step_arguments(self, simulation):
-        """T1's part of the fused small-tissue steps' arguments (:mod:`spherevm.tissue_steps`, after
-        :meth:`capture_ready`): active replicas, squared threshold chords, new lengths, the
-        candidate room, the per-pass counters and totals, the flip log (with whether this pass
-        logs, :meth:`counting`) and its pass count; and ``(width, log_pass)``, which the finishing
-        kernel advances as t1_detect and t1_apply would have."""
+    #: the fused stage's arguments (t1_stage.cuh)
+    FUSED_ARGS = KernelStruct("T1StageArgs", [
+        ("chord2", "const double*"), ("new_length", "const double*"), ("length_factor", "double"), ("cand", "int*"),
+        ("cand_len", "double*"), ("flips", "int*"), ("refused", "int*"), ("total_flips", "unsigned long long*"),
+        ("total_refused", "unsigned long long*"), ("log_count", "int*"), ("log", "int*"), ("logging", "int"),
+        ("log_pass", "const int*"), ("reset_vertices", "int")])
+
+    def fused_stage(self, simulation, minimizing):
+        """t1_stage.cuh: the pass (after :meth:`capture_ready`, which made the candidate room and
+        padded the cell table): squared threshold chords, new lengths, the candidate room, the
+        per-pass counters and totals, the flip log (with whether this pass logs, :meth:`counting`)
+        and its pass count, and whether the integrator forgets the flipped vertices' motion; after
+        each launch, ``t1_steps_finish`` advances the table's width and the log's pass count as
+        t1_detect and t1_apply would have."""
         state = simulation.state
         buf = self._gpu_buffers(state, 3 * state.n_vertices // 2)
         chord2, new_length = self._device_lengths(state)
-        integrator = simulation.operations.integrator
-        active = integrator.active_on_device() if integrator is not None else buf["all_active"]
-        return ((active, chord2, new_length, np.float64(self.length_factor or 0.0), buf["cand"], buf["cand_len"],
-                 buf["flips"], buf["refused"], buf["total_flips"], buf["total_refused"], buf["log_count"], buf["log"],
-                 np.int32(self.counting(simulation)), buf["log_pass"]),
-                (buf["width"], buf["log_pass"]))
+        values = dict(chord2=chord2, new_length=new_length, length_factor=self.length_factor or 0.0,
+                      cand=buf["cand"], cand_len=buf["cand_len"], flips=buf["flips"], refused=buf["refused"],
+                      total_flips=buf["total_flips"], total_refused=buf["total_refused"], log_count=buf["log_count"],
+                      log=buf["log"], logging=int(self.counting(simulation)), log_pass=buf["log_pass"],
+                      reset_vertices=int(self.reset_velocities))
+
+        def finish(module, step_need, steps):
+            module.get_function("t1_steps_finish")((1,), (1,), (buf["width"], step_need, np.int32(steps),
+                                                                buf["log_pass"]))
+        return FusedStage("pass", "T1Stage", '#include "plugins/updaters/t1_stage.cuh"', self.FUSED_ARGS, values,
+                          finish=finish)
 
     def capture_done(self, simulation):
         """The cell table back to the width the step-by-step path would have (one small read-back)."""

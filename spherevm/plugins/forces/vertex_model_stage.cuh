@@ -1,0 +1,24 @@
+// The vertex model's stage of the fused small-tissue steps (spherevm/tissue_steps.cu,
+// VertexModel.fused_stage): a cell's two coefficients from its area and perimeter (vm_cell_terms)
+// and a vertex's force from its cells' coefficients (Surface::vertex_force), the functions of the
+// general kernels (vertex_model.cu), so the fused forces are theirs bit for bit. VertexModelArgs is
+// declared from its Python definition (VertexModel.FUSED_ARGS): the per-cell kA, kP, A0, P0.
+#pragma once
+#include "plugins/forces/vertex_model.cuh"
+
+struct VertexModelStage {
+    static constexpr int cell_doubles = 2;     // coef: 2 kA (A - A0) and 2 kP (P - P0), in surface units
+    static constexpr bool measures = true;     // takes each cell's area and perimeter
+    VertexModelArgs a;
+
+    __device__ __forceinline__ void cell(double A, double P, long c, Surface::Size s, double* coef) const
+    {
+        vm_cell_terms(A, P, c, s, a.kA, a.kP, a.A0, a.P0, coef);
+    }
+
+    __device__ __forceinline__ vec3 vertex(const double* pos, const int* vn, const int* vc, long v, Surface::Size s,
+                                           const double* coef, KeptNorm norm) const
+    {
+        return Surface::vertex_force(pos, vn, vc, v, s, coef, NoExtra(), norm);
+    }
+};

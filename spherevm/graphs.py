@@ -200,7 +200,7 @@ class StepGraphs:
         a fall-back from them is logged once."""
         if self.fused is False:
             return False
-        reason = tissue_steps.why_not(self.sim, self.minimizing)
+        reason = tissue_steps.reason(self.plan)
         if reason is not None:
             if self.fused is True:
                 raise ValueError(f"{'minimize' if self.minimizing else 'run'}(fused=True): {reason}")
@@ -209,7 +209,7 @@ class StepGraphs:
                 self._fell_back = True
             return False
         if self.tissue is None:
-            self.tissue = tissue_steps.TissueSteps(self.sim, FUSED_STRETCH, self.minimizing)
+            self.tissue = tissue_steps.TissueSteps(self.plan, FUSED_STRETCH)
         return True
 
     def _replay(self, key, steps) -> int:

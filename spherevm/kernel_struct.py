@@ -59,12 +59,9 @@ class KernelStruct:
         ValueError
             If a field is missing or unknown.
         """
-        names = [f for f, _ in self.fields]
-        missing, unknown = set(names) - set(values), set(values) - set(names)
-        if missing or unknown:
-            raise ValueError(f"{self.name}: missing fields {sorted(missing)}, unknown fields {sorted(unknown)}")
-        record = np.zeros((), dtype=self.dtype)
-        for field, ctype in self.fields:
-            value = values[field]
-            record[field] = address(value) if ctype.endswith("*") else value
-        return record[()]
+        if len(values) != len(self.fields) or any(f not in values for f, _ in self.fields):
+            names = {f for f, _ in self.fields}
+            raise ValueError(f"{self.name}: missing fields {sorted(names - set(values))}, unknown fields "
+                             f"{sorted(set(values) - names)}")
+        row = tuple(address(values[f]) if t.endswith("*") else values[f] for f, t in self.fields)
+        return np.array(row, dtype=self.dtype)[()]

@@ -211,13 +211,25 @@ def stages(plan):
 
 def why_not(simulation, minimizing: bool = False) -> str | None:
     """Why the fused steps cannot run ``simulation``'s next steps of ``run`` (or of ``minimize``:
-    ``minimizing``); None if they can. Asked before every stretch."""
+    ``minimizing``); None if they can. Asked before every stretch: the answer is kept with the State
+    for the operations and their parameters' versions."""
     if not simulation.device.is_gpu:
         return "the fused small-tissue steps need the GPU"
+    return reason(Plan(simulation, minimizing))
+
+
+def reason(plan) -> str | None:
+    """:func:`why_not` for ``plan`` (its executor's), kept with the State for the operations and
+    their parameters' versions."""
+    key = tuple((id(op), type(op), op.parameter_version) for op in plan.device_operations())
+    return plan.simulation.state.cached((why_not, plan.minimizing, key), lambda: _why_not(plan))
+
+
+def _why_not(plan):
+    simulation, minimizing = plan.simulation, plan.minimizing
     state = simulation.state
     if not isinstance(state.constraint, tuple(SURFACE_DEFINES)):
         return f"no kernels for {type(state.constraint).__name__}"
-    plan = Plan(simulation, minimizing)
     found = stages(plan)
     if isinstance(found, str):
         return found
@@ -239,11 +251,8 @@ def _unique(items):
 
 def _signature(found, minimizing):
     forces, move, pas = found
-    return (minimizing,) + tuple((s.role, s.struct, s.source, s.arguments.cuda, s.cell_doubles, s.measures, s.sums,
+    return (minimizing,) + tuple((s.role, s.struct, s.source, id(s.arguments), s.cell_doubles, s.measures, s.sums,
                                   s.vertex_doubles) for s in (*forces, move, *([pas] if pas is not None else [])))
-
-
-_SOURCES = {}
 
 
 def kernel_source(found, minimizing: bool) -> str:
@@ -303,14 +312,14 @@ def kernel_source(found, minimizing: bool) -> str:
 
 
 class TissueSteps:
-    """The fused steps of one Simulation: :meth:`run` advances the State ``steps`` cycles of the
-    plan of ``run`` (or iterations of ``minimize``: ``minimizing``; the caller,
+    """The fused steps of a plan: :meth:`run` advances the State ``steps`` cycles of the plan of
+    ``run`` (or iterations of ``minimize``; the caller,
     :class:`spherevm.graphs.StepGraphs`, has made T1's room and padded the cell table for them, and
     does the Simulation's bookkeeping)."""
 
-    def __init__(self, simulation, max_steps: int, minimizing: bool = False):
+    def __init__(self, plan, max_steps: int):
         import cupy as cp
-        self.sim, self.minimizing = simulation, minimizing
+        self.plan, self.sim, self.minimizing = plan, plan.simulation, plan.minimizing
         self.n_sm = device_limits(cp.cuda.Device().id)[2]
         self.step_need = cp.full(max_steps, -1, dtype=cp.int32)   # per step of a launch (the pass's finish)
         self.no_pass = NO_PASS.pack(unused=0)
@@ -321,20 +330,12 @@ class TissueSteps:
         state = sim.state
         if steps > len(self.step_need):
             raise ValueError(f"at most {len(self.step_need)} fused steps a launch, got {steps}")
-        found = stages(Plan(sim, self.minimizing))
+        found = stages(self.plan)
         if isinstance(found, str):
             raise ValueError(f"the fused steps cannot run: {found}")
         forces, move, pas = found
         cluster, shared, threads, bound = layout(state, self.minimizing, self.n_sm, found)
-        surface = next(d for cls, d in SURFACE_DEFINES.items() if isinstance(state.constraint, cls))
-        key = _signature(found, self.minimizing)
-        if key not in _SOURCES:
-            _SOURCES[key] = kernel_source(found, self.minimizing)
-        module = load_source(_SOURCES[key],
-                             surface + (f"TISSUE_CLUSTER={cluster}", f"TISSUE_THREADS={bound}"))
-        kernel = module.get_function("tissue_minimize" if self.minimizing else "tissue_steps")
-        if kernel.max_dynamic_shared_size_bytes < shared:
-            kernel.max_dynamic_shared_size_bytes = shared
+        kernel, forces_dtype = self._kernel(found, state, cluster, bound, shared)
         vertex_start, cell_start = state.cached((TissueSteps, "starts"), lambda: (
             cp.asarray(state.vertex_start.astype(np.int32)), cp.asarray(state.cell_start.astype(np.int32))))
         st = TISSUE_STATE.pack(
@@ -342,12 +343,42 @@ class TissueSteps:
             sides=state.cell_sides, vertex_start=vertex_start, cell_start=cell_start,
             size=getattr(state, state.constraint.size_name), max_sides=state.max_sides,
             active=sim.operations.integrator.active_on_device(), step_need=self.step_need)
-        fa = np.zeros((), dtype=np.dtype([(f"s{k}", s.arguments.dtype) for k, s in enumerate(forces)], align=True))
-        for k, s in enumerate(forces):
-            fa[f"s{k}"] = s.packed()
-        args = (st, fa[()], move.packed(), pas.packed() if pas is not None else self.no_pass)
+        fa = np.array(tuple(s.packed() for s in forces), dtype=forces_dtype)[()]
+        args = (st, fa, move.packed(), pas.packed() if pas is not None else self.no_pass)
         tail = (np.int32(BLOCK),) if self.minimizing else ()
         kernel((cluster * state.n_replicas,), (threads,), (*args, *tail, np.uint64(sim.timestep), np.int32(steps)),
                shared_mem=shared)
         if pas is not None and pas.finish is not None:
-            pas.finish(module, self.step_need, steps)
+            pas.finish(kernel.module, self.step_need, steps)
+
+    def _kernel(self, found, state, cluster, bound, shared):
+        """The compiled kernel for the stages ``found`` on ``state``'s surface (kept per combination),
+        with room for ``shared`` bytes, and the dtype of its forces' arguments."""
+        surface = next(d for cls, d in SURFACE_DEFINES.items() if isinstance(state.constraint, cls))
+        key = (_signature(found, self.minimizing), surface, cluster, bound)
+        entry = _KERNELS_BUILT.get(key)
+        if entry is None:
+            module = load_source(kernel_source(found, self.minimizing),
+                                 surface + (f"TISSUE_CLUSTER={cluster}", f"TISSUE_THREADS={bound}"))
+            kernel = _Kernel(module, "tissue_minimize" if self.minimizing else "tissue_steps")
+            dtype = np.dtype([(f"s{k}", s.arguments.dtype) for k, s in enumerate(found[0])], align=True)
+            entry = _KERNELS_BUILT[key] = (kernel, dtype)
+        kernel = entry[0]
+        if kernel.function.max_dynamic_shared_size_bytes < shared:
+            kernel.function.max_dynamic_shared_size_bytes = shared
+        return entry
+
+
+class _Kernel:
+    """A fused kernel and the module it came from (whose other kernels, such as a pass's finishing
+    kernel, its stage launches)."""
+
+    def __init__(self, module, name):
+        self.module, self.function = module, module.get_function(name)
+
+    def __call__(self, grid, block, args, shared_mem):
+        self.function(grid, block, args, shared_mem=shared_mem)
+
+
+#: compiled fused kernels, by their stages' signature, surface, cluster size and register bound
+_KERNELS_BUILT = {}

@@ -98,6 +98,24 @@ def fan_triangles(state, cells=None):
     return centre, a, b, cell_of
 
 
+def replica_offsets(state) -> np.ndarray:
+    """The shifts ``(n_replicas, 3)`` that lay the replicas side by side along x, replica 0 in
+    place: 2.5 of the largest radius apart on a sphere; on the plane 1.1 of the widest box plus
+    twice the widest cell, as cells unwrapped across the box edge reach out of it by up to a cell."""
+    size = state.constraint.size_np(state)
+    if isinstance(state.constraint, PeriodicPlane):
+        _, a, _, cell_of = fan_triangles(state)
+        hi, lo = np.full(state.n_cells, -np.inf), np.full(state.n_cells, np.inf)
+        np.maximum.at(hi, cell_of, a[:, 0])
+        np.minimum.at(lo, cell_of, a[:, 0])
+        step = 1.1 * size[:, 0].max() + 2 * (hi - lo).max()
+    else:
+        step = 2.5 * size.max()
+    out = np.zeros((state.n_replicas, 3))
+    out[:, 0] = step * np.arange(state.n_replicas)
+    return out
+
+
 def cell_mesh(state, values=None, quantity: str = "shape_index", cmap: str = "viridis", subdivisions: int = 3,
               replica=None, side_by_side: bool = True, vmin=None, vmax=None):
     """A ``trimesh.Trimesh`` of the cells of ``state``, coloured per cell.
@@ -125,14 +143,11 @@ def cell_mesh(state, values=None, quantity: str = "shape_index", cmap: str = "vi
     w, tris = _grid(n)
     points = w[None, :, 0, None] * centre[:, None] + w[None, :, 1, None] * a[:, None] + w[None, :, 2, None] * b[:, None]
     rep = crep[cell_of]
-    plane = isinstance(state.constraint, PeriodicPlane)
-    size = state.constraint.size_np(state)
-    if not plane:
-        pr = np.repeat(size[rep], len(w))
+    if not isinstance(state.constraint, PeriodicPlane):
+        pr = np.repeat(state.constraint.size_np(state)[rep], len(w))
         points = np.asarray(state.constraint.project_normal(points.reshape(-1, 3), pr)).reshape(points.shape)
-    if replica is None and side_by_side and state.n_replicas > 1:
-        step = 1.1 * size[:, 0].max() if plane else 2.5 * size.max()
-        points = points + (rep * step)[:, None, None] * np.array([1.0, 0.0, 0.0])
+    if replica is None and side_by_side:
+        points = points + replica_offsets(state)[rep][:, None, :]
     nf, npt = len(centre), len(w)
     faces = (tris[None, :, :] + (np.arange(nf) * npt)[:, None, None]).reshape(-1, 3)
     vcol = np.repeat(colors(values, cmap, vmin, vmax)[cell_of], npt, axis=0)

@@ -153,7 +153,7 @@ class FrameWriter:
         frame.particles.N = n_v
         frame.particles.types = ["V"]
         frame.particles.typeid = np.zeros(n_v, dtype=np.uint32)
-        frame.particles.position = (pos - np.array([lx / 2, ly / 2, 0.0]) if planar else pos).astype(np.float32)
+        frame.particles.position = (pos - particle_origin(state)).astype(np.float32)
         frame.particles.diameter = _diameters(state, chord, bonds)[vrep]
         frame.bonds.N = len(bonds)
         frame.bonds.types = ["E"]
@@ -208,6 +208,16 @@ class FrameWriter:
         for name, arr in chunks.items():
             traj.file.write_chunk(PREFIX + name, np.ascontiguousarray(arr))
         traj.append(frame)
+
+
+def particle_origin(state) -> np.ndarray:
+    """Where a State's origin sits in the file's particle coordinates, ``(3,)``: half the largest
+    box on the periodic plane (HOOMD's box is centred on the origin), zero on a sphere. Particle
+    positions are the State's positions minus this."""
+    if state.box is None:
+        return np.zeros(3)
+    lx, ly = state.box_np().max(axis=0)
+    return np.array([lx / 2, ly / 2, 0.0])
 
 
 def _diameters(state, chord, bonds):

@@ -1,10 +1,10 @@
 """Pictures without OVITO: the cells of a State drawn with matplotlib, coloured per cell.
 
 On a sphere each cell is a ``Poly3DCollection`` polygon whose edges are geodesics (each cut into a
-few segments on the surface); cells on the far side (outward normal at the cell centre pointing
-away from the viewer) are left out, so the picture shows one hemisphere as a solid ball. On the
-periodic plane the cells are drawn flat, unwrapped across the box edges. A colour bar names the
-quantity::
+few segments on the surface), seen by an orthographic camera: the cells are clipped to the
+hemisphere facing it, so the picture is a solid ball with a round rim. On the periodic plane the
+box is outlined and filled by the cells and their periodic images (a cell that crosses an edge
+shows on both sides), with the images around the box faded. A colour bar names the quantity::
 
     from spherevm.render import render_gsd
     render_gsd("run.gsd", "snapshot.png", frame=-1)
@@ -30,26 +30,121 @@ def view_direction(elev: float, azim: float) -> np.ndarray:
 
 
 def cell_polygons(state, cells, segments: int = 4):
-    """Boundary polygons of ``cells``: a list of ``(k * segments, 3)`` arrays (edges cut into
-    ``segments`` pieces and put back on the surface), and the centre of each cell."""
-    centre, a, b, cell_of = fan_triangles(state, cells)
+    """Boundary polygons of ``cells``: a list of ``(k * segments, 3)`` arrays, one per cell of
+    ``k`` sides (edges cut into ``segments`` pieces and put back on the surface; unwrapped about
+    the cell's first vertex on the periodic plane)."""
+    _, a, b, cell_of = fan_triangles(state, cells)
     t = (np.arange(segments) / segments)[None, :, None]
     pts = (1 - t) * a[:, None] + t * b[:, None]                  # (edges, segments, 3)
     plane = isinstance(state.constraint, PeriodicPlane)
     if not plane:
         radius = state.constraint.size_np(state)[state.cell_replica_np()[cell_of]]
         pts = np.asarray(state.constraint.project_normal(pts, radius[:, None]))
-        centre = np.asarray(state.constraint.project_normal(centre, radius))
     bounds = np.concatenate([[0], np.cumsum(np.bincount(np.searchsorted(cells, cell_of), minlength=len(cells)))])
     polys = [pts[bounds[i]:bounds[i + 1]].reshape(-1, 3) for i in range(len(cells))]
-    return polys, centre[bounds[:-1]]
+    return polys
+
+
+STEP = np.radians(3.0)      # the longest piece of a cell's edge or of the rim drawn straight on a sphere
+
+
+def refine(poly, radius, step: float = STEP):
+    """The spherical polygon ``poly`` (k, 3) with points added on the sphere of ``radius`` so that
+    neighbours are at most ``step`` radians apart (straight pieces that look round)."""
+    nxt = np.roll(poly, -1, axis=0)
+    angle = np.arccos(np.clip(np.einsum("ij,ij->i", poly, nxt) / radius ** 2, -1.0, 1.0))
+    pieces = np.maximum(1, np.ceil(angle / step).astype(np.int64))
+    if (pieces == 1).all():
+        return poly
+    i = np.repeat(np.arange(len(poly)), pieces)
+    t = (np.arange(len(i)) - np.repeat(np.cumsum(pieces) - pieces, pieces)) / pieces[i]
+    pts = (1 - t)[:, None] * poly[i] + t[:, None] * nxt[i]
+    return radius * pts / np.linalg.norm(pts, axis=1, keepdims=True)
+
+
+def clip_to_front(poly, view, radius, rim_step: float = STEP):
+    """The part of the spherical polygon ``poly`` (k, 3) on the hemisphere facing ``view`` (a unit
+    vector), or None where none is: edges are cut where they cross the rim (the great circle
+    perpendicular to ``view``) and the cut ends joined along the rim in steps of at most
+    ``rim_step`` radians, so the clipped cells fill the disc an orthographic camera sees."""
+    d = poly @ view
+    inside = d >= 0
+    if inside.all():
+        return poly
+    if not inside.any():
+        return None
+    start = int(np.argmax(inside))                      # walk from a point in front
+    p, d, inside = np.roll(poly, -start, axis=0), np.roll(d, -start), np.roll(inside, -start)
+    out, leave = [], None
+    for i in range(len(p)):
+        j = (i + 1) % len(p)
+        if inside[i]:
+            out.append(p[i])
+        if inside[i] == inside[j]:
+            continue
+        cut = p[i] + d[i] / (d[i] - d[j]) * (p[j] - p[i])
+        cut *= radius / np.linalg.norm(cut)
+        if not inside[i]:                               # back in front: the rim from where it left
+            angle = np.arccos(np.clip(leave @ cut / radius ** 2, -1.0, 1.0))
+            s = np.linspace(0.0, 1.0, int(np.ceil(angle / rim_step)) + 1)[1:-1, None]
+            arc = (1 - s) * leave + s * cut
+            out.extend(radius * arc / np.linalg.norm(arc, axis=1, keepdims=True))
+        out.append(cut)
+        leave = cut
+    return np.array(out)
+
+
+def _draw_plane(ax, state, polys, face, replica):
+    """The cells of one replica on the periodic plane: the box outlined, the cells and their
+    periodic images filling it (so cells that cross an edge show on both sides), and the images
+    around it faded."""
+    from matplotlib.collections import PolyCollection
+    from matplotlib.patches import Rectangle
+    lx, ly = state.constraint.size_np(state)[int(replica)]
+    flat = [p[:, :2] for p in polys]
+    shifts = [(i * lx, j * ly) for i in (-1, 0, 1) for j in (-1, 0, 1)]
+    tiles = [p + s for s in shifts for p in flat]
+    colours = np.tile(face, (len(shifts), 1))
+    ax.add_collection(PolyCollection(tiles, facecolors=colours, edgecolors="k", linewidths=0.5, alpha=0.35))
+    inside = PolyCollection(tiles, facecolors=colours, edgecolors="k", linewidths=0.5)
+    ax.add_collection(inside)
+    inside.set_clip_path(Rectangle((0, 0), lx, ly, transform=ax.transData))
+    ax.add_patch(Rectangle((0, 0), lx, ly, fill=False, edgecolor="k", linewidth=1.5))
+    ax.set_xlim(-0.1 * lx, 1.1 * lx)
+    ax.set_ylim(-0.1 * ly, 1.1 * ly)
+    ax.set_aspect("equal")
+
+
+def _draw_sphere(ax, state, polys, face, replica, elev, azim):
+    """The hemisphere of one replica's sphere that faces the camera, seen orthographically: cells
+    clipped at the rim, so its outline is the sphere's circle."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    r = float(state.constraint.size_np(state)[int(replica)])
+    view = view_direction(elev, azim)
+    clipped = [clip_to_front(refine(p, r), view, r) for p in polys]
+    front = np.array([c is not None for c in clipped], dtype=bool)
+    # autolim=False: the limits are the sphere's, set below; matplotlib (3.10+) would otherwise
+    # scale the view on its np.empty padding of ragged polygons, garbage on some runs
+    ax.add_collection3d(Poly3DCollection([c for c in clipped if c is not None], facecolors=face[front],
+                                         edgecolors="k", linewidths=0.4), autolim=False)
+    for set_lim in (ax.set_xlim, ax.set_ylim, ax.set_zlim):
+        set_lim(-r, r)
+    ax.set_proj_type("ortho")
+    ax.set_box_aspect((1, 1, 1), zoom=1.35)
+    ax.view_init(elev=elev, azim=azim)
+    ax.set_axis_off()
 
 
 def draw(ax, state, values=None, quantity: str = "shape_index", cmap: str = "viridis", replica: int = 0,
          elev: float = 20.0, azim: float = 30.0, vmin=None, vmax=None, segments: int = 4):
-    """Draw one replica of ``state`` on ``ax`` (a 3D axes on a sphere, a 2D one on the plane).
+    """Draw one replica of ``state`` on ``ax``: on a sphere (a 3D axes) the hemisphere facing the
+    camera at (``elev``, ``azim``) degrees; on the plane (a 2D axes) the box, the cells and their
+    periodic images.
 
-    Returns a ``ScalarMappable`` for ``fig.colorbar``."""
+    Returns
+    -------
+    A ``ScalarMappable`` for ``fig.colorbar``.
+    """
     import matplotlib
     from matplotlib.cm import ScalarMappable
     values = cell_values(state, quantity) if values is None else np.asarray(values, dtype=np.float64)
@@ -59,27 +154,11 @@ def draw(ax, state, values=None, quantity: str = "shape_index", cmap: str = "vir
     lo = vmin if vmin is not None else (vals[ok].min() if ok.any() else 0.0)
     hi = vmax if vmax is not None else (vals[ok].max() if ok.any() else 1.0)
     face = colors(vals, cmap, lo, hi) / 255.0
-    polys, centres = cell_polygons(state, cells, segments)
+    polys = cell_polygons(state, cells, segments)
     if isinstance(state.constraint, PeriodicPlane):
-        from matplotlib.collections import PolyCollection
-        ax.add_collection(PolyCollection([p[:, :2] for p in polys], facecolors=face, edgecolors="k", linewidths=0.5))
-        lx, ly = state.constraint.size_np(state)[int(replica)]
-        ax.set_xlim(-0.1 * lx, 1.1 * lx)
-        ax.set_ylim(-0.1 * ly, 1.1 * ly)
-        ax.set_aspect("equal")
+        _draw_plane(ax, state, polys, face, replica)
     else:
-        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
-        front = (centres @ view_direction(elev, azim)) > 0            # outward normal towards the viewer
-        # autolim=False: the limits are the sphere's, set below; matplotlib (3.10+) would otherwise
-        # scale the view on its np.empty padding of ragged polygons, garbage on some runs
-        ax.add_collection3d(Poly3DCollection([p for p, f in zip(polys, front) if f], facecolors=face[front],
-                                             edgecolors="k", linewidths=0.4), autolim=False)
-        r = float(state.constraint.size_np(state)[int(replica)])
-        for set_lim in (ax.set_xlim, ax.set_ylim, ax.set_zlim):
-            set_lim(-r, r)
-        ax.set_box_aspect((1, 1, 1), zoom=1.35)
-        ax.view_init(elev=elev, azim=azim)
-        ax.set_axis_off()
+        _draw_sphere(ax, state, polys, face, replica, elev, azim)
     mappable = ScalarMappable(norm=matplotlib.colors.Normalize(lo, hi), cmap=cmap)
     mappable.set_array(vals[ok])
     return mappable
@@ -116,9 +195,11 @@ def _interactive():
 def render_gsd(path, out, frame: int = -1, quantity: str = "shape_index", **options):
     """Render a frame of a spherevm GSD file (exact per-cell values from the file) to ``out``."""
     with Reader(path) as reader:
-        state = reader.state(frame)
-        stored = reader.cell_values(frame)
-        step = reader.step(frame)
+        index = reader.index(frame)
+        state = reader.state(index)
+        stored = reader.cell_values(index)
+        step = reader.step(index)
     values = cell_values(state, quantity, stored)
-    options.setdefault("title", f"{path}  frame {frame}  (step {step})")
+    replica = f"  replica {options.get('replica', 0)}" if state.n_replicas > 1 else ""
+    options.setdefault("title", f"{path}  frame {index}  (step {step}){replica}")
     return render_state(state, out, values=values, quantity=quantity, **options)

@@ -21,7 +21,23 @@ HAS_GPU = svm.device.gpu_available()
 GPU_REASON = "needs CuPy and a working NVIDIA GPU"
 
 
+# The quick loop (`-m "not slow"`): the tests named in tests/slow.txt get the ``slow`` marker here,
+# before pytest deselects by marker.
+SLOW_LIST = os.path.join(os.path.dirname(__file__), "slow.txt")
+
+
+def slow_ids(path=SLOW_LIST):
+    """The node ids listed in ``path`` (one a line; '#' starts a comment)."""
+    with open(path) as f:
+        return {line.split("#")[0].strip() for line in f} - {""}
+
+
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
+    slow = slow_ids()
+    for item in items:
+        if item.nodeid in slow:
+            item.add_marker(pytest.mark.slow)
     if HAS_GPU:
         return
     skip = pytest.mark.skip(reason=GPU_REASON)

@@ -1,6 +1,7 @@
-"""The tutorial notebook runs (issue 14.6): ``examples/tutorial.ipynb`` executed top to bottom in a
-fresh Jupyter kernel, in a temporary folder, with this checkout's spherevm. Needs the test extra's
-nbclient and ipykernel (skipped, saying so, where they are missing)."""
+"""The tutorial notebook runs (issue 14.6) and shows its progress bars (issue 35.2):
+``examples/tutorial.ipynb`` executed top to bottom in a fresh Jupyter kernel, in a temporary
+folder, with this checkout's spherevm. Needs the test extra's nbclient and ipykernel (skipped,
+saying so, where they are missing)."""
 import os
 import pathlib
 
@@ -29,6 +30,11 @@ def test_tutorial_notebook_runs(tmp_path, monkeypatch):
     assert "stopped: ['" in text and "max_steps" not in text     # FIRE's loop: every replica converged
     assert "same Q_s as the recording: True" in text
     assert "pentagon" in text                                   # the p0* table
+    # progress bars in the cells (issue 35.2): tqdm's widget where ipywidgets is installed, else text
+    bars = "".join(o.get("text", "") for o in outputs if o.output_type == "stream" and o.name == "stderr")
+    widgets = [o for o in outputs if "application/vnd.jupyter.widget-view+json" in o.get("data", {})]
+    assert len(widgets) >= 3 or all(b in bars for b in ("relax: 4/4 replicas done", "production: 100%",
+                                                         "rigidity: 100.0%")), bars
     # energy and shape-index curves, two tissue pictures, MSD and Q_s, the rendered frame,
     # the transition plot and the two inherent states
     assert len(images) >= 6, [o.output_type for o in outputs]

@@ -1,4 +1,5 @@
-"""spherevm.ovito against the real ovito package: one face (and region) per cell, the properties."""
+"""spherevm.ovito against the real ovito package: one face (and region) per cell, the properties,
+the replicas side by side."""
 import numpy as np
 import pytest
 
@@ -17,7 +18,7 @@ def test_pipeline_cell_mesh(tmp_path):
     sim.operations.writers.append(svm.plugins.writers.GSD(20, str(path)))
     sim.run(40)
     sim.operations.writers[0].close()
-    pipeline = so.pipeline(path)
+    pipeline = so.pipeline(path, side_by_side=False)
     for frame in (0, 2):
         data = pipeline.compute(frame)
         mesh = data.surfaces["cells"]
@@ -34,6 +35,45 @@ def test_pipeline_cell_mesh(tmp_path):
         assert np.allclose(np.sort(np.unique(np.round(r, 9))), np.unique(np.round(state.radius_np(), 9)))
         assert mesh.vis.color_mapping_property == "shape_index"
         assert data.particles.bonds.vis.width == pytest.approx(so.BOND_WIDTH)
+
+
+def _write(path, state, steps=0):
+    sim = svm.Simulation(device="cpu")
+    sim.state = state
+    sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=3.8))
+    sim.operations.integrator = svm.plugins.integrators.FIRE(dt=0.02)
+    sim.operations.writers.append(svm.plugins.writers.GSD(10, str(path)))
+    sim.run(steps)
+    sim.operations.writers[0].close()
+    return svm.init.from_gsd(path)
+
+
+@pytest.mark.parametrize("surface", ["sphere", "plane"])
+def test_replicas_side_by_side_and_cells_on_their_vertices(tmp_path, surface):
+    """By default each replica's particles and cells move by export.replica_offsets (replica 0 stays);
+    every cell's first corner is its first vertex's particle (on the plane too, whose particles the
+    file centres on the origin); side_by_side=False leaves the file's positions."""
+    import spherevm.ovito as so
+    from spherevm.export import replica_offsets
+    path = tmp_path / "run.gsd"
+    make = svm.init.random_tiling if surface == "sphere" else svm.init_plane.random_planar_tiling
+    state = _write(path, make(20, replicas=3, seed=4))
+    shift = replica_offsets(state)
+    assert shift[0].tolist() == [0, 0, 0] and (np.diff(shift[:, 0]) > 0).all()
+    overlapping = so.pipeline(path, side_by_side=False).compute(0)
+    apart = so.pipeline(path).compute(0)
+    vrep, crep = state.vertex_replica_np(), state.cell_replica_np()
+    p0, p1 = np.asarray(overlapping.particles.positions), np.asarray(apart.particles.positions)
+    np.testing.assert_allclose(p1 - p0, shift[vrep], atol=1e-5)
+    starts = np.concatenate([[0], np.cumsum(so.SEGMENTS * state.cell_sides)[:-1]])
+    for data in (overlapping, apart):
+        corners = np.asarray(data.surfaces["cells"].vertices["Position"])[starts]
+        np.testing.assert_allclose(corners, np.asarray(data.particles.positions)[state.cell_vertices[:, 0]], atol=1e-5)
+    # the replicas' cells no longer overlap along x
+    mesh = np.asarray(apart.surfaces["cells"].vertices["Position"])
+    face_rep = np.repeat(crep, so.SEGMENTS * state.cell_sides)
+    spans = [(mesh[face_rep == r, 0].min(), mesh[face_rep == r, 0].max()) for r in range(3)]
+    assert all(spans[r][1] < spans[r + 1][0] for r in range(2)), spans
 
 
 def test_ovito_reads_a_growing_tissue(tmp_path):

@@ -65,7 +65,7 @@ def run(args) -> int:
                   f"T={args.T:g} dt={args.dt:g}, {args.steps} steps\n")
     t0 = time.perf_counter()
     try:
-        with StageBars(stream=err, enabled=not args.quiet) as bars:
+        with StageBars(stream=err, enabled=False if args.quiet else None) as bars:
             res = glassy_dynamics(args.cells, args.p0, args.kr, args.T, dt=args.dt, steps=args.steps,
                                   replicas=args.replicas, seed=args.seed, device=args.device,
                                   relax_steps=args.relax, surface=args.surface, restart=args.restart,

@@ -127,7 +127,7 @@ def run(args) -> int:
                   f"kr={args.kr:g}{'' if args.t1 is None else f' t1={args.t1:g}'} on {device.name}"
                   f"{'' if args.out is None else f', writing {args.out}'}\n")
         err.flush()
-    progress = MinimizeBar(sim, stream=err, enabled=not args.quiet)
+    progress = MinimizeBar(sim, stream=err, enabled=False if args.quiet else None)
     t0 = time.perf_counter()
     # the run: a failure here is a runtime failure (status 1)
     try:

@@ -112,7 +112,7 @@ def run(args) -> int:
                       f"({sweep.p0[0]:g}..{sweep.p0[-1]:g}), {sweep.replicas} replicas, kr = {sweep.kr:g}: "
                       f"{sweep.total_units} minimisations on {where}, writing {args.out}\n")
             err.flush()
-        bar = TextProgress(err) if not args.quiet else None
+        bar = TextProgress(err, enabled=None) if not args.quiet else None
         try:
             device = "gpu" if args.gpus else args.device
             result = run_sweep(sweep, args.out, executor=client, device=device,

@@ -252,16 +252,18 @@ class SweepProgress:
 class TextProgress:
     """The sweep's progress bar (tqdm) on a stream (standard error by default): the share of the
     work done (cells, since a minimisation's cost grows with N), chunks and minimisations done,
-    those found on disk, elapsed time and ETA. Drawn on a terminal only; silent in a log or a pipe."""
+    those found on disk, elapsed time and ETA; a widget in a notebook. ``enabled``: True (the
+    default) draws it, None only on a terminal or in a notebook (silent in a log or a pipe), False
+    never (see :func:`spherevm.progress.bar`)."""
 
-    def __init__(self, stream=None, label="rigidity"):
-        self.stream, self.label = stream, label
+    def __init__(self, stream=None, label="rigidity", enabled=True):
+        self.stream, self.label, self.enabled = stream, label, enabled
         self.bar = None
 
     def __call__(self, p: SweepProgress):
         if self.bar is None:
-            self.bar = progress_bar(p.cells_total, self.label, " cells", self.stream, initial=p.cells_done,
-                                    smoothing=0,
+            self.bar = progress_bar(p.cells_total, self.label, " cells", self.stream, self.enabled,
+                                    initial=p.cells_done, smoothing=0,
                                     bar_format="{desc}: {percentage:5.1f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
         reused = f" ({p.units_reused} on disk)" if p.units_reused else ""
         self.bar.set_postfix_str(f"chunks {p.chunks_done}/{p.chunks_total}  "

@@ -115,7 +115,7 @@ __device__ __forceinline__ void tissue_cells(const double* P, KeptNorm norm, con
 // Threads a cell in tissue_cells (cb cells): as many as a block of at most 512 threads has for its
 // cells, a power of two up to 8. A block of more threads keeps one a cell: its SM is busy with its
 // many warps, and the lanes' shuffles and repeated sums only add work (one H200: 8 x 1,024 cells on
-// 2 blocks of 1,024 threads, 18 % longer on two lanes a cell in session 13; on 4 blocks of 512
+// 2 blocks of 1,024 threads, 18 % longer on two lanes a cell without kept norms; on 4 blocks of 512
 // threads, 6 % shorter with the kept norms; 1,024 x 32 and 64 x 64 cells, 2-5 warps a block, 4-14 %
 // shorter).
 __device__ __forceinline__ int tissue_cell_lanes(int cb)

@@ -47,13 +47,11 @@ _KERNELS = Path(__file__).with_suffix(".cu")
 #: threads per tissue's block (at most this many; fewer for a tissue with fewer vertices)
 THREADS = 1024
 #: tissues of up to this many vertices run on one block; larger ones on a cluster of blocks, one
-#: block per about this many vertices. One H200, Brownian + T1, ms a step by blocks a tissue 1 / 2 /
-#: 4 / 8 (session 12): 8 x 1,024 cells 0.033 / 0.024 / 0.024 / 0.029; 1 x 1,000 0.031 / 0.024 /
-#: 0.025 / 0.027; 8 x 256 0.013 / 0.019: the chains of dependent double-precision operations of one
-#: cell and one vertex set a floor that more blocks do not lower. Since session 14 (kept norms, two
-#: lanes a cell in blocks of 512 threads, T1's detection on every block): 8 x 1,024 cells on 4
-#: blocks 0.0214 against 0.0250 on 2; session 16 (two or three barriers a step): 16.0 us of GPU
-#: time a step on 4 blocks against 19.4 on 8.
+#: block per about this many vertices. The chains of dependent double-precision operations of one
+#: cell and one vertex set a floor that more blocks do not lower. One H200, Brownian + T1, 8 x 1,024
+#: cells: 0.0214 ms a step on 4 blocks against 0.0250 on 2 (kept norms, two lanes a cell in blocks
+#: of 512 threads, T1's detection on every block), and 16.0 us of GPU time a step on 4 blocks
+#: against 19.4 on 8 (two or three barriers a step). See docs/performance.md.
 VERTICES_PER_BLOCK = 512
 #: largest cluster (the portable size on Hopper)
 MAX_CLUSTER = 8

@@ -205,16 +205,7 @@ class Force(Operation):
     evaluated whenever the integrator needs them; their trigger is not used."""
 
     def compute(self, state) -> ForceResult:
-        """The force on every vertex: minus the surface (tangent-plane) gradient of the energy.
-
-        Parameters
-        ----------
-        state : State
-
-        Returns
-        -------
-        ForceResult
-            On the State's device."""
+        """The force of ``state``: a :class:`ForceResult` on the State's device."""
         raise NotImplementedError
 
     def energy_scale(self, state):
@@ -307,13 +298,7 @@ class Integrator(Operation):
         """Forget per-vertex memory of ``vertices`` (device index array; negative entries ignored)."""
 
     def step(self, simulation, forces):
-        """Move the vertices of the ``active`` replicas one step.
-
-        Parameters
-        ----------
-        simulation : Simulation
-        forces : array
-            The summed forces ``(V, 3)``, on the State's device."""
+        """Move the ``active`` replicas one step under the summed ``forces`` ``(V, 3)``."""
         raise NotImplementedError
 
     def check(self, simulation):
@@ -491,12 +476,7 @@ class Updater(Operation):
     in_minimize = True
 
     def update(self, simulation, timestep):
-        """Change the State before the step's forces.
-
-        Parameters
-        ----------
-        simulation : Simulation
-        timestep : int"""
+        """Change the State (at ``timestep``) before the step's forces."""
         raise NotImplementedError
 
     def after_minimize(self, simulation):
@@ -512,12 +492,7 @@ class Writer(Operation):
     last_written = None
 
     def write(self, simulation, timestep):
-        """Record the simulation's current state.
-
-        Parameters
-        ----------
-        simulation : Simulation
-        timestep : int"""
+        """Record the simulation's current state (at ``timestep``)."""
         raise NotImplementedError
 
     def close(self):

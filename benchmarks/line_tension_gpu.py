@@ -56,15 +56,16 @@ class LineTensionKernel(LineTension):
 
     def _compute_gpu(self, state):
         import cupy as cp
-        from spherevm.device import launch, load_module
+        from spherevm.device import launch, load_module, segment_sums
         module = load_module(self.cu_file)
         nv = state.n_vertices
         forces = cp.empty_like(state.positions)
         corner_energy = cp.empty((nv, 3))
-        energy = cp.zeros(state.n_replicas)
+        energy = cp.empty(state.n_replicas)
         launch(module.get_function("line_tension"), nv,
                (state.positions, state.vertex_neighbors, state.vertex_replica, state.radius,
-                np.int32(nv), np.float64(self.tension), forces, corner_energy, energy))
+                np.int32(nv), np.float64(self.tension), forces, corner_energy, energy,
+                *segment_sums(state, "vertices")))
         cell_energy = cp.bincount(state.vertex_cells.reshape(-1), weights=corner_energy.reshape(-1),
                                   minlength=state.n_cells)
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)

@@ -118,13 +118,29 @@ def replica_offsets(state) -> np.ndarray:
 
 def cell_mesh(state, values=None, quantity: str = "shape_index", cmap: str = "viridis", subdivisions: int = 3,
               replica=None, side_by_side: bool = True, vmin=None, vmax=None):
-    """A ``trimesh.Trimesh`` of the cells of ``state``, coloured per cell.
+    """A ``trimesh.Trimesh`` of the cells of ``state``, coloured per cell: mesh vertices carry
+    ``vertex_colors``, ``mesh.metadata['cell']`` gives each face's cell.
 
-    ``values`` (length ``n_cells``) overrides ``quantity``. ``replica``: one replica (int) or all
-    (None); all replicas are placed side by side along x (``side_by_side=False``: where they are,
-    overlapping, as in the State). Mesh vertices carry ``vertex_colors``; ``mesh.metadata['cell']``
-    gives each face's cell.
-    """
+    Parameters
+    ----------
+    state : State
+    values : array (n_cells,), optional
+        Overrides ``quantity``.
+    quantity : str
+    cmap : str
+        A matplotlib colour map.
+    subdivisions : int
+        Each fan triangle cut into ``subdivisions^2`` on the surface.
+    replica : int, optional
+        One replica, or all (None).
+    side_by_side : bool
+        All replicas placed side by side along x; False: where they are, overlapping.
+    vmin, vmax : float, optional
+        The colour scale's range.
+
+    Returns
+    -------
+    trimesh.Trimesh"""
     import trimesh
     n = int(subdivisions)
     if n < 1:
@@ -167,8 +183,23 @@ def export_state(state, out, values=None, quantity: str = "shape_index", **optio
 
 
 def export_gsd(path, out, frame: int = -1, quantity: str = "shape_index", **options):
-    """Write frame ``frame`` of a spherevm GSD file as a mesh; the quantity's exact per-cell values
-    come from the file (``energy`` only where it was recorded). Returns the mesh."""
+    """Write a frame of a spherevm GSD file as a mesh; the quantity's exact per-cell values come
+    from the file (``energy`` only where it was recorded).
+
+    Parameters
+    ----------
+    path : str or path
+    out : str or path
+        ``.ply``, ``.obj`` or ``.glb``.
+    frame : int
+        Negative from the end.
+    quantity : str
+    **options
+        As in :func:`cell_mesh`.
+
+    Returns
+    -------
+    trimesh.Trimesh"""
     with Reader(path) as reader:
         state = reader.state(frame)
         stored = reader.cell_values(frame)

@@ -72,26 +72,30 @@ def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, v
     """Random tilings of the sphere, the paper's initial condition.
 
     For each replica: ``n_cells`` points uniform on the sphere, their convex hull, and one vertex at
-    the centroid of each hull facet pushed onto the sphere (so cells have any side count the hull
-    yields). Default radius ``sqrt(N/4 pi)`` so that <A> = 1. Replica ``r`` uses the random stream
-    ``(seed, r)``: the same seed gives the same tilings, and replica r does not depend on how many
-    replicas are made.
+    the centroid of each hull facet pushed onto the sphere. Replica ``r`` uses the random stream
+    ``(seed, r)``, so it does not depend on how many replicas are made. A draw with a cell larger
+    than a hemisphere or folded (common for N < 16, below 1e-6 from N = 32) is redrawn from
+    ``(seed, r, attempt)``: every tiling returned passes :meth:`State.validate`.
 
-    ``vertices="circumcenter"`` puts vertices at the facet circumcentres instead: the exact spherical
-    Voronoi tessellation of the points.
+    Parameters
+    ----------
+    n_cells : int
+        Cells per replica, >= 4.
+    replicas : int
+        Independent tilings, stored back to back.
+    seed : int
+    radius : float, optional
+        Default ``sqrt(n_cells / 4 pi)``, so that <A> = 1.
+    vertices : {"centroid", "circumcenter"}
+        "circumcenter": vertices at the facet circumcentres, the exact spherical Voronoi tessellation.
+    sort : bool
+        Number cells and vertices along a Morton curve (:func:`spherevm.topology.morton_codes`), so
+        that neighbours are close in memory (the GPU kernels gather several times faster).
+    device : Device or str
 
-    Small spheres: a point set lying within one hemisphere (probability (N^2 - N + 2)/2^N, so
-    common for N < 16 and below 1e-6 from N = 32) has the origin outside its hull and gives a cell
-    larger than a hemisphere; facet centroids can also fold a cell over when a facet is very
-    obtuse, or push one past a hemisphere. Such draws are rejected and redrawn from the stream
-    ``(seed, r, attempt)``, so every tiling returned has all cells counter-clockwise with positive
-    area, each smaller than a hemisphere (what :meth:`State.validate` requires). This conditions the
-    ensemble of small-N tilings; at N >= 32 it practically never happens.
-
-    ``sort=True`` numbers cells and vertices along a Morton curve on the sphere
-    (:func:`spherevm.topology.morton_codes`), so that neighbours are close in memory; the GPU force
-    kernels gather several times faster at large N.
-    """
+    Returns
+    -------
+    State"""
     n = integer("n_cells", n_cells, minimum=4)
     replicas = integer("replicas", replicas, minimum=1)
     seed = integer("seed", seed)
@@ -101,11 +105,20 @@ def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, v
 
 
 def random_tilings(n_cells: int, seeds, radius=None, vertices="centroid", sort: bool = True, device=CPU) -> State:
-    """One random tiling per seed, as an ensemble: replica ``i`` equals ``random_tiling(n_cells, seed=seeds[i])``.
+    """One random tiling per seed, as an ensemble: replica ``i`` equals
+    ``random_tiling(n_cells, seed=seeds[i])``, built with one convex hull per tiling and one
+    vectorised pass for everything else.
 
-    Sweeps give every (N, p0, replica) its own seed; building them together costs one convex hull
-    per tiling and one vectorised pass for everything else.
-    """
+    Parameters
+    ----------
+    n_cells : int
+    seeds : sequence of int or tuple
+    radius, vertices, sort, device
+        As in :func:`random_tiling`.
+
+    Returns
+    -------
+    State"""
     n = int(n_cells)
     if n != n_cells or n < 4:
         raise ValueError(f"n_cells must be an integer >= 4, got {n_cells}")
@@ -172,13 +185,25 @@ def _batched_dual(n, hulls, R, vertices, sort):
 def from_polygons(vertices, cells, radius=None, device=CPU, validate=True, box=None) -> State:
     """A single-replica State from vertex positions and counter-clockwise cell vertex lists.
 
-    ``vertices`` (V, 3) are projected onto the sphere of the given radius; ``cells`` is a list of
-    vertex-index lists, each counter-clockwise seen from outside. The network must be trivalent.
+    Parameters
+    ----------
+    vertices : array (V, 3)
+        Projected onto the sphere of the given radius; on the plane (V, 2) or (V, 3) with z = 0,
+        inside ``[0, Lx) x [0, Ly)``.
+    cells : list of lists of int
+        Each cell's vertices, counter-clockwise seen from outside (from +z on the plane, edges the
+        minimum images, see :mod:`spherevm.init_plane`). The network must be trivalent.
+    radius : float, optional
+        The sphere's radius.
+    device : Device or str
+    validate : bool
+        Check the network.
+    box : (Lx, Ly), optional
+        Instead of a radius: the State lives on a :class:`~spherevm.constraints.PeriodicPlane`.
 
-    With ``box=(Lx, Ly)`` instead of a radius the State lives on a :class:`PeriodicPlane`:
-    ``vertices`` are (V, 2) or (V, 3) with z = 0, inside ``[0, Lx) x [0, Ly)``, and cells are
-    counter-clockwise seen from +z, their edges the minimum images (see :mod:`spherevm.init_plane`).
-    """
+    Returns
+    -------
+    State"""
     if box is not None or radius is None:
         if radius is not None:
             raise ValueError("give radius (a sphere) or box (a periodic plane), not both")
@@ -233,10 +258,18 @@ def _ccw_cells(points, groups):
 def regular_tiling(name: str, radius=None, device=CPU) -> State:
     """A regular (Platonic or Archimedean) tiling of the sphere.
 
-    ``"dodecahedron"``: 12 regular pentagons (20 vertices). ``"truncated_icosahedron"``: 12 regular
-    pentagons and 20 regular hexagons (60 vertices, all edges of equal length), the football.
-    Default radius ``sqrt(N/4 pi)``.
-    """
+    Parameters
+    ----------
+    name : {"dodecahedron", "truncated_icosahedron"}
+        12 regular pentagons (20 vertices), or 12 regular pentagons and 20 regular hexagons (60
+        vertices, all edges equal), the football.
+    radius : float, optional
+        Default ``sqrt(N / 4 pi)``.
+    device : Device or str
+
+    Returns
+    -------
+    State"""
     if name not in REGULAR_TILINGS:
         raise ValueError(f"name must be one of {REGULAR_TILINGS}, got {name!r}")
     ico_v, ico_f = _icosahedron()
@@ -266,11 +299,21 @@ from .init_plane import MIN_PLANAR_CELLS, hexagonal_tiling, random_planar_tiling
 
 
 def from_gsd(path, frame: int = -1, device=CPU, validate: bool = True, orientation: bool = False) -> State:
-    """The State of frame ``frame`` (negative counts from the end) of a spherevm GSD file, restored
-    exactly: bitwise positions, identical topology (see :func:`spherevm.gsdio.read_state`).
+    """The State of a frame of a spherevm GSD file, restored exactly: bitwise positions, identical
+    topology (see :func:`spherevm.gsdio.read_state`).
 
-    ``validate`` (default True) checks the stored network and names the file, frame and first bad
-    entry; ``orientation=True`` also requires positive cell areas (off by default: at kA = 0 a
-    valid run may fold a cell, which that test rejects).
-    """
+    Parameters
+    ----------
+    path : str or path
+    frame : int
+        Frame index, negative from the end.
+    device : Device or str
+    validate : bool
+        Check the stored network, naming the file, frame and first bad entry.
+    orientation : bool
+        Also require positive cell areas (off by default: at kA = 0 a valid run may fold a cell).
+
+    Returns
+    -------
+    State"""
     return gsdio.read_state(path, frame=frame, device=device, validate=validate, orientation=orientation)

@@ -106,14 +106,27 @@ def periodic_voronoi(points, box, margin=True):
 
 def random_planar_tiling(n_cells: int, replicas: int = 1, seed: int = 0, box=None, sort: bool = True,
                          device=CPU) -> State:
-    """Random Voronoi tilings of the periodic box: ``n_cells`` uniform random points each.
+    """Random Voronoi tilings of the periodic box, ``n_cells`` uniform random points each.
 
-    Default box: the square of area ``n_cells`` (``<A> = 1``); ``box`` is a side or ``(Lx, Ly)``.
     Replica ``r`` uses the random stream ``(seed, r)`` (redrawn from ``(seed, r, attempt)`` when the
     Voronoi network is not simple or has an edge longer than half the box: common at small N or in a
-    box only a few cells wide), so it does not depend on how many replicas are made. ``n_cells >= MIN_PLANAR_CELLS`` (8; see there). ``sort=True`` numbers cells and vertices along a 2-D
-    Morton curve.
-    """
+    box only a few cells wide), so it does not depend on how many replicas are made.
+
+    Parameters
+    ----------
+    n_cells : int
+        Cells per replica, at least ``MIN_PLANAR_CELLS`` (8).
+    replicas : int
+    seed : int
+    box : float or (Lx, Ly), optional
+        Default: the square of area ``n_cells`` (<A> = 1).
+    sort : bool
+        Number cells and vertices along a 2-D Morton curve.
+    device : Device or str
+
+    Returns
+    -------
+    State"""
     n = integer("n_cells", n_cells, minimum=MIN_PLANAR_CELLS)
     replicas = integer("replicas", replicas, minimum=1)
     seed = integer("seed", seed)
@@ -165,9 +178,17 @@ def hexagonal_tiling(nx: int, ny: int, device=CPU) -> State:
     """The regular honeycomb of ``nx x ny`` unit-area hexagons on the periodic plane.
 
     Pointy-top hexagons of side ``a = sqrt(2 / (3 sqrt 3))`` (area 1, perimeter ``sqrt(8 sqrt 3)``),
-    rows offset by half a cell; box ``(nx sqrt(3) a, ny 3a/2)``, so ``ny`` must be even. ``nx >= 3``
-    and ``ny >= 4`` keep the network simple (no cell its own neighbour twice through the images).
-    """
+    rows offset by half a cell; box ``(nx sqrt(3) a, ny 3a/2)``.
+
+    Parameters
+    ----------
+    nx, ny : int
+        Hexagons per row and rows: ``nx >= 3``, ``ny >= 4`` and even (a simple network).
+    device : Device or str
+
+    Returns
+    -------
+    State"""
     nx = integer("nx", nx, minimum=3)
     ny = integer("ny", ny, minimum=4)
     if ny % 2:

@@ -17,7 +17,11 @@ class Logger:
     A custom quantity is a callable ``f(simulation)`` returning a scalar or one value per replica.
     Names are checked against the Simulation when a writer first uses the logger (:meth:`check`),
     since operations attached later add loggables.
-    """
+
+    Parameters
+    ----------
+    quantities : sequence of str
+        Loggable names (see ``Simulation.loggables``)."""
 
     def __init__(self, quantities=()):
         self._custom = {}
@@ -25,8 +29,19 @@ class Logger:
         self.add(quantities=quantities)
 
     def add(self, obj=None, quantities=None):
-        """Add ``quantities`` (a name or names), or every loggable of ``obj`` (an operation or a
-        Simulation: anything with a ``loggables`` mapping); with both, the names must be ``obj``'s."""
+        """Add quantities by name, or every loggable of an object.
+
+        Parameters
+        ----------
+        obj : Operation or Simulation, optional
+            Anything with a ``loggables`` mapping: all of them, or those named in ``quantities``.
+        quantities : str or sequence of str, optional
+            Names; with ``obj``, they must be ``obj``'s.
+
+        Returns
+        -------
+        Logger
+            ``self``."""
         names = [quantities] if isinstance(quantities, str) else list(quantities or ())
         if not all(isinstance(n, str) and n for n in names):
             raise ValueError(f"quantities must be loggable names (str), got {quantities!r}")

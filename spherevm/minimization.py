@@ -14,7 +14,11 @@ import numpy as np
 
 @dataclass
 class MinimizeResult:
-    """Outcome of :meth:`Simulation.minimize`, one entry per replica (NumPy arrays)."""
+    """Outcome of :meth:`Simulation.minimize`, one entry per replica (NumPy arrays).
+
+    Parameters
+    ----------
+    converged, reason, energy, energy_per_cell, max_force, steps, mean_shape_index : numpy.ndarray"""
     converged: np.ndarray
     reason: np.ndarray          # "force", "energy", "max_steps" or an operation's halt reason
     energy: np.ndarray          # total energy per replica
@@ -28,7 +32,11 @@ class MinimizeResult:
         return bool(np.all(self.converged))
 
     def table(self) -> str:
-        """A plain-text table, one row per replica."""
+        """A plain-text table, one row per replica.
+
+        Returns
+        -------
+        str"""
         rows = ["replica   energy/cell  <P/sqrt(A)>     max|F|  converged  reason          steps"]
         for r in range(len(self.converged)):
             rows.append(f"{r:7d}  {self.energy_per_cell[r]:12.6e}  {self.mean_shape_index[r]:11.6f}  "

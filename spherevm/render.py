@@ -172,7 +172,28 @@ def new_axes(fig, state, *position):
 
 def render_state(state, out, values=None, quantity: str = "shape_index", size=(6.0, 5.0), dpi: int = 100,
                  title=None, **options):
-    """Write a PNG (or any format matplotlib writes) of one replica of ``state`` with a colour bar."""
+    """Write a picture (PNG, or any format matplotlib writes) of one replica of ``state`` with a
+    colour bar.
+
+    Parameters
+    ----------
+    state : State
+    out : str or path
+    values : array (n_cells,), optional
+        Per-cell values; default the ``quantity`` computed from the State.
+    quantity : str
+        The colour bar's label, and what is computed without ``values``.
+    size : (float, float)
+        Figure size in inches.
+    dpi : int
+    title : str, optional
+    **options
+        :func:`draw`'s keywords (``replica``, ``cmap``, ...).
+
+    Returns
+    -------
+    str or path
+        ``out``."""
     import matplotlib
     matplotlib.use("Agg", force=False) if matplotlib.get_backend().lower() != "agg" and not _interactive() else None
     import matplotlib.pyplot as plt
@@ -193,7 +214,22 @@ def _interactive():
 
 
 def render_gsd(path, out, frame: int = -1, quantity: str = "shape_index", **options):
-    """Render a frame of a spherevm GSD file (exact per-cell values from the file) to ``out``."""
+    """Render a frame of a spherevm GSD file, with the exact per-cell values stored in the file.
+
+    Parameters
+    ----------
+    path : str or path
+    out : str or path
+    frame : int
+        Negative from the end.
+    quantity : {"shape_index", "area", "perimeter", "energy"}
+    **options
+        As in :func:`render_state`.
+
+    Returns
+    -------
+    str or path
+        ``out``."""
     with Reader(path) as reader:
         index = reader.index(frame)
         state = reader.state(index)

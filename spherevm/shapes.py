@@ -18,8 +18,17 @@ CENTROID_METHODS = ("area", "vertex")
 
 # ======================================================================================== shapes
 def cell_shapes(state):
-    """Per-cell areas and perimeters, as NumPy arrays of length ``n_cells`` (on the GPU from one
-    kernel, the vertex model's own formulas: :func:`spherevm.constraints.kernels.cell_measures`)."""
+    """Per-cell areas and perimeters (on the GPU from one kernel, the vertex model's own formulas:
+    :func:`spherevm.constraints.kernels.cell_measures`).
+
+    Parameters
+    ----------
+    state : State
+
+    Returns
+    -------
+    (area, perimeter)
+        NumPy arrays of length ``n_cells``."""
     if state.device.is_gpu and isinstance(state.constraint, KERNEL_SURFACES):
         area, perimeter = cell_measures(state)
     else:
@@ -35,12 +44,28 @@ def shape_index_of(area, perimeter):
 
 
 def shape_index(state):
-    """Per-cell shape index ``P / sqrt(A)`` (see :func:`shape_index_of`)."""
+    """Per-cell shape index ``P / sqrt(A)`` (see :func:`shape_index_of`).
+
+    Parameters
+    ----------
+    state : State
+
+    Returns
+    -------
+    numpy.ndarray (n_cells,)"""
     return shape_index_of(*cell_shapes(state))
 
 
 def mean_shape_index(state):
-    """Mean shape index per replica, over the cells of positive area."""
+    """Mean shape index per replica, over the cells of positive area.
+
+    Parameters
+    ----------
+    state : State
+
+    Returns
+    -------
+    numpy.ndarray (n_replicas,)"""
     q = shape_index(state)
     ok = np.isfinite(q)
     rep = state.cell_replica_np()
@@ -69,8 +94,14 @@ def regular_polygon_perimeter(n_sides: int, area: float, radius: float) -> float
 def pentagon_perimeter(n_cells) -> float:
     """The paper's bound: perimeter of a unit-area regular spherical pentagon, R = sqrt(N / 4 pi).
 
-    Accepts a scalar or an array of cell numbers (returns an array then).
-    """
+    Parameters
+    ----------
+    n_cells : int or array
+        Cells on the sphere.
+
+    Returns
+    -------
+    float or numpy.ndarray"""
     n = np.asarray(n_cells)
     if np.any(n < 4):
         raise ValueError(f"n_cells must be >= 4, got {n_cells}")
@@ -96,35 +127,27 @@ def surface_pentagon_perimeter(n_cells, surface: str = "sphere"):
 
 # ======================================================================================== centroids
 def cell_centroids(state, method: str = "area"):
-    """Cell positions on the sphere, ``(n_cells, 3)`` NumPy float64, each at distance R from the centre.
+    """Cell positions, ``(n_cells, 3)`` NumPy float64: on the sphere each at distance R from the
+    centre; on a :class:`~spherevm.constraints.PeriodicPlane` wrapped into the box, ``z = 0`` (each
+    polygon unwrapped from its first vertex, :func:`planar_cell_centroids`).
 
     ``method="area"`` (default): the centre of mass of the spherical polygon, pushed radially onto
-    the sphere. The surface integral of the unit normal over a spherical polygon is exact and
-    cheap: closing the polygon with the planar sectors (centre, edge arc) gives a closed surface,
-    so ``integral of n dA = (R^2 / 2) sum_edges theta_e (a_e x b_e) / |a_e x b_e|`` over the edges
-    ``a_e -> b_e`` taken counter-clockwise, ``theta_e`` the arc angle. The centroid direction is
-    that vector, normalised.
+    the sphere: ``integral of n dA = (R^2 / 2) sum_edges theta_e (a_e x b_e) / |a_e x b_e|`` over the
+    edges ``a_e -> b_e`` taken counter-clockwise (exact), normalised. It is continuous through a T1,
+    while the vertex centroid jumps by about ``|r_edge - r_cell| / n`` (0.08 sqrt(<A>) for a
+    hexagon) at every T1, which an MSD's cage plateau would feel. A folded cell (non-positive area,
+    allowed at kA = 0) falls back to the vertex centroid. ``method="vertex"``: ``R`` times the
+    normalised mean of the unit vertex directions (:meth:`spherevm.constraints.Sphere.cell_centers`).
 
-    ``method="vertex"``: ``R`` times the normalised mean of the unit vertex directions
-    (:meth:`spherevm.constraints.Sphere.cell_centers`).
+    Parameters
+    ----------
+    state : State
+        Sphere or PeriodicPlane, either device.
+    method : {"area", "vertex"}
 
-    Why "area" is the default: the vertex centroid depends on how the vertices are spread along the
-    boundary, not only on the cell's shape, and it jumps at every T1. Just before a T1 the short
-    edge's two vertices almost coincide and count twice in the two cells that lose the edge; after
-    the flip they count once, so the vertex centroid of an n-sided cell jumps by about
-    ``|r_edge - r_cell| / n``, roughly 0.08 sqrt(<A>) for a hexagon, a spurious displacement in
-    every T1 that a cage plateau of the MSD (around 0.01 <A> in a glass) would feel. The area
-    centroid is continuous through a T1: flipping a vanishing edge barely changes the polygon.
-
-    A cell folded over (non-positive area, allowed at kA = 0) has no meaningful area centroid (its
-    area vector vanishes or points inward); such cells fall back to the vertex centroid.
-
-    On a :class:`~spherevm.constraints.PeriodicPlane` (:func:`planar_cell_centroids`) each polygon
-    is unwrapped from its first vertex along its minimum-image edges; the area centroid (or the
-    vertex centroid) of the unwrapped polygon is wrapped back into the box, ``z = 0``.
-
-    Works on either device (the sums run where the state lives); Sphere and PeriodicPlane.
-    """
+    Returns
+    -------
+    numpy.ndarray (n_cells, 3)"""
     if method not in CENTROID_METHODS:
         raise ValueError(f"method must be one of {CENTROID_METHODS}, got {method!r}")
     if isinstance(state.constraint, PeriodicPlane):

@@ -29,12 +29,13 @@ class _ForceCache:
 class Simulation:
     """A State plus the operations acting on it (HOOMD-blue style).
 
-    >>> sim = Simulation(device="cpu")
-    >>> sim.state = spherevm.init.random_tiling(64)
-    >>> sim.operations.forces.append(spherevm.plugins.forces.VertexModel.dimensionless(kr=0, p0=3.8))
-    >>> sim.operations.integrator = spherevm.plugins.integrators.FIRE(dt=0.05)
-    >>> result = sim.minimize(force_tol=1e-10)
-    """
+    Parameters
+    ----------
+    device : {"auto", "cpu", "gpu"} or Device
+        Where the State lives; "auto" takes the GPU when CuPy sees one.
+    seed : int
+        Seed of every random stream of the run (Brownian noise, divisions, ...); docs/index.md
+        shows a whole script."""
 
     def __init__(self, device="auto", seed: int = 0):
         self.device = resolve(device)
@@ -91,14 +92,16 @@ class Simulation:
             op.restore_state(data)
 
     def create_state_from_gsd(self, path, frame: int = -1, validate: bool = True):
-        """Set the State, the timestep and the saved state of the operations from a GSD frame
-        (HOOMD's ``Simulation.create_state_from_gsd``), restored exactly on this Simulation's device.
+        """Set the State, the timestep and every operation's saved state (now or when it attaches)
+        from a GSD frame, exactly: running on is bitwise the uninterrupted run (docs/file-format.md).
 
-        Every operation attached now or later picks up its saved state (FIRE's velocities, dt,
-        alpha, counters and convergence; Active's directors; T1's counters and flip-back memory)
-        when it attaches, by its checkpoint key (``Operation.checkpoint_key``): running on gives
-        bitwise the uninterrupted run. ``validate``: see :func:`spherevm.gsdio.read_state`.
-        See docs/file-format.md, *Checkpoints*."""
+        Parameters
+        ----------
+        path : str or path
+        frame : int
+            Frame index, negative from the end.
+        validate : bool
+            Check the stored network (:func:`spherevm.gsdio.read_state`)."""
         from . import gsdio
         with gsdio.Reader(path) as reader:
             state = reader.state(frame, device=self.device, validate=validate)
@@ -117,10 +120,12 @@ class Simulation:
                         held_back=held)
 
     def checkpoint(self) -> dict:
-        """What a checkpoint frame holds besides the State: ``{chunk suffix: NumPy array}``, with
-        ``op/<key>/<field>`` for every operation's :meth:`~spherevm.plugins.base.Operation.state_to_save`
-        and ``simulation/<field>`` for the Simulation's own (seed, the timestep its updaters last ran,
-        whether a minimisation held some back then)."""
+        """What a checkpoint frame holds besides the State: ``op/<key>/<field>`` for every operation's
+        :meth:`~spherevm.plugins.base.Operation.state_to_save`, ``simulation/<field>`` for the Simulation's.
+
+        Returns
+        -------
+        dict"""
         out = {"simulation/seed": np.array([self.seed], dtype=np.int64),
                "simulation/updated_at": np.array([-1 if self._updated_at is None else self._updated_at],
                                                  dtype=np.int64),
@@ -162,7 +167,11 @@ class Simulation:
 
     # ------------------------------------------------------------------ forces and logging
     def compute_forces(self):
-        """Summed forces ``(V, 3)`` and energy per replica on the device, cached until the state changes."""
+        """The summed forces ``(V, 3)`` and the energy per replica, on the State's device, cached.
+
+        Returns
+        -------
+        (forces, energy)"""
         self.require_state()
         if self._cache is None:
             if not self.operations.forces:   # free vertices: zero force, zero energy
@@ -186,14 +195,20 @@ class Simulation:
         return self._cache.cell_energy
 
     def max_force(self):
-        """Largest vertex force magnitude per replica (device array)."""
+        """The largest vertex force magnitude per replica, on the State's device.
+
+        Returns
+        -------
+        array"""
         return self._summary()[:self._state.n_replicas].view(np.float64)
 
     def replica_summary(self):
-        """``(max_force, energy, first_bad_vertex)`` in NumPy, from one device-to-host copy (a
-        convergence check reads all three): the largest vertex force magnitude and the energy per
-        replica, and the first vertex whose position is not finite (-1 if none). Cached with the
-        forces until the state changes."""
+        """What a convergence check reads, in NumPy from one read-back; cached with the forces.
+
+        Returns
+        -------
+        (max_force, energy, first_bad_vertex)
+            Per replica: the largest vertex force, the energy, the first non-finite vertex (-1: none)."""
         summary = self._summary()
         if self._cache.summary_host is None:
             self._cache.summary_host = read_replica_summary(summary, self._state.n_vertices, self._state.n_replicas)
@@ -229,7 +244,16 @@ class Simulation:
         return out
 
     def log(self, name: str):
-        """The current value of a loggable quantity (NumPy)."""
+        """The current value of loggable ``name`` (one of :attr:`loggables`).
+
+        Parameters
+        ----------
+        name : str
+
+        Returns
+        -------
+        numpy.ndarray or float
+            One value per replica, or a scalar."""
         table = self.loggables
         if name not in table:
             raise ValueError(f"unknown loggable {name!r}; available: {sorted(table)}")
@@ -298,22 +322,17 @@ class Simulation:
     def run(self, steps: int, check_every=None, progress=None, graphs=None, fused=None):
         """Advance ``steps`` timesteps: updaters, forces, integrator, writers on each.
 
-        Every ``check_every`` steps (default: every step on the CPU, every 100 on the GPU, where a
-        check is a device-to-host read) the positions are checked: a NaN stops the run with
-        FloatingPointError naming the step, replica and vertex; writers have flushed every frame
-        before, so the last good frame stays on disk. ``progress(done, total)`` is called at checks.
-
-        ``graphs``: run the steps between checks and writes as CUDA graphs (:mod:`spherevm.graphs`;
-        the same trajectory bit for bit, several times faster for small tissues). None (default): on
-        the GPU when every operation can, the run has at least ``graphs.MIN_STEPS`` steps and the
-        State at most ``graphs.MAX_VERTICES`` vertices; True: always (ValueError naming what
-        cannot); False: never.
-
-        ``fused``: with graphs on, Brownian dynamics of small tissues run a stretch of steps in one
-        launch, a thread block per tissue (:mod:`spherevm.tissue_steps`; the same trajectory bit for
-        bit). None (default): wherever ``tissue_steps.why_not`` finds nothing against it; False:
-        graph replays of the general kernels.
-        """
+        Parameters
+        ----------
+        steps : int
+            Number of timesteps.
+        check_every, progress : int, callable, optional
+            Steps between checks (default 1 on the CPU, 100 on the GPU), where ``progress(done, total)``
+            is called; a NaN position stops the run with FloatingPointError naming step and vertex.
+        graphs, fused : bool, optional
+            Run stretches as CUDA graphs (:mod:`spherevm.graphs`), small tissues' steps fused
+            (:mod:`spherevm.tissue_steps`), the same trajectory bit for bit. None: where they apply;
+            True: insist (ValueError naming what cannot); False: never (docs/performance.md)."""
         self.require_state()
         steps = integer("steps", steps)
         if self.operations.integrator is None:
@@ -410,43 +429,30 @@ class Simulation:
     def minimize(self, force_tol=None, energy_tol=None, max_steps: int = 100_000, check_every=None,
                  progress=None, narrow: bool = True, resume: bool = False, graphs=None,
                  fused=None) -> MinimizeResult:
-        """Minimise every replica with the Minimizer integrator (FIRE if none is set) until each
-        converges, is halted or ``max_steps`` iterations have passed.
+        """Minimise every replica with the Minimizer integrator (FIRE by default) until each converges,
+        is halted or ``max_steps`` iterations pass; growth updaters (``in_minimize`` False) sit it out.
 
-        ``resume=False`` (default): the minimiser starts afresh (FIRE's velocities, dt, alpha,
-        counters, convergence and iteration count reset; halting operations forget their history).
-        ``resume=True``: it goes on from where it stands (after an earlier ``minimize``, a ``run``
-        or a checkpoint restored with ``create_state_from_gsd``), for ``max_steps`` more
-        iterations: ``minimize(1000)`` then ``minimize(1000, resume=True)`` is bitwise
-        ``minimize(2000)`` (when ``check_every`` divides 1000: the first call checks convergence at
-        its last iteration).
+        Parameters
+        ----------
+        force_tol, energy_tol, check_every : optional
+            Set the minimiser's own (:class:`spherevm.plugins.base.Minimizer`); None keeps them.
+        max_steps : int
+            Iteration limit; replicas still running then stop with reason ``"max_steps"``.
+        progress : callable, optional
+            ``progress(step, n_done, n_replicas)``, called at every check.
+        narrow : bool
+            Once at most half of the replicas run, step a State of those alone (the same numbers;
+            without writers, with ``narrowable`` operations).
+        resume : bool
+            False: start afresh (FIRE's velocities, dt, alpha reset). True: go on for ``max_steps`` more
+            (``minimize(1000)`` then ``minimize(1000, resume=True)`` is bitwise ``minimize(2000)``).
+        graphs, fused : bool, optional
+            As in :meth:`run`, for the iterations between two checks (the same minimisation bit for
+            bit); a ``progress`` callback must not change the operations' parameters then.
 
-        Updaters run at every iteration (T1 exchanges), except those that change what the tissue
-        is (``Updater.in_minimize`` False: Division, Extrusion, RadiusSchedule): a minimisation
-        finds the inherent state of the tissue at its N and R, and those go on in the next ``run``.
-
-        ``force_tol``, ``energy_tol`` and ``check_every`` set the minimiser's own (see
-        :class:`spherevm.plugins.base.Minimizer`); None keeps them. ``progress`` is an optional
-        callable ``progress(step, n_done, n_replicas)`` called at every convergence check.
-
-        ``narrow``: once at most half of the replicas in the stepped State are still running, step
-        a State of those alone (finished ones cost nothing more; each replica's arithmetic is the
-        same), and put everything back at the end. Done only when no writer is attached and every
-        operation is ``narrowable`` (see :class:`spherevm.plugins.base.Operation`). While narrowed,
-        ``sim.state`` (and what a ``progress`` callback logs) holds the running replicas only.
-
-        ``graphs``: run the iterations between two convergence checks as CUDA graphs, as
-        :meth:`run` does (:mod:`spherevm.graphs`; the same minimisation bit for bit). None (default):
-        on the GPU when every operation can, no writer is attached, ``max_steps`` is at least
-        ``graphs.MIN_STEPS`` and the State has at most ``graphs.MAX_VERTICES`` vertices; True:
-        always (ValueError naming what cannot); False: never. A ``progress`` callback sees the State
-        as step by step, but must not change the operations' parameters (the graphs hold them).
-
-        ``fused``: with graphs on, FIRE minimisations of small tissues run the iterations between
-        two checks in one launch, a thread block per tissue (:mod:`spherevm.tissue_steps`; the same
-        minimisation bit for bit). None (default): wherever ``tissue_steps.why_not`` finds nothing
-        against it; False: graph replays of the general kernels.
-        """
+        Returns
+        -------
+        MinimizeResult"""
         from .plugins.integrators import FIRE   # the default minimiser
         self.require_state()
         if not self.operations.forces:

@@ -23,12 +23,30 @@ class State:
 
     Replicas are independent tissues stored back to back: replica ``r`` owns vertices
     ``vertex_start[r]:vertex_start[r+1]`` and cells ``cell_start[r]:cell_start[r+1]``; all indices are
-    global. Each replica lives on its own surface (``constraint`` with per-replica ``radius``).
-    Positions are float64, indices int32. See :mod:`spherevm.topology` for the orientation rules.
+    global. Each replica lives on its own surface. See :mod:`spherevm.topology` for the orientation
+    rules. States usually come from :mod:`spherevm.init`.
 
-    The constructor validates the network (see :func:`spherevm.topology.check`); call
-    :meth:`validate` again after editing arrays by hand.
-    """
+    Parameters
+    ----------
+    positions : array (V, 3) of float64
+        On the surface.
+    cell_vertices, cell_sides : array (C, max_sides), (C,) of int32
+        Each cell's vertices, counter-clockwise seen from outside, padded with -1; its side count.
+    vertex_neighbors, vertex_cells : array (V, 3) of int32
+        Each vertex's three neighbours and three cells, counter-clockwise.
+    vertex_start, cell_start : array (R + 1,)
+        Where each replica's vertices and cells start.
+    radius : float or array (R,), optional
+        Sphere radius per replica (sphere only).
+    constraint : Constraint, optional
+        The surface (default :class:`~spherevm.constraints.Sphere`).
+    device : Device or str
+        Where the arrays live.
+    validate : bool
+        Check the network (:func:`spherevm.topology.check`); call :meth:`validate` again after
+        editing arrays by hand.
+    box : array (R, 2), optional
+        The periodic box (Lx, Ly) per replica, with ``constraint=PeriodicPlane()``."""
 
     def __init__(self, positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells,
                  vertex_start, cell_start, radius=None, constraint=None, device=CPU, validate=True, box=None):
@@ -210,10 +228,23 @@ class State:
         return self
 
     def to(self, device) -> "State":
-        """A copy of this State on another device (``"cpu"``, ``"gpu"``, ``"auto"`` or a Device)."""
+        """A copy of this State on another device.
+
+        Parameters
+        ----------
+        device : {"cpu", "gpu", "auto"} or Device
+
+        Returns
+        -------
+        State"""
         return State(**self.arrays_np(), constraint=self.constraint, device=device, validate=False)
 
     def copy(self) -> "State":
+        """A copy of this State on the same device.
+
+        Returns
+        -------
+        State"""
         return State(**self._arrays(), constraint=self.constraint, device=self.device, validate=False)
 
     def _arrays(self):
@@ -248,7 +279,16 @@ class State:
         return ReplicaSelection(replicas=r, vertices=ranges(self.vertex_start), cells=ranges(self.cell_start))
 
     def select(self, selection: ReplicaSelection) -> "State":
-        """A new State holding only the selected replicas, renumbered (same device, no validation)."""
+        """A new State holding only the selected replicas, renumbered (same device, no validation).
+
+        Parameters
+        ----------
+        selection : ReplicaSelection
+            From :meth:`selection`.
+
+        Returns
+        -------
+        State"""
         xp = self.device.xp
         v, c = xp.asarray(selection.vertices), xp.asarray(selection.cells)
         vmap = xp.full(self.n_vertices + 1, -1, dtype=xp.int64)   # old -> new; index -1 (padding) -> -1
@@ -264,8 +304,14 @@ class State:
                      **{self.size_name: np.asarray(self.device.to_numpy(getattr(self, self.size_name)))[r]})
 
     def write_back(self, selection: ReplicaSelection, part: "State"):
-        """Copy ``part`` (made by :meth:`select` with ``selection``, then evolved, T1 flips
-        included) back into this State's rows of those replicas."""
+        """Copy ``part`` back into this State's rows of its replicas.
+
+        Parameters
+        ----------
+        selection : ReplicaSelection
+            The selection ``part`` was made with (:meth:`select`).
+        part : State
+            The selected replicas, evolved since (T1 flips included)."""
         xp = self.device.xp
         v, c = xp.asarray(selection.vertices), xp.asarray(selection.cells)
         self.positions[v] = part.positions
@@ -283,7 +329,17 @@ class State:
 
     @classmethod
     def concatenate(cls, states, device=None) -> "State":
-        """Stack single- or multi-replica States (same constraint type) into one ensemble."""
+        """Stack single- or multi-replica States (same constraint type) into one ensemble.
+
+        Parameters
+        ----------
+        states : sequence of State
+        device : Device or str, optional
+            Where the result lives (default: the first State's device).
+
+        Returns
+        -------
+        State"""
         states = list(states)
         if not states:
             raise ValueError("states must hold at least one State")

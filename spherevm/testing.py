@@ -96,19 +96,39 @@ def _result(force, state):
 def check_force(force, state, *, samples: int = 8, rtol: float = 1e-6, h: float = 1e-3,
                 tangent_tol: float = 1e-10, cell_rtol: float = 1e-10, seed: int = 0,
                 compare_cpu: bool = True) -> ForceCheck:
-    """Check ``force`` on ``state`` (any device, any number of replicas); return a :class:`ForceCheck`.
+    """Check ``force`` on ``state``: directional derivatives, tangency, per-cell energies, replica
+    independence (the module docstring says how).
 
-    ``samples`` vertices per replica, each with its own random unit tangent direction, are tested
-    (one vertex per replica moved at a time). ``h`` is the step in units of each replica's cell
-    size ``sqrt(<A>)`` (total area over number of cells); the
-    error of a derivative is compared with ``rtol`` times the scale ``|F_v| + rms |F| + |E''| h``
-    (the last, the second difference, keeps the test meaningful at a minimum where forces vanish),
-    plus the rounding floor ``100 eps |E_r| / h``. Check at unrelaxed states (random tilings are):
-    near a minimum both sides are nearly 0, a wrong force is hard to see, and a relaxed fluid tissue
-    has vanishing edges where the energy is not differentiable, which the check reports. ``tangent_tol`` bounds the normal part of
-    each force relative to ``|F_v| + rms |F|``; ``cell_rtol`` the sum of per-cell energies against
-    each replica's energy, relative to the sum of their magnitudes.
-    """
+    Check at unrelaxed states (random tilings are): near a minimum both sides are nearly 0 and a
+    wrong force is hard to see, and a relaxed fluid tissue has vanishing edges where the energy is
+    not differentiable, which the check reports.
+
+    Parameters
+    ----------
+    force : Force
+    state : State
+        Any device, any number of replicas.
+    samples : int
+        Vertices per replica, each with its own random unit tangent direction.
+    rtol : float
+        The error of a derivative is compared with ``rtol`` times ``|F_v| + rms |F| + |E''| h``
+        (the second difference keeps the test meaningful where forces vanish), plus the rounding
+        floor ``100 eps |E_r| / h``.
+    h : float
+        The step, in units of each replica's cell size ``sqrt(<A>)``.
+    tangent_tol : float
+        Bound on the normal part of each force relative to ``|F_v| + rms |F|``.
+    cell_rtol : float
+        Bound on the sum of per-cell energies against each replica's energy, relative to the sum of
+        their magnitudes.
+    seed : int
+    compare_cpu : bool
+        On the GPU, also compare the forces with those of the CPU copy.
+
+    Returns
+    -------
+    ForceCheck
+        ``ok``, ``failures`` (one line per failed check) and where each check came closest."""
     if samples < 1:
         raise ValueError(f"samples must be >= 1, got {samples}")
     if not rtol > 0 or not h > 0:
@@ -224,5 +244,14 @@ def check_force(force, state, *, samples: int = 8, rtol: float = 1e-6, h: float 
 
 
 def assert_force_ok(force, state, **options) -> ForceCheck:
-    """:func:`check_force` that raises AssertionError with the report when a check fails."""
+    """:func:`check_force` that raises AssertionError with the report when a check fails.
+
+    Parameters
+    ----------
+    force, state, **options
+        As in :func:`check_force`.
+
+    Returns
+    -------
+    ForceCheck"""
     return check_force(force, state, **options).assert_ok()

@@ -13,6 +13,15 @@ class Trigger:
     ``__call__`` instead still works.) Combine with ``&``, ``|`` and ``~``."""
 
     def compute(self, timestep: int) -> bool:
+        """Whether the operation runs on ``timestep``; a subclass implements it.
+
+        Parameters
+        ----------
+        timestep : int
+
+        Returns
+        -------
+        bool"""
         raise NotImplementedError(f"{type(self).__name__} must implement compute(timestep)")
 
     def __call__(self, timestep: int) -> bool:
@@ -29,7 +38,14 @@ class Trigger:
 
 
 class Periodic(Trigger):
-    """Every ``period`` steps, on timesteps with ``(timestep - phase) % period == 0``."""
+    """Every ``period`` steps, on timesteps with ``(timestep - phase) % period == 0``.
+
+    Parameters
+    ----------
+    period : int
+        >= 1.
+    phase : int
+        >= 0."""
 
     def __init__(self, period: int, phase: int = 0):
         self.period = integer("period", period)
@@ -45,7 +61,11 @@ class Periodic(Trigger):
 
 
 class On(Trigger):
-    """Exactly on the given timestep."""
+    """Exactly on the given timestep.
+
+    Parameters
+    ----------
+    timestep : int"""
 
     def __init__(self, timestep: int):
         self.timestep = integer("timestep", timestep)
@@ -58,7 +78,11 @@ class On(Trigger):
 
 
 class After(Trigger):
-    """On every timestep strictly after the given one."""
+    """On every timestep strictly after the given one.
+
+    Parameters
+    ----------
+    timestep : int"""
 
     def __init__(self, timestep: int):
         self.timestep = integer("timestep", timestep)
@@ -71,7 +95,11 @@ class After(Trigger):
 
 
 class Before(Trigger):
-    """On every timestep strictly before the given one."""
+    """On every timestep strictly before the given one.
+
+    Parameters
+    ----------
+    timestep : int"""
 
     def __init__(self, timestep: int):
         self.timestep = integer("timestep", timestep)
@@ -134,7 +162,12 @@ class Not(Trigger):
 
 
 class OnTimesteps(Trigger):
-    """True exactly on the given timesteps (any iterable of non-negative integers), e.g. log-spaced ones."""
+    """True exactly on the given timesteps, e.g. log-spaced ones.
+
+    Parameters
+    ----------
+    timesteps : iterable of int
+        Non-negative."""
 
     def __init__(self, timesteps):
         arr = np.asarray(list(timesteps) if not isinstance(timesteps, np.ndarray) else timesteps)

@@ -75,3 +75,75 @@ def test_cli_md_error_text_is_the_real_one(command, expected, tmp_path):
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
     assert result.stderr.strip() == expected
+
+
+# ------------------------------------------------------------------------ the docs as a manual
+DIARY = re.compile(r"\bsession\s+\d+", re.I)
+
+
+def test_no_development_diary_in_docs_or_code():
+    """The development history stays in the git log: no "session N" in the docs, the package, the
+    benchmarks or the examples."""
+    found = []
+    for folder in ("docs", "spherevm", "benchmarks", "examples"):
+        for path in sorted((ROOT / folder).rglob("*")):
+            if path.suffix not in (".md", ".py", ".cu", ".cuh", ".ipynb", ".rst") or not path.is_file():
+                continue
+            for n, line in enumerate(path.read_text().splitlines(), 1):
+                if DIARY.search(line):
+                    found.append(f"{path.relative_to(ROOT)}:{n}: {line.strip()[:80]}")
+    assert not found, "state the fact, not the session it came from:\n" + "\n".join(found)
+
+
+def test_index_links_every_page():
+    text = (ROOT / "docs" / "index.md").read_text()
+    missing = [p.name for p in sorted((ROOT / "docs").glob("*.md"))
+               if p.name != "index.md" and f"]({p.name})" not in text]
+    assert not missing, f"docs/index.md's table of pages does not link {missing}"
+
+
+def _sections(text):
+    """{heading: body} of a page's level-2 sections."""
+    parts = re.split(r"^## (.*)$", text, flags=re.M)
+    return dict(zip(parts[1::2], parts[2::2]))
+
+
+def _cli_subparsers():
+    import argparse
+    from spherevm.cli import build_parser
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return parser, sub.choices
+
+
+def test_cli_md_documents_every_command_and_option():
+    """Every subcommand has a section "## `spherevm NAME`" in docs/cli.md that names each of its
+    options (every spelling: `--cells` and `-N`); the top-level options appear on the page."""
+    text = (ROOT / "docs" / "cli.md").read_text()
+    sections = _sections(text)
+    parser, commands = _cli_subparsers()
+    missing = []
+    for option in (s for a in parser._actions for s in a.option_strings if s not in ("-h", "--help")):
+        if not re.search(rf"(?<![\w-]){re.escape(option)}(?![\w-])", text):
+            missing.append(f"spherevm {option}")
+    for name, sub in commands.items():
+        body = sections.get(f"`spherevm {name}`")
+        if body is None:
+            missing.append(f"the section ## `spherevm {name}`")
+            continue
+        for action in sub._actions:
+            for option in action.option_strings:
+                if option not in ("-h", "--help") and not re.search(rf"(?<![\w-]){re.escape(option)}(?![\w-])", body):
+                    missing.append(f"spherevm {name} {option}")
+    assert not missing, f"docs/cli.md does not document: {missing}"
+
+
+def test_architecture_md_layers_are_test_layers_table():
+    """docs/architecture.md's layer table lists the layers of tests/test_layers.py, module for module."""
+    from test_layers import LAYERS
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    rows = re.findall(r"^\| (\d+) [^|]*\| ([^|]*) \|", text, re.M)
+    documented = [sorted(re.sub(r"(\.py|/)$", "", m) for m in re.findall(r"`([^`]+)`", modules))
+                  for _, modules in rows]
+    assert [int(n) for n, _ in rows] == list(range(len(rows)))
+    assert documented == [sorted(layer) for layer in LAYERS]

@@ -171,18 +171,27 @@ def msd(traj, remove_rotation: bool = None, geodesic: bool = False, origins="fir
         scaled: bool = True, remove_drift: bool = None) -> TimeCorrelation:
     """Mean squared displacement ``<|r_i(t0 + t) - r_i(t0)|^2>`` of the cell centroids.
 
-    geodesic : False for the chord (straight 3D distance, the paper's ``|r_i(t) - r_i(0)|``), True
-        for the arc length on the sphere. Both saturate at long times: the chord at ``2 R``, the
-        arc at ``pi R`` (the mean over a uniform sphere is ``2 R^2`` for the chord squared).
-    origins : ``"first"`` (lags from frame 0 only; suits log-spaced sampling), ``"all"`` (every pair
-        of frames ``t0 <= t1``, grouped by equal lag ``t1 - t0``) or a sequence of origin frames.
-    remove_rotation : remove each replica's rigid rotation between the two frames first (sphere;
-        None = True there; refused on the plane).
-    scaled : lengths in units of ``sqrt(<A>)`` per replica (default) rather than simulation units.
-    remove_drift : periodic plane: subtract each replica's mean cell displacement between the two
-        frames (None = True on the plane; refused on a sphere). Displacements on the plane are
-        unwrapped across the boundary.
-    """
+    Parameters
+    ----------
+    traj : Trajectory
+    remove_rotation : bool, optional
+        Remove each replica's rigid rotation between the two frames first (sphere; None = True
+        there; refused on the plane).
+    geodesic : bool
+        False for the chord (straight 3D distance, the paper's ``|r_i(t) - r_i(0)|``), True for the
+        arc length on the sphere. Both saturate: the chord at ``2 R``, the arc at ``pi R``.
+    origins : {"first", "all"} or sequence of int
+        "first": lags from frame 0 only (suits log-spaced sampling); "all": every pair of frames
+        ``t0 <= t1``, grouped by equal lag; or the origin frames.
+    scaled : bool
+        Lengths in units of ``sqrt(<A>)`` per replica (default) rather than simulation units.
+    remove_drift : bool, optional
+        Periodic plane: subtract each replica's mean cell displacement between the two frames
+        (None = True on the plane; refused on a sphere). Displacements on the plane are unwrapped.
+
+    Returns
+    -------
+    TimeCorrelation"""
     return _correlate(traj, np.square, origins, remove_rotation, geodesic, scaled, "msd", remove_drift)
 
 
@@ -191,8 +200,19 @@ def self_overlap(traj, b: float = 0.5, geodesic: bool = False, remove_rotation: 
     """Self-overlap ``Q_s(t)``: the fraction of cells displaced by at most ``b`` (paper: ``b = 1/2``).
 
     ``w(d) = 1`` for ``d <= b``, else 0, on the chord ``|r_i(t) - r_i(0)|`` (or the arc with
-    ``geodesic=True``), in units of ``sqrt(<A>)``. Other arguments as in :func:`msd`.
-    """
+    ``geodesic=True``).
+
+    Parameters
+    ----------
+    traj : Trajectory
+    b : float
+        The window, in units of ``sqrt(<A>)``.
+    geodesic, remove_rotation, origins, scaled, remove_drift
+        As in :func:`msd`.
+
+    Returns
+    -------
+    TimeCorrelation"""
     if not np.isfinite(b) or b <= 0:
         raise ValueError(f"b must be positive and finite, got {b!r}")
     return _correlate(traj, lambda d: (d <= b).astype(np.float64), origins, remove_rotation, geodesic, scaled,
@@ -202,23 +222,25 @@ def self_overlap(traj, b: float = 0.5, geodesic: bool = False, remove_rotation: 
 def self_intermediate_scattering(traj, q: float = 2 * np.pi, remove_rotation: bool = None, average: str = "2d",
                                  geodesic: bool = False, origins="first", scaled: bool = True,
                                  remove_drift: bool = None) -> TimeCorrelation:
-    """Self-intermediate scattering function ``F_s(q, t) = < exp(i q . (r_i(t) - r_i(0))) >``.
+    """Self-intermediate scattering function ``F_s(q, t) = < exp(i q . (r_i(t) - r_i(0))) >``,
+    averaged over the directions of ``q``, so a function of ``d = |dr|`` only.
 
-    The average over the directions of ``q`` makes it a function of ``d = |dr|`` only:
+    Parameters
+    ----------
+    traj : Trajectory
+    q : float
+        In units of ``1/sqrt(<A>)``; the default ``2 pi`` is a wavelength of one cell length, near
+        the first peak of the cells' structure factor, the usual choice for alpha relaxation.
+    average : {"2d", "3d"}
+        "2d": ``J0(q d)``, the average over ``q`` in a plane containing the displacement: cells move
+        on the surface, so the tangent wave vectors are the meaningful ones, as for a flat monolayer.
+        "3d": ``sin(q d) / (q d)``, the average over all directions in space.
+    remove_rotation, geodesic, origins, scaled, remove_drift
+        As in :func:`msd` (``d`` is the chord, or the arc length with ``geodesic=True``).
 
-    * ``average="2d"`` (default): ``J0(q d)``, the average of ``exp(i q . u)`` over ``q`` uniform in
-      a plane containing ``u``. Cells move on the surface, so a displacement lies in the tangent
-      plane at ``r_i(0)`` up to a radial part ``d^2 / 2R`` (second order), and the physically
-      meaningful wave vectors are the tangent ones: the 2D average is the right one, as for a flat
-      monolayer. At a given ``q`` it decays faster than the 3D one (``J0(x) ~ 1 - x^2/4`` against
-      ``1 - x^2/6``).
-    * ``average="3d"``: ``sin(q d) / (q d)``, the average over all directions in space.
-
-    ``q`` in units of ``1/sqrt(<A>)``; the default ``2 pi`` is a wavelength of one cell length, near
-    the first peak of the cells' structure factor (``4 pi / (sqrt 3 a) = 6.75`` for a hexagonal
-    tiling of unit-area cells, spacing ``a = 1.075``), the usual choice for alpha relaxation.
-    ``d`` is the chord, or the arc length with ``geodesic=True``. Other arguments as in :func:`msd`.
-    """
+    Returns
+    -------
+    TimeCorrelation"""
     if not np.isfinite(q) or q <= 0:
         raise ValueError(f"q must be positive and finite, got {q!r}")
     if average == "2d":
@@ -239,22 +261,28 @@ class NoRelaxationWarning(RuntimeWarning):
 
 def tau_alpha(times, q_s=None, level: float = 1 / math.e, interpolation: str = "log", warn: bool = True,
               _stacklevel: int = 2):
-    """The first time at which ``q_s`` falls to ``level`` (default ``1/e``), interpolated.
+    """The first time at which ``q_s`` falls to ``level`` (default ``1/e``), interpolated between the
+    samples ``k - 1`` and ``k`` around the first sample ``k`` with ``q_s <= level``.
 
-    ``times`` and ``q_s`` are arrays of equal length (``q_s`` may be ``(T, k)``: one tau per column),
-    or pass a :class:`TimeCorrelation` alone. With the first sample ``k`` at which ``q_s <= level``,
-    the crossing is interpolated between samples ``k - 1`` and ``k``, linearly in the value and
+    Parameters
+    ----------
+    times : array or TimeCorrelation
+        Sample times; or a :class:`TimeCorrelation` alone (its lags and values).
+    q_s : array, optional
+        Same length as ``times``, or ``(T, k)``: one tau per column.
+    level : float
+    interpolation : {"log", "linear"}
+        "log": linearly in ``log t`` (the natural variable for log-spaced sampling: for
+        ``exp(-t/tau)`` the curve against ``log t`` has its inflection exactly at ``t = tau``;
+        linear in ``t`` for an interval starting at ``t <= 0``); "linear": linearly in ``t``.
+    warn : bool
+        Issue a :class:`NoRelaxationWarning` where a NaN is returned.
 
-    * ``interpolation="log"`` (default) linearly in ``log t``: the natural variable for log-spaced
-      sampling, and accurate where it matters: for ``exp(-t/tau)`` the curve against ``log t`` has
-      its inflection point exactly at ``t = tau``, so the interpolation error is third order in the
-      spacing. Falls back to linear in ``t`` for an interval starting at ``t <= 0``.
-    * ``interpolation="linear"``: linearly in ``t``.
-
-    Returns a float (or an array per column). NaN where the curve never reaches the level (the
-    run is too short: no alpha relaxation observed) or is already below it at the first sample;
-    a :class:`NoRelaxationWarning` says which, unless ``warn=False``.
-    """
+    Returns
+    -------
+    float or numpy.ndarray
+        One per column; NaN where the curve never reaches the level (no alpha relaxation within
+        the run) or is already below it at the first sample."""
     if isinstance(times, TimeCorrelation) and q_s is None:
         times, q_s = times.lag, times.value
     t = np.asarray(times, dtype=np.float64).reshape(-1)

@@ -48,10 +48,18 @@ CONVERGED_REASONS = ("force", "energy")
 def classify(energy_per_cell, reason, zero_tol: float = ZERO_ENERGY_TOL):
     """Status of each minimised replica: ``"zero"``, ``"rigid"`` or the non-convergence reason.
 
-    A replica converged when its ``reason`` is ``"force"`` or ``"energy"``; it is then zero energy
-    when ``energy_per_cell < zero_tol``. Replicas that stopped for any other reason (``max_steps``,
-    ``t1_oscillation``) keep that reason as their status, so they can be counted separately.
-    """
+    A replica converged when its ``reason`` is "force" or "energy"; it is then zero energy when
+    ``energy_per_cell < zero_tol``. Others keep their reason (``max_steps``, ``t1_oscillation``).
+
+    Parameters
+    ----------
+    energy_per_cell, reason : array
+        Per replica (``MinimizeResult`` or a sweep's records).
+    zero_tol : float
+
+    Returns
+    -------
+    numpy.ndarray of str"""
     e = np.asarray(energy_per_cell, dtype=np.float64)
     r = np.asarray(reason).astype(str)
     if e.shape != r.shape:
@@ -99,15 +107,21 @@ FRACTION_COLUMNS = ("n_cells", "p0", "n_replicas", "n_zero", "n_rigid", "n_uncon
 
 
 def zero_fraction(n_cells, p0, status):
-    """F(p0, N) from per-replica records; returns a dict of columns (:data:`FRACTION_COLUMNS`).
+    """F(p0, N) from per-replica records: ``F = n_zero / (n_zero + n_rigid)``. Non-converged replicas
+    are not in the denominator; they are counted in ``n_max_steps``, ``n_t1_oscillation`` and
+    ``n_other``. ``F_err`` is the binomial standard error, ``F_low``/``F_high`` the 68 % Wilson
+    interval; ``F_unconverged_rigid``/``_zero`` are F if every non-converged replica had been rigid
+    or zero energy (a bound on what leaving them out can do).
 
-    ``n_cells``, ``p0`` and ``status`` (see :func:`classify`) have one entry per replica.
-    ``F = n_zero / (n_zero + n_rigid)``: non-converged replicas are not in the denominator and are
-    counted in ``n_max_steps``, ``n_t1_oscillation`` and ``n_other``. ``F_err`` is the binomial
-    standard error, ``F_low``/``F_high`` the 68 % Wilson interval; ``F_unconverged_rigid`` and
-    ``F_unconverged_zero`` are F if every non-converged replica had been rigid or zero energy (a
-    bound on what leaving them out can do).
-    """
+    Parameters
+    ----------
+    n_cells, p0, status : array
+        One entry per replica (``status`` from :func:`classify`).
+
+    Returns
+    -------
+    dict
+        Columns (:data:`FRACTION_COLUMNS`), one row per (N, p0)."""
     n_cells = np.asarray(n_cells, dtype=np.int64)
     p0 = np.asarray(p0, dtype=np.float64)
     status = np.asarray(status).astype(str)
@@ -234,14 +248,24 @@ class TransitionEstimate:
 
 
 def p0_star(p0, F, n=None, sigma=None, resamples: int = 400, seed: int = 0) -> TransitionEstimate:
-    """Mean and spread of the transition point p0* from F(p0) at one N.
+    """Mean and spread of the transition point p0* from F(p0) at one N. The mean and variance are
+    computed exactly from the interpolation (see the module docstring).
 
-    ``n`` (replicas entering F at each p0) weights the monotone fit behind the smoothing width and
-    gives ``mean_err``: F at each p0 is redrawn ``resamples`` times from its Jeffreys posterior
-    Beta(k + 1/2, n - k + 1/2) and the spread of the resulting means is reported (NaN without
-    ``n``). ``sigma`` defaults to :func:`smoothing_width`. The mean and variance are computed
-    exactly from the interpolation (see the module docstring).
-    """
+    Parameters
+    ----------
+    p0, F : array
+        F(p0) on increasing p0.
+    n : array, optional
+        Replicas entering F at each p0: weights the monotone fit behind the smoothing width, and
+        gives ``mean_err`` (F redrawn ``resamples`` times from its Jeffreys posterior
+        Beta(k + 1/2, n - k + 1/2); NaN without ``n``).
+    sigma : float, optional
+        Smoothing width (default :func:`smoothing_width`).
+    resamples, seed : int
+
+    Returns
+    -------
+    TransitionEstimate"""
     x, f = _check_curve(p0, F)
     finite = np.isfinite(np.asarray(F, dtype=np.float64))
     weights = None if n is None else np.asarray(n, dtype=np.float64)[finite]
@@ -275,7 +299,15 @@ def p0_star(p0, F, n=None, sigma=None, resamples: int = 400, seed: int = 0) -> T
 
 
 def critical_perimeter(p0_star_value, mean_area):
-    """Fig. 4 of the paper: ``P0*(N, <A>) = sqrt(<A>) p0*(N)`` (NumPy broadcasting)."""
+    """Fig. 4 of the paper: ``P0*(N, <A>) = sqrt(<A>) p0*(N)`` (NumPy broadcasting).
+
+    Parameters
+    ----------
+    p0_star_value, mean_area : float or array
+
+    Returns
+    -------
+    numpy.ndarray"""
     a = np.asarray(mean_area, dtype=np.float64)
     if np.any(a <= 0):
         raise ValueError("mean_area must be positive")

@@ -21,18 +21,24 @@ from ..shapes import cell_centroids
 class Trajectory:
     """Cell centroids over time, for one tissue or an ensemble of replicas.
 
-    times : (T,) sampling times (timesteps, or times in any unit), increasing.
-    centroids : (T, n_cells, 3) cell positions on the sphere of each replica, or in the periodic
-        box of each replica (stored wrapped, z = 0).
-    cell_replica : (n_cells,) replica of each cell.
-    radius : (n_replicas,) sphere radius of each replica; None on the periodic plane.
-    box : (n_replicas, 2) periodic box (Lx, Ly) of each replica on the plane; None on a sphere.
-
     On the plane the centroids are unwrapped across the boundary (:attr:`positions`): each
     frame-to-frame displacement is taken as its minimum image and summed from frame 0, so a cell
     that leaves the box on one side keeps its true displacement. This needs every cell to move
     less than half the box between consecutive frames (sample often enough).
-    """
+
+    Parameters
+    ----------
+    times : numpy.ndarray (T,)
+        Sampling times (timesteps, or times in any unit), increasing.
+    centroids : numpy.ndarray (T, n_cells, 3)
+        Cell positions on the sphere of each replica, or in the periodic box of each replica
+        (stored wrapped, z = 0).
+    cell_replica : numpy.ndarray (n_cells,)
+        Replica of each cell.
+    radius : numpy.ndarray (n_replicas,), optional
+        Sphere radius of each replica; None on the periodic plane.
+    box : numpy.ndarray (n_replicas, 2), optional
+        Periodic box (Lx, Ly) of each replica on the plane; None on a sphere."""
     times: np.ndarray
     centroids: np.ndarray
     cell_replica: np.ndarray
@@ -262,18 +268,26 @@ def _replica_sum(values, order, starts):
 
 # ======================================================================================== rotation
 def remove_rigid_rotation(reference, current, cell_replica, return_rotation: bool = False):
-    """Rotate each replica of ``current`` rigidly onto ``reference``; returns the rotated positions.
+    """Rotate each replica of ``current`` rigidly onto ``reference``.
 
-    For every replica r (cells ``cell_replica == r``) the proper rotation ``Q_r`` (det +1) about the
-    sphere's centre that minimises ``sum_i |Q_r c_i - ref_i|^2`` (Kabsch: SVD of
-    ``H = sum_i c_i ref_i^T = U S V^T``, ``Q = V diag(1, 1, d) U^T``, ``d = sign det(V U^T)``) is
-    applied to ``current``. No translation: the sphere's centre is fixed.
+    For every replica r the proper rotation ``Q_r`` (det +1) about the sphere's centre that
+    minimises ``sum_i |Q_r c_i - ref_i|^2`` (Kabsch: SVD of ``H = sum_i c_i ref_i^T = U S V^T``,
+    ``Q = V diag(1, 1, d) U^T``, ``d = sign det(V U^T)``) is applied to ``current``; all replicas
+    and leading indices in one batched ``np.linalg.svd``. No translation.
 
-    ``reference`` is ``(n_cells, 3)`` or ``(..., n_cells, 3)``, ``current`` ``(..., n_cells, 3)``
-    (broadcast against each other, e.g. all frames of a trajectory onto one reference). All
-    replicas and leading indices are solved in one batched ``np.linalg.svd``.
-    ``return_rotation=True`` also returns ``Q`` with shape ``(..., n_replicas, 3, 3)``.
-    """
+    Parameters
+    ----------
+    reference : numpy.ndarray (n_cells, 3) or (..., n_cells, 3)
+    current : numpy.ndarray (..., n_cells, 3)
+        Broadcast against ``reference`` (e.g. all frames of a trajectory onto one reference).
+    cell_replica : numpy.ndarray (n_cells,)
+    return_rotation : bool
+        Also return ``Q``, shape ``(..., n_replicas, 3, 3)``.
+
+    Returns
+    -------
+    numpy.ndarray, or (numpy.ndarray, numpy.ndarray)
+        The rotated positions (and ``Q``)."""
     ref = np.asarray(reference, dtype=np.float64)
     cur = np.asarray(current, dtype=np.float64)
     rep = np.asarray(cell_replica, dtype=np.int64).reshape(-1)

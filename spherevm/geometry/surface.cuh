@@ -1,7 +1,7 @@
 // The surface a kernel is compiled for: one kernel source serves every surface. Each surface is a
 // struct of static device functions with the same names; a kernel calls them through `Surface`,
 // which is PlaneSurface when the module is compiled with -DSVM_SURFACE_PLANE and SphereSurface
-// otherwise (spherevm.plugins.base.surface_module picks the flag from the State's constraint).
+// otherwise (spherevm.constraints.kernels.surface_kernels picks the flag from the State's constraint).
 //
 //   Size                      the per-replica size (a radius, or a box (Lx, Ly))
 //   size(s, r)                replica r's size from the State's size array (radius or box)

@@ -14,16 +14,16 @@ from .rows import _host, _index_like, _restored, follow_rows
 class Operation:
     """Something the Simulation runs: it has a trigger and may publish loggable quantities.
 
-    ``loggables`` maps a quantity name to a callable ``f(simulation)`` returning a scalar or a
-    per-replica array; writers and ``Simulation.log`` find them by name.
+    ``loggables`` maps a name to a callable ``f(simulation)`` returning a scalar or a per-replica
+    array. An operation with a NumPy and a CUDA implementation names them ``_<name>_cpu`` and
+    ``_<name>_gpu`` and binds one with :meth:`implementation` at attach (as HOOMD picks its C++
+    class), never branching per call; a CUDA path lists the constraint classes it was compiled for
+    in ``gpu_surfaces``, and attaching it to a State on another surface raises.
 
-    Device and surface (HOOMD picks its C++ class at attach; so do we): an operation with a NumPy
-    and a CUDA implementation names them ``_<name>_cpu`` and ``_<name>_gpu`` and binds one with
-    :meth:`implementation` when it attaches, never branching on the device per call. The NumPy
-    path measures everything through the constraint, so it serves every surface whose constraint
-    implements what it calls; a CUDA path compiled for some surfaces lists their constraint
-    classes in ``gpu_surfaces``, and attaching it to a State on another surface raises.
-    """
+    Parameters
+    ----------
+    trigger : Trigger or int, optional
+        The timesteps it runs on (an int: ``Periodic(int)``; default every step)."""
 
     #: Constraint classes the GPU implementation supports (None: every surface).
     gpu_surfaces = None
@@ -65,9 +65,17 @@ class Operation:
         self._simulation = None
 
     def implementation(self, name, state):
-        """The bound method ``_<name>_cpu`` or ``_<name>_gpu`` serving ``state``'s device, looked
-        up once per device and surface. Raises ValueError if the GPU path does not support
-        ``state.constraint`` (naming both)."""
+        """``_<name>_cpu`` or ``_<name>_gpu``, bound, for ``state``'s device, looked up once (ValueError,
+        naming both, if the GPU path does not support ``state.constraint``).
+
+        Parameters
+        ----------
+        name : str
+        state : State
+
+        Returns
+        -------
+        bound method"""
         key = (name, state.device.name, type(state.constraint))
         bound = self.__dict__.setdefault("_bound", {})
         if key not in bound:
@@ -185,21 +193,25 @@ class Operation:
 
 @dataclass
 class ForceResult:
-    """What a Force computes: ``forces (V, 3)`` on the device and ``energy`` per replica."""
+    """What a Force computes, on the State's device.
+
+    Parameters
+    ----------
+    forces : array
+        ``(V, 3)``, minus the surface gradient of the energy.
+    energy, cell_energy : array
+        Per replica, and per cell (optional: None if the force does not split its energy by cell)."""
     forces: object
     energy: object
     cell_energy: object = None
 
 
 class Force(Operation):
-    """A contribution to the potential energy; subclasses implement :meth:`compute`.
-
-    ``compute(state)`` returns a :class:`ForceResult` whose forces are minus the surface
-    (tangent-plane) gradient of the energy, on the state's device. Forces are evaluated whenever
-    the integrator needs them; their trigger is not used.
-    """
+    """A contribution to the potential energy; subclasses implement :meth:`compute`. Forces are
+    evaluated whenever the integrator needs them; their trigger is not used."""
 
     def compute(self, state) -> ForceResult:
+        """The force of ``state``: a :class:`ForceResult` on the State's device."""
         raise NotImplementedError
 
     def energy_scale(self, state):
@@ -242,20 +254,14 @@ def compute_all(forces, state):
 
 
 class Integrator(Operation):
-    """Moves the vertices one step: ``step(simulation, forces)`` with the summed forces.
+    """Moves the vertices one step: :meth:`step` with the summed forces. ``check(simulation)``,
+    called every few steps (where the GPU path reads back error flags), raises if it went wrong.
 
-    ``check(simulation)`` is called every few steps (where the GPU path reads back error flags)
-    and raises if the integration went wrong.
-
-    The contract other operations rely on:
-
-    * ``active``: per-replica bool mask (NumPy) of the replicas this integrator still moves; a
-      minimiser stops the replicas that have converged. Updaters act on active replicas only.
-      ``active_on_device()`` is the same mask on the State's device, uploaded once per change.
-    * ``reset_vertices(vertices)``: forget the per-vertex dynamical memory (velocities, say) of the
-      given vertices, after an updater changed the topology around them; ``vertices`` is an index
-      array on the State's device, negative entries are ignored. The default keeps nothing.
-    """
+    What other operations rely on: ``active``, the per-replica bool mask (NumPy) of the replicas it
+    still moves (a minimiser stops converged ones; updaters act on active replicas only;
+    ``active_on_device()`` is the same mask on the State's device); ``reset_vertices(vertices)``:
+    forget the per-vertex memory (velocities, say) of vertices whose topology an updater changed
+    (an index array on the State's device, negative entries ignored; the default keeps nothing)."""
 
     def attach(self, simulation):
         super().attach(simulation)
@@ -298,6 +304,7 @@ class Integrator(Operation):
         """Forget per-vertex memory of ``vertices`` (device index array; negative entries ignored)."""
 
     def step(self, simulation, forces):
+        """Move the ``active`` replicas one step under the summed ``forces`` ``(V, 3)``."""
         raise NotImplementedError
 
     def check(self, simulation):
@@ -318,17 +325,19 @@ def raise_flagged_step(error, simulation, message):
 class Minimizer(Integrator):
     """An integrator that lowers the energy and keeps per-replica convergence (FIRE is one).
 
-    Every ``check_every`` steps (one small read-back) :meth:`check_convergence` stops, per replica,
-    the replicas whose largest vertex force is below ``force_tol`` or whose energy per cell is
-    below ``energy_tol`` (in the replica's natural units, :meth:`tolerance_units`: the same shape
-    at any size), and those that an operation halts (:meth:`Operation.halted`); the others go on.
-    HOOMD-style use: ``while not fire.done: sim.run(100)``, or ``sim.minimize()``.
+    HOOMD-style use: ``while not fire.done: sim.run(100)``, or ``sim.minimize()``. Per replica
+    (NumPy): ``replica_converged``, ``reason`` ("force", "energy", an operation's ``halt_reason``,
+    "running"), ``steps`` (-1 while running); ``converged`` and ``done`` for all. Subclasses
+    implement :meth:`move` (one iteration) and :meth:`reset_motion`.
 
-    Per replica (NumPy): ``replica_converged``, ``reason`` ("force", "energy", an operation's
-    ``halt_reason``, or "running"), ``steps`` (the iteration at which it stopped, -1 while running).
-    ``converged``: every replica reached a tolerance; ``done``: every replica stopped.
-    Subclasses implement :meth:`move` (one iteration) and :meth:`reset_motion`.
-    """
+    Parameters
+    ----------
+    force_tol, energy_tol : float
+        A replica stops when its largest vertex force, or its energy per cell, is below these, in
+        its natural units (:meth:`tolerance_units`), or when an operation halts it.
+    check_every : int
+        Iterations between checks (:meth:`check_convergence`, one small read-back).
+    trigger : Trigger or int, optional"""
 
     force_tol = Parameter(lambda name, value: float(non_negative(name, value, per_item="a scalar")))
     energy_tol = Parameter(lambda name, value: float(non_negative(name, value, per_item="a scalar")))
@@ -466,17 +475,14 @@ class Minimizer(Integrator):
 
 
 class Updater(Operation):
-    """Changes the state between steps (for example the topology): ``update(simulation, timestep)``.
-
-    ``in_minimize``: whether ``Simulation.minimize`` runs it (T1: yes). The growth updaters
-    (Division, Extrusion, RadiusSchedule) sit minimisations out: a quench finds the inherent state
-    of the tissue as it is (its N and R); a later ``run`` goes on with them, and
-    :meth:`after_minimize` tells them a minimisation passed.
-    """
+    """Changes the State between steps (for example its topology): :meth:`update`. ``in_minimize``:
+    whether ``Simulation.minimize`` runs it (T1: yes; the growth updaters sit minimisations out,
+    a quench finds the inherent state at the tissue's N and R, and :meth:`after_minimize` tells them)."""
 
     in_minimize = True
 
     def update(self, simulation, timestep):
+        """Change the State (at ``timestep``) before the step's forces."""
         raise NotImplementedError
 
     def after_minimize(self, simulation):
@@ -484,18 +490,15 @@ class Updater(Operation):
 
 
 class Writer(Operation):
-    """Records the simulation: ``write(simulation, timestep)``; ``close()`` at the end.
-
-    ``final = True`` asks for one more ``write`` at the end of every ``run`` and ``minimize`` (at
-    the timestep they end on, unless the trigger already wrote it), so the last record is the
-    final state; the GSD writer sets it by default.
-    """
+    """Records the simulation: :meth:`write`; ``close()`` at the end. ``final = True`` asks for one
+    more write at the end of every ``run`` and ``minimize`` (the GSD writer sets it)."""
 
     final = False
     #: the timestep this writer last wrote (the Simulation sets it; at most one write a timestep)
     last_written = None
 
     def write(self, simulation, timestep):
+        """Record the simulation's current state (at ``timestep``)."""
         raise NotImplementedError
 
     def close(self):

@@ -315,28 +315,38 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
               progress=None, save_states=False, prefetch=None) -> SweepResult:
     """Run (or resume) a rigidity sweep, writing each chunk to ``<out>/chunks/`` as it finishes.
 
-    ``executor``: any :class:`concurrent.futures.Executor` (or a ``distributed.Client``, whose
-    ``get_executor()`` is used); None picks :func:`default_executor` (in-process on a GPU, a
-    process pool of ``workers`` processes on the CPU). ``device``: where each chunk is minimised
-    (``"cpu"``, ``"gpu"`` or ``"auto"``; with your own executor it is resolved on the worker).
-    ``prefetch``: build the tilings in a process pool on this machine, ahead of the workers
-    (:class:`TilingPrefetch`), and send each chunk its State; the results are the same. None (the
-    default) does so for GPU sweeps of at least :data:`PREFETCH_MIN_CELLS` cells on a machine of
-    three or more cores, where the host's tilings would otherwise starve the GPU (also for a Dask
-    cluster of GPU workers on this host, ``cluster.client(gpus=N)``, whose workers are one thread
-    each). The pool has ``workers`` processes (default: the CPU count less one per GPU worker); at
-    most two chunks per worker are then in flight, so tilings are built only just ahead of use.
-    ``batch_cells``: cells per chunk (default :data:`CPU_BATCH_CELLS` or :data:`GPU_BATCH_CELLS`);
-    it changes how the work is cut, never the results. ``progress``: called with a
-    :class:`SweepProgress` after every chunk. ``save_states``: also keep each chunk's minimised
-    State (the inherent states) in ``<out>/states/<chunk id>.gsd``, opened with
-    :func:`spherevm.sweeps.load_state`; a chunk finished earlier without its state file is
-    computed again (on the CPU with bitwise the same records).
-
     Everything is validated before the folder is created; a folder holding a sweep with other
     parameters raises ValueError. A chunk that fails stops the sweep (RuntimeError naming the
     chunk); the chunks finished before it stay on disk and a rerun resumes from them.
-    """
+
+    Parameters
+    ----------
+    sweep : RigiditySweep
+    out : str or path
+        The output folder.
+    executor : concurrent.futures.Executor or distributed.Client, optional
+        None picks :func:`default_executor` (in-process on a GPU, a process pool of ``workers``
+        processes on the CPU).
+    device : {"cpu", "gpu", "auto"}
+        Where each chunk is minimised (with your own executor it is resolved on the worker).
+    workers : int, optional
+        Processes (default: the CPU count, less one per GPU worker when tilings are prefetched).
+    batch_cells : int, optional
+        Cells per chunk (default :data:`CPU_BATCH_CELLS` or :data:`GPU_BATCH_CELLS`); it changes how
+        the work is cut, never the results.
+    progress : callable, optional
+        Called with a :class:`SweepProgress` after every chunk.
+    save_states : bool
+        Also keep each chunk's minimised States in ``<out>/states/<chunk id>.gsd``
+        (:func:`spherevm.sweeps.load_state`).
+    prefetch : bool, optional
+        Build the tilings in a process pool on this machine ahead of the workers
+        (:class:`TilingPrefetch`); the results are the same. None: for GPU sweeps of at least
+        :data:`PREFETCH_MIN_CELLS` cells on a machine of three or more cores.
+
+    Returns
+    -------
+    SweepResult"""
     if not isinstance(sweep, RigiditySweep):
         raise TypeError(f"sweep must be a RigiditySweep, got {type(sweep).__name__}")
     from ..device import DEVICE_NAMES, Device

@@ -15,26 +15,37 @@ from ..validation import integer, positive, real
 class RigiditySweep:
     """What to compute: every (N in ``cells``, p0 in ``p0``, replica < ``replicas``) minimised.
 
-    * ``cells``: cells per tiling, each >= 4, no duplicates (sorted for you);
-    * ``p0``: the target shape indices, non-empty, finite, > 0 and strictly increasing;
-    * ``replicas``: random tilings per (N, p0), >= 1;
-    * ``kr``: area stiffness kA <A> / kP (0: the paper's Fig. 2);
-    * ``seed``: the tiling of (N, p0, replica) is drawn from ``seed`` and those three numbers only;
-      ``shared_tilings=True`` uses the same tilings at every p0 (then F(p0) per tiling is a step).
-    * minimiser: FIRE time step ``dt``; a replica stops when its largest vertex force is below
-      ``force_tol``, its energy per cell below ``energy_tol`` (a zero-energy state), after
-      ``max_steps`` steps, or when T1 flips oscillate (``t1_max_flip_backs`` re-joins of one pair);
-      T1 exchanges of edges shorter than ``t1_threshold`` (new edges ``t1_new_length``), units
-      sqrt(<A>); ``t1_length_factor`` instead makes a new edge that many times the old one (the
-      paper code's rule is ``t1_threshold=0.1, t1_length_factor=2``, :meth:`reference_t1`).
-      Defaults from docs/rigidity.md.
-    * ``surface``: ``"sphere"`` (default; random convex-hull tilings of radius sqrt(N / 4 pi)) or
-      ``"plane"`` (random periodic Voronoi tilings, :func:`spherevm.init.random_planar_tilings`, in
-      the square box of side sqrt(N), so <A> = 1 on both; N >= 8 there).
-
     The energy is ``E = sum_c kr/<A> (A_c - <A>)^2 + (P_c - p0 sqrt(<A>))^2`` per tiling (kP = 1), so
     that ``energy_per_cell`` is in units of kP <A>^2 (<A> = 1 at the default radius sqrt(N/4 pi)).
-    """
+    Defaults from docs/rigidity.md.
+
+    Parameters
+    ----------
+    cells : tuple of int
+        Cells per tiling, each >= 4, no duplicates (sorted for you).
+    p0 : tuple of float
+        The target shape indices, non-empty, finite, > 0 and strictly increasing.
+    replicas : int
+        Random tilings per (N, p0), >= 1.
+    kr : float
+        Area stiffness kA <A> / kP (0: the paper's Fig. 2).
+    seed : int
+        The tiling of (N, p0, replica) is drawn from ``seed`` and those three numbers only.
+    shared_tilings : bool
+        The same tilings at every p0 (then F(p0) per tiling is a step).
+    dt, force_tol, energy_tol, max_steps, check_every
+        FIRE's time step; a replica stops when its largest vertex force is below ``force_tol``, its
+        energy per cell below ``energy_tol`` (a zero-energy state), or after ``max_steps``.
+    t1_threshold, t1_new_length, t1_max_flip_backs, t1_length_factor
+        T1 exchanges of edges shorter than ``t1_threshold`` (new edges ``t1_new_length``, or
+        ``t1_length_factor`` times the old one), units sqrt(<A>); a replica stops when one pair
+        re-joins ``t1_max_flip_backs`` times. The paper code's rule is ``t1_threshold=0.1,
+        t1_length_factor=2`` (:meth:`reference_t1`).
+    surface : {"sphere", "plane"}
+        Random convex-hull tilings of radius sqrt(N / 4 pi), or periodic Voronoi tilings in the
+        square box of side sqrt(N) (N >= 8): <A> = 1 on both.
+    forces : tuple
+        Extra forces, ``(name, {parameter: value})`` of registered plugins."""
     cells: tuple
     p0: tuple
     replicas: int

@@ -50,9 +50,20 @@ def save_chunk_state(out, chunk_id, data: bytes):
 
 
 def load_state(out, n_cells, p0, replica, device="cpu"):
-    """``(state, record)``: the inherent state of the tiling (N = ``n_cells``, ``p0``, ``replica``)
-    of the sweep in folder ``out``, as a single-replica :class:`~spherevm.State`, and its record
-    (a dict: energy per cell, reason, steps, ...). Needs a sweep run with ``save_states=True``."""
+    """The inherent state of one tiling of a sweep run with ``save_states=True``.
+
+    Parameters
+    ----------
+    out : str or path
+        The sweep's folder.
+    n_cells, p0, replica
+        Which tiling.
+    device : Device or str
+
+    Returns
+    -------
+    (State, dict)
+        A single-replica State and its record (energy per cell, reason, steps, ...)."""
     from ..init import from_gsd
     folder = os.path.join(os.fspath(out), CHUNK_DIR)
     names = sorted(n for n in os.listdir(folder) if n.endswith(".csv")) if os.path.isdir(folder) else []

@@ -46,15 +46,21 @@ def cell_area_vectors(state):
 
 
 def cell_normals(state):
-    """The unit normal of every cell, ``(n_cells, 3)``: its normalised area vector
-    (:func:`cell_area_vectors`), ``n_c = a_c / |a_c|``.
+    """The unit normal of every cell: its normalised area vector (:func:`cell_area_vectors`),
+    ``n_c = a_c / |a_c|``, the one definition of a cell's normal in spherevm.
 
-    The one definition of a cell's normal in spherevm (the bending energy uses it). On the sphere,
-    for a regular polygon (vertices equally spaced on a circle of the sphere) it is exactly the
-    radial direction at the polygon's centre; for any cell it is close to the normalised vertex
-    centroid, the two differing at second order in the cell size over R for an irregular cell. On
-    a periodic plane it is ``(0, 0, 1)`` for every (counter-clockwise) cell.
-    """
+    On the sphere, for a regular polygon it is exactly the radial direction at the polygon's
+    centre; for any cell it is close to the normalised vertex centroid (they differ at second
+    order in the cell size over R). On a periodic plane it is ``(0, 0, 1)``.
+
+    Parameters
+    ----------
+    state : State
+
+    Returns
+    -------
+    array (n_cells, 3)
+        On the State's device."""
     a = cell_area_vectors(state).T
     return (a / state.device.xp.sqrt(_dot(a, a))).T
 
@@ -136,16 +142,19 @@ class Bending(Force):
     """``E_b = B sum over neighbouring cell pairs (i, j) of (1 - n_i . n_j)``, each pair once.
 
     ``n_i`` is the unit area vector of cell ``i`` (:func:`cell_normals`); two cells are neighbours
-    when they share an edge. ``B`` is an energy (in the dimensionless model, in units of
-    ``kP <A>``): a scalar, or one value per replica (length ``n_replicas``), finite and ``>= 0``.
+    when they share an edge. ``1 - n_i . n_j`` is evaluated as ``|n_i - n_j|^2 / 2`` (no
+    cancellation for nearly parallel normals). Forces are minus the surface gradient, tangent to the
+    surface; ``cell_energy`` gives each cell half of each of its pairs. On the sphere, for small
+    cells, ``1 - n_i . n_j ~ r_ij^2 / 2R^2`` with ``r_ij`` the geodesic distance between the cells'
+    centres. On a periodic plane every normal is ``(0, 0, 1)``: energy and forces are zero.
+    See docs/bending.md.
 
-    ``1 - n_i . n_j`` is evaluated as ``|n_i - n_j|^2 / 2`` (no cancellation for nearly parallel
-    normals). Forces are minus the surface gradient with respect to the vertex positions (the
-    surface's ``shape_gradient`` of ``dE/da_c``), tangent to the surface. ``cell_energy`` gives each
-    cell half of each of its pairs. On the sphere, for small cells, ``1 - n_i . n_j ~ r_ij^2 / 2R^2``
-    with ``r_ij`` the geodesic distance between the cells' centres. On a periodic plane every normal
-    is ``(0, 0, 1)``: energy and forces are zero.
-    """
+    Parameters
+    ----------
+    B : float or array (n_replicas,)
+        An energy (in the dimensionless model, in units of ``kP <A>``), finite and >= 0.
+    trigger : optional
+        Not used (forces are evaluated whenever the integrator needs them)."""
 
     narrowable = True
     gpu_surfaces = (Sphere,)

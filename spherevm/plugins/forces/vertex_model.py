@@ -31,13 +31,16 @@ def _param(name, value, lower=0.0):
 class VertexModel(Force):
     """Area and perimeter elasticity of every cell, measured on the constraint surface.
 
-    ``E = sum_c kA (A_c - A0)^2 + kP (P_c - P0)^2`` with scalar or per-cell (length ``n_cells``)
-    parameters. Forces are minus the surface gradient, gathered per vertex from its three corners
-    (:meth:`spherevm.constraints.Sphere.shape_gradient`), so they are tangent by construction.
+    ``E = sum_c kA (A_c - A0)^2 + kP (P_c - P0)^2``. Forces are minus the surface gradient, gathered
+    per vertex from its three corners (:meth:`spherevm.constraints.Sphere.shape_gradient`), so they
+    are tangent by construction. :meth:`dimensionless` gives the paper's form.
 
-    :meth:`dimensionless` gives the paper's form ``E/(kP <A>) = sum kr (a - a0)^2 + (p - p0)^2`` in
-    the unit of length ``sqrt(<A>)`` of each replica.
-    """
+    Parameters
+    ----------
+    kA, kP : float or array (n_cells,)
+        Area and perimeter stiffness, >= 0.
+    A0, P0 : float or array (n_cells,)
+        Target area and perimeter."""
 
     kA = Parameter(_param)
     kP = Parameter(_param)
@@ -55,12 +58,25 @@ class VertexModel(Force):
 
     @classmethod
     def dimensionless(cls, kr=0.0, p0=3.8, a0=1.0, kP=1.0) -> "VertexModel":
-        """The paper's parameters: kr = kA <A>/kP, p0 = P0/sqrt(<A>), a0 = A0/<A>.
+        """The paper's form ``E/(kP <A>) = sum kr (a - a0)^2 + (p - p0)^2``, in the unit of length
+        ``sqrt(<A>)`` of each replica, resolved per replica from its mean cell area
+        <A> = 4 pi R^2 / N: ensembles of spheres of different sizes share one set of parameters.
+        Its ``kr``, ``p0``, ``a0`` and ``kP`` may change later (``kA``, ``A0`` and ``P0`` are not used).
 
-        Resolved per replica from its mean cell area <A> = 4 pi R^2 / N, so that ensembles of
-        spheres of different sizes share one set of dimensionless parameters. Its ``kr``, ``p0``,
-        ``a0`` and ``kP`` may change later (``kA``, ``A0`` and ``P0`` are not used).
-        """
+        Parameters
+        ----------
+        kr : float
+            ``kA <A> / kP``.
+        p0 : float or array (n_cells,)
+            Target shape index ``P0 / sqrt(<A>)``.
+        a0 : float
+            ``A0 / <A>``.
+        kP : float
+            The energy unit.
+
+        Returns
+        -------
+        VertexModel"""
         model = cls(kA=0.0, kP=kP, A0=0.0, P0=0.0)
         model.__dict__.update(_reduced=True, kr=_param("kr", kr), p0=_param("p0", p0), a0=_param("a0", a0))
         return model

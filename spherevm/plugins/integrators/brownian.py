@@ -18,16 +18,23 @@ _KERNELS = Path(__file__).with_suffix(".cu")
 
 
 class Brownian(Integrator):
-    """Overdamped Brownian dynamics, the paper's Methods:
+    """Overdamped Brownian dynamics, the paper's Methods.
 
     ``dr = P_T(r, mu dt F + eta)``, ``<eta_a eta_b> = 2 mu T dt delta_ab`` per Cartesian component,
-    then ``r <- P_N(r + dr)``. ``T`` may be one value per replica (a temperature series in one
-    ensemble). Noise is Philox (``spherevm.random``) keyed by (simulation seed, stream 0) and
-    counted by (timestep, global vertex id), so CPU and GPU draw the same numbers.
+    then ``r <- P_N(r + dr)``. Noise is Philox (``spherevm.random``) keyed by (simulation seed,
+    stream 0) and counted by (timestep, global vertex id), so CPU and GPU draw the same numbers.
 
-    ``max_step`` (units of sqrt(<A>)) guards against exploding steps: a larger displacement of any
-    vertex stops the run with the step, replica and vertex named.
-    """
+    Parameters
+    ----------
+    dt : float
+        Time step, > 0.
+    T : float or array (n_replicas,)
+        Temperature, >= 0 (one per replica: a temperature series in one ensemble).
+    mu : float
+        Mobility.
+    max_step : float
+        Units of sqrt(<A>): a larger displacement of any vertex stops the run with the step,
+        replica and vertex named."""
 
     dt = Parameter(positive)
     T = Parameter(non_negative)
@@ -184,25 +191,28 @@ def _director_mode(name, value):
 class Active(Brownian):
     """Self-propelled vertex-model dynamics: velocity ``mu F + v0 p`` plus optional noise T.
 
-    ``directors="cell"`` (default, the active vertex model of the planar GPU code): every cell
-    carries a unit director in the tangent plane at its centroid, and a vertex moves with the mean
-    of its three cells' directors, projected on its own tangent plane. ``directors="vertex"``:
-    each vertex carries its own director.
-
     Each step a director rotates about the local surface normal by a Gaussian angle of variance
-    ``2 Dr dt`` (Philox stream 1, counted by cell or vertex id). Transport: after the vertices
-    move, each director is projected on the tangent plane at its new base point (the cell centroid
-    or the vertex) and renormalised; this is parallel transport to first order in the step.
-    Initial directors are uniform random angles in the tangent plane (stream 2, timestep 0).
+    ``2 Dr dt`` (Philox stream 1, counted by cell or vertex id); after the vertices move it is
+    projected on the tangent plane at its new base point and renormalised (parallel transport to
+    first order). Initial directors are uniform random angles in the tangent plane (stream 2). At a
+    division the mother keeps her director and the daughter draws a new one, as cellGPU's active
+    cells do (Philox stream 3, draw 2; with vertex directors the two new vertices draw theirs,
+    stream 4); a T2's merged vertex keeps its own.
 
-    Growth (Division, Extrusion): directors follow their cells or vertices (:meth:`resized`). At
-    a division the mother keeps her director and the daughter draws a new one, a uniform angle in
-    the tangent plane at her centre, as cellGPU's active cells do (``Simple2DActiveCell::
-    cellDivision``: the new cell inherits the motility, its director is random). The draw is
-    Philox stream 3 (division), draw 2, counted by (timestep, the mother's index before the
-    division). With vertex directors the two vertices a division creates draw theirs (stream 4,
-    counted by (timestep, new vertex index)); a T2's merged vertex keeps its own.
-    """
+    Parameters
+    ----------
+    dt : float
+        Time step, > 0.
+    v0 : float
+        Self-propulsion speed.
+    Dr : float
+        Rotational diffusion constant of the directors.
+    mu, T, max_step
+        As in :class:`Brownian`.
+    directors : {"cell", "vertex"}
+        "cell" (the active vertex model of the planar GPU code): every cell carries a unit
+        director in the tangent plane at its centroid, and a vertex moves with the mean of its three
+        cells' directors, projected on its own tangent plane. "vertex": each vertex carries its own."""
 
     v0 = Parameter(lambda name, value: float(non_negative(name, value, per_item="a scalar")))
     Dr = Parameter(lambda name, value: float(non_negative(name, value, per_item="a scalar")))

@@ -32,11 +32,11 @@ __device__ __forceinline__ void fire_control_replica(double power, double vnorm2
 // so that they are indexed by it) of a running replica whose size is s: mix, semi-implicit Euler,
 // P_N re-projection and P_T velocity transport. A move |h w| that is not finite or above max_step
 // units (sqrt(<A>)) leaves the vertex and its velocity as they were and flags (timestep << 32 | i).
-// The arithmetic is written out (vec3.cuh's rounded helpers) in the forms session 11's fire.cu
-// compiled to: w = fma(keep, v, scale f), w = fma(h, f, w), x = x + (h w), w = fma(-(w.n), n, w), so
-// it has the same bits wherever it is inlined (fire.cu's kernel, the fused minimisation). Left to the
-// compiler, the mix had become (keep v) + fma(scale, f) in one and fma(keep, v, scale f) in the
-// other (session 12).
+// The arithmetic is written out (vec3.cuh's rounded helpers) in the forms fire.cu's kernel compiled
+// to when it held this code itself: w = fma(keep, v, scale f), w = fma(h, f, w), x = x + (h w),
+// w = fma(-(w.n), n, w), so it has the same bits wherever it is inlined (fire.cu's kernel, the fused
+// minimisation). Left to the compiler, the mix becomes (keep v) + fma(scale, f) in one and
+// fma(keep, v, scale f) in the other.
 __device__ __forceinline__ void fire_move_vertex(double* pos, double* vel, const double* forces, long i,
                                                  Surface::Size s, double keep, double scale, double h, double unit,
                                                  double max_step, unsigned long long timestep,

@@ -28,23 +28,24 @@ class FIRE(Minimizer):
     3. semi-implicit Euler: ``v <- v + dt F``, ``x <- P_N(x + dt v)``, then ``v <- P_T(x, v)``
        carries the velocity into the new tangent plane.
 
-    ``dt = 0.02`` is the step the docs, the CLI and the sweeps use (measured fastest on the
-    rigidity protocol, docs/rigidity.md). The other defaults are Bitzek's: ``dt_max = 10 dt``,
-    ``n_min = 5``, ``f_inc = 1.1``, ``f_dec = 0.5``, ``alpha_start = 0.1``, ``f_alpha = 0.99``.
-    Convergence (``force_tol``, ``energy_tol``, ``check_every``) is per replica, see
-    :class:`spherevm.plugins.base.Minimizer`: replicas that have stopped do not move, and their dt,
-    alpha and counter stay as they were. The tolerances are in each replica's natural units (force
-    ``kP sqrt(<A>)``, energy per cell ``kP <A>`` for the vertex model), on both devices (the check
-    reads back the largest force per replica).
+    Replicas that have stopped do not move, and their dt, alpha and counter stay as they were.
 
-    ``max_step`` (units of sqrt(<A>) of the replica; default 1, a cell size, because FIRE with
-    dt_max = 10 dt takes legitimate steps of half a cell on a raw tiling) guards against exploding
-    steps, as in :class:`~spherevm.plugins.integrators.Brownian`: a vertex that would move farther (or to
-    NaN) in one iteration stops the run with FloatingPointError naming the timestep, replica and
-    vertex, before the move (CPU) or at the next ``check`` (GPU: the kernel leaves that vertex in
-    place and sets an error word; every writer checks it before writing), so no corrupt frame is
-    written.
-    """
+    Parameters
+    ----------
+    dt : float
+        The initial time step; 0.02 is the step the docs, the CLI and the sweeps use (fastest on
+        the rigidity protocol, docs/rigidity.md).
+    dt_max, n_min, f_inc, f_dec, alpha_start, f_alpha : optional
+        Bitzek's defaults: ``dt_max = 10 dt``, 5, 1.1, 0.5, 0.1, 0.99.
+    force_tol, energy_tol, check_every : optional
+        Convergence per replica (:class:`spherevm.plugins.base.Minimizer`), in each replica's
+        natural units (force ``kP sqrt(<A>)``, energy per cell ``kP <A>`` for the vertex model).
+    max_step : float
+        Units of sqrt(<A>) (default 1, a cell size: FIRE with ``dt_max = 10 dt`` takes legitimate
+        steps of half a cell on a raw tiling). A vertex that would move farther, or to NaN, in one
+        iteration stops the run with FloatingPointError naming the timestep, replica and vertex,
+        before the move (CPU) or at the next check (GPU: the vertex stays in place), so no corrupt
+        frame is written."""
 
     gpu_surfaces = KERNEL_SURFACES
     surface_needs = ("normal", "project_normal")

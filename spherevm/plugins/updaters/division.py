@@ -100,33 +100,36 @@ def _division_axis(name, value):
 class Division(Updater):
     """Divide cells chosen by a rule, each through its centre across a chosen axis.
 
-    Rules (``rule``), built in:
+    Only replicas the integrator still moves (``integrator.active``) divide. Refusals (see
+    :mod:`spherevm.growth`) are counted per replica and reason in ``refused``; ``lineage`` (one per
+    cell, initially the cell's index at attach) is inherited by daughters. Sits minimisations out
+    (``in_minimize = False``): ``Simulation.minimize`` quenches the tissue at its N, and the time it
+    takes does not count for the rate rule. The GPU path chooses the same cells as the CPU (the same
+    Philox draws). See docs/growth.md.
 
-    * ``"rate"``: every cell divides with probability ``1 - exp(-rate * elapsed)`` per pass, where
-      ``elapsed`` is the time since the last pass (steps times ``dt``; ``dt`` defaults to the
-      integrator's ``dt``, else 1). The draw is Philox, keyed by ``(simulation.seed,
-      STREAM_DIVISION, timestep, cell id)``, so CPU and GPU would agree;
-    * ``"area"``: every cell whose area exceeds ``area_threshold * <A>`` (its replica's <A>);
-    * a callable ``rule(simulation) -> cell ids`` (global indices) of the user's choice.
-
-    Axes (``axis``, the spindle: the cut runs perpendicular to it through the centre):
-
-    * ``"hertwig"`` (default): the cell's long axis, the eigenvector of the largest eigenvalue of
-      its vertex gyration tensor in the tangent plane at its centre (Hertwig's rule);
-    * ``"random"``: a uniform angle in the tangent plane, the second Philox draw of the cell;
-    * a callable ``axis(simulation, cells) -> (n, 3)`` directions (projected on the tangent plane).
-
-    ``max_cells``: a replica stops growing at this many cells (the cells chosen first by the rule
-    divide: smallest draw, largest area, or the callable's order). Only replicas the integrator
-    still moves (``integrator.active``) divide. Refusals (see :mod:`spherevm.growth`) are counted
-    per replica and reason in ``refused``; ``lineage`` (one per cell, initially the cell's index at
-    attach) is inherited by daughters.
-
-    Sits minimisations out (``in_minimize = False``): ``Simulation.minimize`` quenches the tissue
-    at its N, and the time it takes does not count for the rate rule. Both devices: the GPU path
-    edits on the host on the steps cells divide (see the module's docstring) and chooses the same
-    cells as the CPU (the same Philox draws).
-    """
+    Parameters
+    ----------
+    rule : {"rate", "area"} or callable
+        "rate": every cell divides with probability ``1 - exp(-rate * elapsed)`` per pass,
+        ``elapsed`` the time since the last pass (steps times ``dt``), a Philox draw keyed by
+        ``(simulation.seed, STREAM_DIVISION, timestep, cell id)``. "area": every cell whose area
+        exceeds ``area_threshold * <A>`` (its replica's <A>). A callable ``rule(simulation) -> cell
+        ids`` (global indices) of the user's choice.
+    rate : float
+        For ``rule="rate"``: divisions per cell per unit time.
+    area_threshold : float
+        For ``rule="area"``.
+    axis : {"hertwig", "random"} or callable
+        The spindle (the cut runs perpendicular to it through the centre): "hertwig", the cell's
+        long axis (the largest eigenvector of its vertex gyration tensor in the tangent plane);
+        "random", a uniform angle (the cell's second Philox draw); a callable
+        ``axis(simulation, cells) -> (n, 3)`` directions (projected on the tangent plane).
+    max_cells : int, optional
+        A replica stops growing at this many cells (the cells chosen first by the rule divide:
+        smallest draw, largest area, or the callable's order).
+    dt : float, optional
+        Time per step for the rate rule (default: the integrator's ``dt``, else 1).
+    trigger : Trigger or int"""
 
     narrowable = True
     in_minimize = False

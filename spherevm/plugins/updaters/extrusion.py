@@ -19,17 +19,21 @@ class Extrusion(Updater):
     """Remove (T2) the triangular cells a rule selects: their three vertices merge into one at
     their centroid, joining the three neighbours, which lose a side each.
 
-    Rules (``rule``), built in: ``"area"``, every cell with area below ``area_threshold * <A>`` (its
-    replica's <A>); or a callable ``rule(simulation) -> cell ids`` (global indices).
-
     Only triangles are extruded (the standard T2): a selected cell with more sides is refused and
     counted (``"not_triangle"``; T1s must first take its sides), as are a triangle with a
-    three-sided neighbour or neighbours that are not three distinct cells (``"neighbours"``: a
-    two-sided cell would result) and one whose removal would fold a neighbour (``"fold"``).
-    Counters per replica: ``last_extrusions``, ``total_extrusions``, ``refused[reason]``. Only
-    replicas the integrator still moves are touched. Sits minimisations out, and runs on both
-    devices, as :class:`~spherevm.plugins.updaters.Division` does.
-    """
+    three-sided neighbour or neighbours that are not three distinct cells (``"neighbours"``) and one
+    whose removal would fold a neighbour (``"fold"``). Counters per replica: ``last_extrusions``,
+    ``total_extrusions``, ``refused[reason]``. Only replicas the integrator still moves are touched.
+    Sits minimisations out, and runs on both devices, as :class:`~spherevm.plugins.updaters.Division`.
+
+    Parameters
+    ----------
+    rule : {"area"} or callable
+        "area": every cell with area below ``area_threshold * <A>`` (its replica's <A>); a callable
+        ``rule(simulation) -> cell ids`` (global indices).
+    area_threshold : float
+        For ``rule="area"``.
+    trigger : Trigger or int"""
 
     narrowable = True
     in_minimize = False

@@ -28,19 +28,18 @@ class RadiusSchedule(Updater):
     """Set each replica's sphere radius every time the trigger fires, rescaling its vertex
     positions radially (``x -> x R_new / R_old``: shapes are kept, every length scales).
 
-    ``mode``:
-
-    * ``"fixed"``: never change R (dividing cells then lowers <A> = 4 pi R^2 / N);
-    * ``"constant_area"``: ``R = sqrt(N area / 4 pi)`` so that <A> stays ``area`` (default: each
-      replica's <A> when the schedule attaches) as N changes;
-    * a callable ``f(simulation) -> R`` (a scalar or one per replica), of the timestep, of
-      ``simulation.state.cells_per_replica`` or of anything else.
-
     Put it after the updaters that change N (Division, Extrusion) so the new N is seen in the same
-    step. Sphere only, both devices (a pass compares on the host with the radius last set, so a
-    step with no change costs no transfer). Sits minimisations out, as Division does. Narrowable
-    (it keeps one ``area`` per replica).
-    """
+    step. Sphere only, both devices. Sits minimisations out, as Division does.
+
+    Parameters
+    ----------
+    mode : {"fixed", "constant_area"} or callable
+        "fixed": never change R (dividing cells then lower <A> = 4 pi R^2 / N); "constant_area":
+        ``R = sqrt(N area / 4 pi)``, so that <A> stays ``area`` as N changes; a callable
+        ``f(simulation) -> R`` (a scalar or one per replica).
+    area : float, optional
+        For "constant_area" (default: each replica's <A> when the schedule attaches).
+    trigger : Trigger or int"""
 
     narrowable = True
     in_minimize = False

@@ -33,37 +33,43 @@ class T1(DevicePass, Updater):
 
     The flip rotates the edge by 90 degrees about the surface normal at its midpoint: the two cells
     that shared it stop touching, the two cells at its ends now share it, and its vertices sit
-    symmetrically about the midpoint, ``new_length`` apart (or ``length_factor`` times the old
-    length). Rules, applied per pass (every time the trigger fires):
+    symmetrically about the midpoint. Rules, applied per pass (every time the trigger fires):
 
-    * a flip that would leave a cell with fewer than 3 sides (a triangle losing a side), or fold
-      the network (leave one of its four cells with signed area <= 0, or invert a corner: the
-      three edges at one of its six vertices no longer counter-clockwise; see
+    * a flip that would leave a cell with fewer than 3 sides, or fold the network (leave one of its
+      four cells with signed area <= 0, or invert a corner; see
       :func:`spherevm.folding.t1_placement`), is refused and counted, never an error; one whose
       usual placement would fold is rotated the other way round if that does not;
     * conflicting flips (short edges touching a common cell) are resolved deterministically: an
       edge flips only if it has the lowest index among the candidate edges touching each of its
-      four cells, so at most one flip per cell per pass; the rest wait for the next pass. The edge
-      index is ``3 u + k`` for the edge ``u -> vertex_neighbors[u, k]`` with ``u < v``; the GPU
-      kernel follows the same rule;
-    * ``reset_velocities``: ask the integrator to forget the flipped vertices' memory
-      (``Integrator.reset_vertices``: FIRE zeroes their velocities).
+      four cells, so at most one flip per cell per pass. The edge index is ``3 u + k`` for the edge
+      ``u -> vertex_neighbors[u, k]`` with ``u < v``; the GPU kernel follows the same rule.
 
     Oscillation: a flip that makes two cells neighbours again after an earlier flip separated them
     is a flip back. When one pair of cells has been re-joined ``max_flip_backs`` times, its replica
-    is reported as halted (``Simulation.minimize`` stops it with reason ``"t1_oscillation"``)
-    instead of flipping back and forth until max_steps. ``flip_backs`` holds, per replica, the
-    largest re-join count of any pair.
+    is reported as halted (``Simulation.minimize`` stops it with reason ``"t1_oscillation"``).
+    ``flip_backs`` holds, per replica, the largest re-join count of any pair. See docs/t1.md.
 
-    ``count_flip_backs``: keep that bookkeeping (a record of every separated cell pair). None (default):
-    unless the integrator is a dynamics integrator that is not a :class:`~spherevm.plugins.base.Minimizer`
-    (Brownian, Active): there flips back and forth are physics, nothing halts on them, and the
-    record grows with every flip (it cost half the step time of hot 1,024-cell tissues on a GPU).
-
-    ``preset="reference"`` reproduces the paper's code: threshold 0.1, new edge twice the old length.
-    Defaults: threshold 0.04 and new_length 0.12 (3 x threshold, so a fresh edge is not
-    immediately short again). See docs/t1.md.
-    """
+    Parameters
+    ----------
+    threshold : float
+        Edges shorter than this flip (default 0.04).
+    new_length : float
+        Length of a fresh edge (default 0.12, 3 x threshold, so it is not immediately short again).
+    length_factor : float, optional
+        Instead of ``new_length``: a fresh edge is this many times the old one.
+    preset : {"reference"}, optional
+        The paper's code: threshold 0.1, new edge twice the old length.
+    trigger : Trigger or int
+        The timesteps a pass runs on (default every step).
+    reset_velocities : bool
+        Ask the integrator to forget the flipped vertices' memory (``Integrator.reset_vertices``:
+        FIRE zeroes their velocities).
+    max_flip_backs : int
+        Re-joins of one cell pair that halt its replica.
+    count_flip_backs : bool, optional
+        Keep the flip-back bookkeeping (a record of every separated cell pair). None: unless the
+        integrator is a dynamics integrator that is not a Minimizer (Brownian, Active): there flips
+        back and forth are physics, and the record grows with every flip."""
 
     preset = Parameter(_preset)
     threshold = Parameter(positive)

@@ -34,34 +34,36 @@ class GSD(Writer):
 
     ``GSD(trigger, filename, mode="wb", logger=None, ...)``: HOOMD-blue's argument order
     (``hoomd.write.GSD(trigger, filename)``); keywords work too, and the older order, the path
-    first (``GSD("run.gsd", trigger=100)``), still works with a DeprecationWarning.
+    first (``GSD("run.gsd", trigger=100)``), still works with a DeprecationWarning. Every frame is
+    flushed to disk, so a crash leaves a readable file. After :meth:`close`, a later write reopens
+    the file in append mode.
 
     Parameters
     ----------
-    trigger : a :class:`spherevm.trigger.Trigger` or an int period (default every 1000 steps).
-    filename : path of the ``.gsd`` file; opened at the first write (not at construction).
-    mode : ``"wb"`` overwrites (or creates) the file, ``"ab"`` appends to it (or creates it),
-        ``"xb"`` creates it and fails if it exists. ``"w"``, ``"a"``, ``"x"`` are accepted too.
-        (HOOMD's default is ``"ab"``; docs/hoomd.md says why this one overwrites.)
-    logger : a :class:`spherevm.logging.Logger` choosing what is logged, written as ``log/<name>``
-        with one value per replica (scalars as one value).
-    log : the short form, a sequence of loggable names (see ``Simulation.loggables``), or a
-        Logger (HOOMD-blue 3's spelling); give ``logger`` or ``log``, not both. The default (neither) logs energy, energy per cell, mean
-        shape index and largest force, skipping the force-dependent ones without a force.
-    cell_quantities : which per-cell values to record, from ``("area", "perimeter", "shape_index",
-        "energy")``: exact arrays under ``spherevm/cell_<q>`` and the mean over each vertex's three
-        cells under ``log/particles/cell_<q>`` (for colouring in OVITO). ``"energy"`` is written
-        when every force reports per-cell energies (``ForceResult.cell_energy``, taken from the
-        simulation's force cache, so writing costs no extra force evaluation).
-    checkpoint : write the timestep's run state too (every operation's ``state_to_save``: FIRE's
-        velocities and convergence, Active's directors, T1's counters), so that every frame is a
-        checkpoint that ``Simulation.create_state_from_gsd`` continues bitwise (default True).
-    final : also write the state a ``run`` or ``minimize`` ends in, whatever the trigger (default
-        True), so the last frame is the final state.
-
-    Every frame is flushed to disk, so a crash leaves a readable file. After :meth:`close`, a
-    later write reopens the file in append mode.
-    """
+    trigger : Trigger or int
+        When to write (default every 1000 steps).
+    filename : str or path
+        The ``.gsd`` file; opened at the first write (not at construction).
+    mode : {"wb", "ab", "xb"}
+        "wb" overwrites (or creates) the file, "ab" appends to it (or creates it), "xb" creates it
+        and fails if it exists; "w", "a", "x" are accepted too. (HOOMD's default is "ab";
+        docs/hoomd.md says why this one overwrites.)
+    logger : Logger, optional
+        What is logged, written as ``log/<name>`` with one value per replica.
+    log : sequence of str or Logger, optional
+        The short form: loggable names (see ``Simulation.loggables``); give ``logger`` or ``log``,
+        not both. Default: energy, energy per cell, mean shape index and largest force (those that
+        need a force only with one).
+    cell_quantities : sequence of str
+        Per-cell values to record, from ``("area", "perimeter", "shape_index", "energy")``: exact
+        arrays under ``spherevm/cell_<q>`` and the mean over each vertex's three cells under
+        ``log/particles/cell_<q>`` (for colouring in OVITO). "energy" is written when every force
+        reports per-cell energies (from the force cache: no extra force evaluation).
+    checkpoint : bool
+        Write the run state too (every operation's ``state_to_save``), so that every frame is a
+        checkpoint that ``Simulation.create_state_from_gsd`` continues bitwise.
+    final : bool
+        Also write the state a ``run`` or ``minimize`` ends in, whatever the trigger."""
 
     def __init__(self, *args, trigger=None, filename=None, mode="wb", logger=None, log=None,
                  cell_quantities=gsdio.CELL_QUANTITIES, checkpoint=True, final=True):
@@ -207,9 +209,22 @@ class GSD(Writer):
 
 
 def write_gsd(simulation, filename, mode="wb", **options):
-    """Write the Simulation's current state as one frame (a checkpoint by default) to ``filename``,
-    at ``simulation.timestep``, and close the file: the one-shot form of :class:`GSD` (``mode``
-    and ``options`` as there; ``"ab"`` appends a frame to an existing file)."""
+    """Write the Simulation's current state as one frame (a checkpoint by default) at
+    ``simulation.timestep``, and close the file: the one-shot form of :class:`GSD`.
+
+    Parameters
+    ----------
+    simulation : Simulation
+    filename : str or path
+    mode : {"wb", "ab", "xb"}
+        As in :class:`GSD` ("ab" appends a frame to an existing file).
+    **options
+        :class:`GSD`'s other keywords.
+
+    Returns
+    -------
+    str or path
+        The file written."""
     simulation.require_state()
     writer = GSD(1, filename, mode=mode, **options)
     try:

@@ -56,23 +56,22 @@ class Recording:
 class Recorder(Writer):
     """A writer that keeps the cell centroids of a running Simulation in memory (and optionally a CSV).
 
+    :meth:`recording` returns what was recorded; ``spherevm.analysis.Trajectory.from_recording``
+    makes it a Trajectory. A Recorder attached to a simulation already at t > 0 records the current
+    configuration at once when its trigger fires at t, so the run keeps its time origin; the same
+    timestep is not recorded twice. Cells must keep their number: a Recorder belongs to one State.
+
     Parameters
     ----------
-    trigger : when to record: a :class:`~spherevm.trigger.Trigger`, an int period, or a sequence of
-        timesteps (made an :class:`OnTimesteps`). :meth:`log_spaced` builds the usual log-spaced one.
-    csv : optional path; every recorded frame appends rows ``timestep,cell,replica,x,y,z`` (the file
-        is overwritten at the first write and flushed after every frame).
-    method : centroid definition, ``"area"`` or ``"vertex"`` (see :func:`cell_centroids`).
-
-    :meth:`recording` returns what was recorded; ``spherevm.analysis.Trajectory.from_recording``
-    makes it a Trajectory.
-
-    The Simulation runs writers on timestep 0 and after each step, but not at the start of a run
-    that continues from timestep t > 0. So that such a run keeps its time origin, a Recorder
-    attached to a simulation already at t > 0 records the current configuration at once when its
-    trigger fires at t. Recording the same timestep twice is skipped. Cells must keep their number:
-    a Recorder belongs to one State (replace ``sim.state`` and it raises at the next write).
-    """
+    trigger : Trigger, int or sequence of int
+        When to record: a :class:`~spherevm.trigger.Trigger`, an int period, or a sequence of
+        timesteps (made an :class:`~spherevm.trigger.OnTimesteps`); :meth:`log_spaced` builds the
+        usual log-spaced one.
+    csv : str or path, optional
+        Every recorded frame appends rows ``timestep,cell,replica,x,y,z`` (the file is overwritten
+        at the first write and flushed after every frame).
+    method : {"area", "vertex"}
+        The centroid definition (see :func:`~spherevm.analysis.cell_centroids`)."""
 
     def __init__(self, trigger=None, csv=None, method: str = "area"):
         if trigger is None:

@@ -17,11 +17,19 @@ class Table(Writer):
 
     ``Table(trigger, path=None, quantities=..., logger=None)``: the trigger first, as HOOMD-blue's
     ``hoomd.write.Table(trigger, logger)`` (the older ``Table("log.csv", trigger=100)`` still works
-    with a DeprecationWarning). ``path=None`` writes to standard output. What is logged:
-    ``quantities`` (names) or a :class:`spherevm.logging.Logger`; unknown names fail at the first
-    write, before the header. Each row is flushed, so the file is complete up to the last write if
-    the run stops.
-    """
+    with a DeprecationWarning). Each row is flushed, so the file is complete up to the last write
+    if the run stops.
+
+    Parameters
+    ----------
+    trigger : Trigger or int
+        When to write (default every 1000 steps).
+    path : str or path, optional
+        The CSV file; None writes to standard output.
+    quantities : sequence of str, optional
+        Loggable names; unknown names fail at the first write, before the header.
+    logger : Logger, optional
+        Instead of ``quantities``."""
 
     def __init__(self, *args, trigger=None, path=None, quantities=None, logger=None):
         trigger, path = trigger_first("Table", args, trigger, path, 1000, "path")

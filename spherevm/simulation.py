@@ -12,6 +12,7 @@ from .operations import Operations
 from .minimization import Minimization, MinimizeResult
 from .plan import Plan
 from .plugins.base import Minimizer, compute_all
+from .runs import Restored, RunRecords, stepping
 from .validation import GPU_RUN_BYTES_PER_CELL, check_memory, integer
 
 
@@ -26,7 +27,7 @@ class _ForceCache:
     summary_host: tuple = None
 
 
-class Simulation:
+class Simulation(RunRecords):
     """A State plus the operations acting on it (HOOMD-blue style).
 
     >>> sim = Simulation(device="cpu")
@@ -115,6 +116,7 @@ class Simulation:
         self.timestep = step
         self._set_state(state, pending=saved.get("op", {}), updated_at=None if updated < 0 else updated,
                         held_back=held)
+        self._restored = Restored(path, saved.get("op", {}), self._pending)   # reported at the next run
 
     def checkpoint(self) -> dict:
         """What a checkpoint frame holds besides the State: ``{chunk suffix: NumPy array}``, with
@@ -218,6 +220,8 @@ class Simulation:
             "energy_per_cell": lambda s: to_np(s.compute_forces()[1]) / s.state.cells_per_replica,
             "max_force": lambda s: to_np(s.max_force()),
             "mean_shape_index": lambda s: shapes.mean_shape_index(s.state),
+            "tps": lambda s: s.tps,
+            "walltime": lambda s: s.walltime,
         }
         owner = dict.fromkeys(out, "the Simulation")
         for op in self.operations:
@@ -295,7 +299,8 @@ class Simulation:
             w.write(self, ts)
             w.last_written = ts
 
-    def run(self, steps: int, check_every=None, progress=None, graphs=None, fused=None):
+    @stepping
+    def run(self, steps: int, check_every=None, progress=None, graphs=None, fused=None, write_at_start=True):
         """Advance ``steps`` timesteps: updaters, forces, integrator, writers on each.
 
         Every ``check_every`` steps (default: every step on the CPU, every 100 on the GPU, where a
@@ -313,6 +318,9 @@ class Simulation:
         launch, a thread block per tissue (:mod:`spherevm.tissue_steps`; the same trajectory bit for
         bit). None (default): wherever ``tissue_steps.why_not`` finds nothing against it; False:
         graph replays of the general kernels.
+
+        ``write_at_start`` (default True): first run the writers whose trigger fires at the current
+        timestep, unless they wrote it already; False skips them (HOOMD-blue's default).
         """
         self.require_state()
         steps = integer("steps", steps)
@@ -323,7 +331,8 @@ class Simulation:
         check_every = integer("check_every", check_every, minimum=1)
         plan = Plan(self)
         runner = StepGraphs.for_run(plan, steps, graphs, fused)
-        self.write()   # the frame a run starts from (writers skip timesteps they already wrote)
+        if write_at_start:
+            self.write()   # the frame a run starts from (writers skip timesteps they already wrote)
         try:
             done = 0
             while done < steps:
@@ -407,6 +416,7 @@ class Simulation:
             if hasattr(w, "flush"):
                 w.flush()
 
+    @stepping
     def minimize(self, force_tol=None, energy_tol=None, max_steps: int = 100_000, check_every=None,
                  progress=None, narrow: bool = True, resume: bool = False, graphs=None,
                  fused=None) -> MinimizeResult:

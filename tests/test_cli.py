@@ -188,7 +188,8 @@ def test_rigidity_runs_a_tiny_sweep_and_writes_tables(tmp_path, capsys):
     except ImportError:
         pass
     else:
-        assert {"fraction.png", "p0star_distribution.png", "p0star_vs_N.png", "critical_perimeter.png"} <= names
+        assert {"fraction.png", "p0star_distribution.png", "p0star_vs_N.png"} <= names
+        assert "critical_perimeter.png" not in names   # sqrt(<A>) p0*(N): nothing p0star_vs_N.png lacks
     lines = (out / "fraction.csv").read_text().splitlines()
     assert lines[0].startswith("n_cells,p0,n_replicas,n_zero,n_rigid,n_unconverged")
     assert lines[1].startswith("16,3.3,2,0,2,0") and lines[2].startswith("16,4.2,2,2,0,0")

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..trigger import Always, as_trigger
-from ..validation import integer, non_negative
+from ..validation import integer, keyword_hints, non_negative
 from .parameters import Parameter, parameter_names
 from .rows import _host, _index_like, _restored, follow_rows
 
@@ -175,6 +175,12 @@ class Operation:
         arrays follow their rows (see :func:`follow_rows`); one with other per-cell or per-vertex
         data overrides it."""
         follow_rows(self, change)
+
+    def __init_subclass__(cls, **kwargs):
+        """Every operation class, built-in or a user's: a keyword its constructor does not take is
+        answered with the nearest parameter (:func:`spherevm.validation.keyword_hints`)."""
+        super().__init_subclass__(**kwargs)
+        keyword_hints(cls)
 
 
 @dataclass

@@ -74,16 +74,27 @@ def test_run_restart_is_bitwise(kind, device, tiling, tmp_path):
             assert x.tobytes() == y.tobytes(), name
 
 
+def checkpoint_after(kind, tiling, steps, path):
+    """``path``, a checkpoint of ``make(kind, "cpu")`` on ``tiling`` after ``steps`` steps."""
+    sim = make(kind, "cpu")
+    sim.state = tiling
+    sim.run(steps)
+    svm.write_gsd(sim, path)
+    return path
+
+
+def bare_restart(path):
+    """A CPU Simulation without operations, restored from ``path``."""
+    sim = svm.Simulation(device="cpu", seed=4)
+    sim.create_state_from_gsd(path)
+    return sim
+
+
 def test_operations_attached_after_the_state_pick_up_their_state(tiling, tmp_path):
     whole = make("active", "cpu")
     whole.state = tiling
     whole.run(60)
-    first = make("active", "cpu")
-    first.state = tiling
-    first.run(30)
-    svm.write_gsd(first, tmp_path / "ck.gsd")
-    second = svm.Simulation(device="cpu", seed=4)
-    second.create_state_from_gsd(tmp_path / "ck.gsd")
+    second = bare_restart(checkpoint_after("active", tiling, 30, tmp_path / "ck.gsd"))
     second.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.85))
     second.operations.updaters.append(T1())
     second.operations.integrator = INTEGRATORS["active"]()
@@ -95,12 +106,7 @@ def test_a_checkpoint_restored_into_other_operations_says_so_once(tiling, tmp_pa
     """Written with T1 + Brownian + VertexModel, restored with FIRE alone: the first run warns, once,
     naming the saved state no operation took (T1's; Brownian and a scalar VertexModel save none) and
     the operation that started fresh (FIRE); the unclaimed state stays in later checkpoints."""
-    first = make("brownian", "cpu")
-    first.state = tiling
-    first.run(20)
-    svm.write_gsd(first, tmp_path / "ck.gsd")
-    second = svm.Simulation(device="cpu", seed=4)
-    second.create_state_from_gsd(tmp_path / "ck.gsd")
+    second = bare_restart(checkpoint_after("brownian", tiling, 20, tmp_path / "ck.gsd"))
     second.operations.integrator = FIRE()
     with pytest.warns(CheckpointMismatchWarning) as caught:
         second.run(3)

@@ -313,7 +313,8 @@ def test_python_m_spherevm_bad_arguments():
 # ------------------------------------------------------------------------------------ small things (issue 35.9)
 @pytest.mark.parametrize("argv", [["minimize", "--cell", "16"], ["dynamics", "--step", "10"],
                                   ["rigidity", "--cell", "16"], ["--deb", "info"]])
-def test_no_option_is_taken_from_a_prefix(argv, capsys):
+def test_no_option_is_taken_from_a_prefix(argv, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)          # were --cell taken for --cells, the sweep would land here
     rc = cli.main(argv)
     captured = capsys.readouterr()
     _assert_one_line_error(captured, rc, 2)

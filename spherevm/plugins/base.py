@@ -177,8 +177,7 @@ class Operation:
         follow_rows(self, change)
 
     def __init_subclass__(cls, **kwargs):
-        """Every operation class, built-in or a user's: a keyword its constructor does not take is
-        answered with the nearest parameter (:func:`spherevm.validation.keyword_hints`)."""
+        """A misspelt keyword of any operation's constructor names the nearest parameter (keyword_hints)."""
         super().__init_subclass__(**kwargs)
         keyword_hints(cls)
 

@@ -96,6 +96,16 @@ def keyword_hints(cls):
     return cls
 
 
+class KeywordHints:
+    """A base class (of ``spherevm.plugins.Operation``): the constructor of every subclass, a
+    user's included, answers a keyword it does not take with the nearest parameter
+    (:func:`keyword_hints`)."""
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        keyword_hints(cls)
+
+
 def available_host_memory():
     """Bytes of host memory available now (``MemAvailable`` of /proc/meminfo, else sysconf), or None."""
     try:

@@ -6,12 +6,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..trigger import Always, as_trigger
-from ..validation import integer, keyword_hints, non_negative
+from ..validation import KeywordHints, integer, non_negative
 from .parameters import Parameter, parameter_names
 from .rows import _host, _index_like, _restored, follow_rows
 
 
-class Operation:
+class Operation(KeywordHints):
     """Something the Simulation runs: it has a trigger and may publish loggable quantities.
 
     ``loggables`` maps a quantity name to a callable ``f(simulation)`` returning a scalar or a
@@ -175,11 +175,6 @@ class Operation:
         arrays follow their rows (see :func:`follow_rows`); one with other per-cell or per-vertex
         data overrides it."""
         follow_rows(self, change)
-
-    def __init_subclass__(cls, **kwargs):
-        """A misspelt keyword of any operation's constructor names the nearest parameter (keyword_hints)."""
-        super().__init_subclass__(**kwargs)
-        keyword_hints(cls)
 
 
 @dataclass

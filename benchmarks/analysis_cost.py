@@ -42,7 +42,7 @@ def best_of(fn, repeat=3):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--replicas", type=int, default=256)
     ap.add_argument("--cells", type=int, default=32)
     ap.add_argument("--frames", type=int, default=60)

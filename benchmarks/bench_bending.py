@@ -45,7 +45,7 @@ def evaluation(state, *forces):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--rows", nargs="*", default=None, help="CELLSxREPLICAS, e.g. 1000x1 64x4096")
     ap.add_argument("--repeat", type=int, default=11)

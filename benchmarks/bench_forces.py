@@ -19,7 +19,7 @@ import spherevm as svm  # noqa: E402
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--cells", type=int, nargs="+", default=[1000, 10000, 65536, 100000])
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--repeat", type=int, default=9)

@@ -130,7 +130,7 @@ def measure(n_cells, replicas, gpu, numpy_max, bw):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description="spherevm GPU benchmark")
+    ap = argparse.ArgumentParser(allow_abbrev=False, description="spherevm GPU benchmark")
     ap.add_argument("--cells", type=float, nargs="+", default=[1e3, 1e4, 1e5, 1e6])
     ap.add_argument("--ensembles", nargs="*", default=["4096x64", "256x1024"])
     ap.add_argument("--numpy-max", type=float, default=2e5, help="largest total cell count timed on NumPy")

@@ -36,7 +36,7 @@ def simulation(args, division):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--cells", type=int, default=512)
     ap.add_argument("--replicas", type=int, default=24)
     ap.add_argument("--steps", type=int, default=100)

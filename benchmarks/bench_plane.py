@@ -135,7 +135,7 @@ def fmt(x, digits=3):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description="planar benchmark (issue 11)")
+    ap = argparse.ArgumentParser(allow_abbrev=False, description="planar benchmark (issue 11)")
     ap.add_argument("--cells", type=float, nargs="+", default=list(SIZES))
     ap.add_argument("--reps", type=int, default=200)
     ap.add_argument("--warm", type=int, default=20)

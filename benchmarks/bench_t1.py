@@ -18,7 +18,7 @@ import spherevm as svm  # noqa: E402
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--cells", type=int, nargs="+", default=[1000, 10000])
     ap.add_argument("--device", default="cpu")
     args = ap.parse_args(argv)

@@ -69,7 +69,7 @@ def gap_table(records, zero_tol):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--cells", type=int, nargs="+", default=[32, 64])
     ap.add_argument("--p0", nargs="+", default=["3.70:3.90:0.02"])
     ap.add_argument("--replicas", type=int, default=20)

@@ -77,7 +77,7 @@ def rel(a, b):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--shapes", nargs="+", default=["3x64", "50x1000"], help="REPLICASxCELLS")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--tension", type=float, default=0.7)

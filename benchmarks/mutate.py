@@ -98,7 +98,8 @@ def mutant_source(source, index, how):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("module", help="path of the module to mutate, relative to the repository root")
     p.add_argument("tests", nargs="+", help="test files to run against each mutant")
     p.add_argument("--timeout", type=float, default=120.0)

@@ -258,7 +258,7 @@ def write_doc(text: str, path: pathlib.Path = DOC) -> None:
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--write", action="store_true", help=f"rewrite the generated section of {DOC}")
     p.add_argument("--samples", type=int, default=200, help="random orientations per row (default 200)")
     p.add_argument("--seed", type=int, default=SEED)

@@ -26,7 +26,7 @@ RULES = {"new edge 0.06": dict(t1_new_length=0.06), "new edge 0.12 (default)": {
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--cells", type=int, default=256)
     ap.add_argument("--p0", type=float, nargs="+", default=[3.88, 3.81])
     ap.add_argument("--replicas", type=int, default=16)

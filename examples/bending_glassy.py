@@ -134,7 +134,7 @@ def plot(results, path):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--full", action="store_true", help=f"the GPU study: {FULL}")
     ap.add_argument("--cells", type=int, nargs="+", default=None)
     ap.add_argument("--B", type=float, nargs="+", default=[0.0, 0.01, 0.1, 1.0])

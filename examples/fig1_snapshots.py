@@ -17,7 +17,7 @@ from spherevm.shapes import shape_index  # noqa: E402
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     parser.add_argument("--cells", type=int, default=200)
     parser.add_argument("--p0", type=float, default=3.7)
     parser.add_argument("--kr", type=float, default=1.0)

@@ -36,7 +36,7 @@ PLANE_SUFFIX = "_plane"
 
 
 def parse_args(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--paper", action="store_true",
                    help=f"the paper's sweep: N = {PAPER_CELLS}, {PAPER_REPLICAS} replicas, p0 = {PAPER_P0}")

@@ -31,7 +31,7 @@ def tilings(sizes, counts, seed_of):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--full", action="store_true", help="paper size: N = 32, 128, 1024, longer runs")
     ap.add_argument("--sizes", type=int, nargs="+", help="only these N (e.g. --full --sizes 1024: one size per "
                     "run, to fit a time limit)")

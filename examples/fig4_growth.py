@@ -181,7 +181,7 @@ def plot(rows, path):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n")[0])
     ap.add_argument("--full", action="store_true", help="paper size: N 32 -> 512, 24 replicas (one GPU)")
     ap.add_argument("--replicas", type=int, default=None)
     ap.add_argument("--start", type=int, default=32)

@@ -23,7 +23,7 @@ from spherevm.gsdio import n_frames, read_cell_values
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="minimise.gsd", help="GSD file to write (overwritten)")
     parser.add_argument("--cells", type=int, default=64, help="cells per tissue")
     parser.add_argument("--replicas", type=int, default=4, help="independent tissues in the ensemble")

@@ -23,7 +23,16 @@ class Logger:
     quantities : sequence of str
         Loggable names (see ``Simulation.loggables``)."""
 
-    def __init__(self, quantities=()):
+    def __init__(self, quantities=(), categories=None):
+        """``quantities``: loggable names (a name or names). ``categories``: accepted for HOOMD-blue's
+        ``Logger(categories=[...])`` when it includes ``"scalar"`` (every spherevm quantity is a
+        scalar or one scalar per replica, so nothing is filtered); other categories are refused."""
+        if categories is not None:
+            given = [categories] if isinstance(categories, str) else list(categories)
+            if "scalar" not in given:
+                raise ValueError(f"Logger(categories={given!r}): spherevm logs scalars only (one per replica), so "
+                                 "categories must include 'scalar', as HOOMD's Logger(categories=['scalar', "
+                                 "'string']); per-cell values go in GSD(cell_quantities=...)")
         self._custom = {}
         self._names = []
         self.add(quantities=quantities)

@@ -10,7 +10,9 @@ from .plugins.base import Force, Integrator, Updater, Writer
 class Operations:
     """The operations of a Simulation: forces, one integrator, updaters and writers.
 
-    Order inside a step: updaters, force computation, integrator, writers.
+    Order inside a step: updaters, force computation, integrator, writers. ``sim.operations += op``
+    (or :meth:`add`) puts an operation where its kind goes, as in HOOMD-blue; ``-=`` (:meth:`remove`)
+    takes it out.
     """
 
     def __init__(self, simulation):
@@ -34,6 +36,47 @@ class Operations:
         if self._integrator is not None:
             self._integrator.detach()
         self._integrator = value
+
+    def add(self, op):
+        """Add ``op`` where its kind goes (HOOMD-blue's ``Operations.add``): a Force to ``forces``, an
+        Updater to ``updaters``, a Writer to ``writers``; an Integrator becomes ``integrator``
+        (replacing the one there)."""
+        if isinstance(op, Integrator):
+            self.integrator = op
+        else:
+            self._list_of(op, "add").append(op)
+
+    def remove(self, op):
+        """Take ``op`` out of the Simulation (HOOMD-blue's ``Operations.remove``); ValueError if it is
+        not there."""
+        ops = [self._integrator] if isinstance(op, Integrator) else self._list_of(op, "remove")
+        where = next((i for i, other in enumerate(ops) if other is op), None)
+        if where is None:
+            raise ValueError(f"this {type(op).__name__} is not in sim.operations")
+        if isinstance(op, Integrator):
+            self.integrator = None
+        else:
+            del ops[where]
+
+    def __iadd__(self, op):
+        """``sim.operations += op``: :meth:`add`."""
+        self.add(op)
+        return self
+
+    def __isub__(self, op):
+        """``sim.operations -= op``: :meth:`remove`."""
+        self.remove(op)
+        return self
+
+    def __contains__(self, op):
+        return any(other is op for other in self)
+
+    def _list_of(self, op, verb):
+        for kind, ops in ((Force, self.forces), (Updater, self.updaters), (Writer, self.writers)):
+            if isinstance(op, kind):
+                return ops
+        raise TypeError(f"sim.operations.{verb}: expected a spherevm.plugins Force, Integrator, Updater or Writer, "
+                        f"got {type(op).__name__}")
 
     def __iter__(self):
         yield from self.updaters

@@ -12,6 +12,7 @@ from .operations import Operations
 from .minimization import Minimization, MinimizeResult
 from .plan import Plan
 from .plugins.base import Minimizer, compute_all
+from .runs import Restored, RunRecords, stepping
 from .validation import GPU_RUN_BYTES_PER_CELL, check_memory, integer
 
 
@@ -26,7 +27,7 @@ class _ForceCache:
     summary_host: tuple = None
 
 
-class Simulation:
+class Simulation(RunRecords):
     """A State plus the operations acting on it (HOOMD-blue style).
 
     Parameters
@@ -118,6 +119,7 @@ class Simulation:
         self.timestep = step
         self._set_state(state, pending=saved.get("op", {}), updated_at=None if updated < 0 else updated,
                         held_back=held)
+        self._restored = Restored(path, saved.get("op", {}), self._pending)   # reported at the next run
 
     def checkpoint(self) -> dict:
         """What a checkpoint frame holds besides the State: ``op/<key>/<field>`` for every operation's
@@ -233,6 +235,8 @@ class Simulation:
             "energy_per_cell": lambda s: to_np(s.compute_forces()[1]) / s.state.cells_per_replica,
             "max_force": lambda s: to_np(s.max_force()),
             "mean_shape_index": lambda s: shapes.mean_shape_index(s.state),
+            "tps": lambda s: s.tps,
+            "walltime": lambda s: s.walltime,
         }
         owner = dict.fromkeys(out, "the Simulation")
         for op in self.operations:
@@ -319,7 +323,8 @@ class Simulation:
             w.write(self, ts)
             w.last_written = ts
 
-    def run(self, steps: int, check_every=None, progress=None, graphs=None, fused=None):
+    @stepping
+    def run(self, steps: int, check_every=None, progress=None, graphs=None, fused=None, write_at_start=True):
         """Advance ``steps`` timesteps: updaters, forces, integrator, writers on each.
 
         Parameters
@@ -332,7 +337,11 @@ class Simulation:
         graphs, fused : bool, optional
             Run stretches as CUDA graphs (:mod:`spherevm.graphs`), small tissues' steps fused
             (:mod:`spherevm.tissue_steps`), the same trajectory bit for bit. None: where they apply;
-            True: insist (ValueError naming what cannot); False: never (docs/performance.md)."""
+            True: insist (ValueError naming what cannot); False: never (docs/performance.md);
+            :meth:`explain` says which runs each operation.
+        write_at_start : bool
+            First run the writers whose trigger fires at the current timestep, unless they wrote it
+            already (default); False skips them (HOOMD-blue's default)."""
         self.require_state()
         steps = integer("steps", steps)
         if self.operations.integrator is None:
@@ -342,7 +351,8 @@ class Simulation:
         check_every = integer("check_every", check_every, minimum=1)
         plan = Plan(self)
         runner = StepGraphs.for_run(plan, steps, graphs, fused)
-        self.write()   # the frame a run starts from (writers skip timesteps they already wrote)
+        if write_at_start:
+            self.write()   # the frame a run starts from (writers skip timesteps they already wrote)
         try:
             done = 0
             while done < steps:
@@ -426,6 +436,7 @@ class Simulation:
             if hasattr(w, "flush"):
                 w.flush()
 
+    @stepping
     def minimize(self, force_tol=None, energy_tol=None, max_steps: int = 100_000, check_every=None,
                  progress=None, narrow: bool = True, resume: bool = False, graphs=None,
                  fused=None) -> MinimizeResult:

@@ -57,6 +57,55 @@ class InsufficientMemory(MemoryError, ValueError):
     """A request that would not fit in memory, refused before allocating (a MemoryError and a ValueError)."""
 
 
+def did_you_mean(name: str, choices) -> str:
+    """``" (did you mean 'x'?)"`` with the choice nearest ``name`` (difflib, ignoring case), or ``""``
+    when none is near: the tail of an error about an unknown name."""
+    import difflib
+    lowered = {str(c).lower(): c for c in choices}
+    close = difflib.get_close_matches(str(name).lower(), list(lowered), n=1, cutoff=0.6)
+    return f" (did you mean {lowered[close[0]]!r}?)" if close else ""
+
+
+def keyword_hints(cls):
+    """Wrap ``cls.__init__`` (when the class defines one) so that a call with a keyword it does not
+    take raises TypeError naming the class, the keyword and the nearest parameter, instead of
+    Python's bare message. Returns ``cls``."""
+    import functools
+    import inspect
+    init = cls.__dict__.get("__init__")
+    if init is None or getattr(init, "keyword_hints", False):
+        return cls
+
+    @functools.wraps(init)
+    def __init__(self, *args, **kwargs):
+        try:
+            init(self, *args, **kwargs)
+        except TypeError:
+            params = inspect.signature(init).parameters
+            if any(p.kind is p.VAR_KEYWORD for p in params.values()):
+                raise
+            names = [n for n, p in list(params.items())[1:] if p.kind not in (p.VAR_POSITIONAL, p.POSITIONAL_ONLY)]
+            unknown = [k for k in kwargs if k not in names]
+            if not unknown:
+                raise
+            who = type(self) if type(self).__init__ is __init__ else cls   # a subclass inherits it, or calls it
+            raise TypeError(f"{who.__name__}() got an unexpected keyword argument {unknown[0]!r}"
+                            f"{did_you_mean(unknown[0], names)}; its parameters: {', '.join(names)}") from None
+    __init__.keyword_hints = True
+    cls.__init__ = __init__
+    return cls
+
+
+class KeywordHints:
+    """A base class (of ``spherevm.plugins.Operation``): the constructor of every subclass, a
+    user's included, answers a keyword it does not take with the nearest parameter
+    (:func:`keyword_hints`)."""
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        keyword_hints(cls)
+
+
 def available_host_memory():
     """Bytes of host memory available now (``MemAvailable`` of /proc/meminfo, else sysconf), or None."""
     try:

@@ -188,7 +188,8 @@ def test_rigidity_runs_a_tiny_sweep_and_writes_tables(tmp_path, capsys):
     except ImportError:
         pass
     else:
-        assert {"fraction.png", "p0star_distribution.png", "p0star_vs_N.png", "critical_perimeter.png"} <= names
+        assert {"fraction.png", "p0star_distribution.png", "p0star_vs_N.png"} <= names
+        assert "critical_perimeter.png" not in names   # sqrt(<A>) p0*(N): nothing p0star_vs_N.png lacks
     lines = (out / "fraction.csv").read_text().splitlines()
     assert lines[0].startswith("n_cells,p0,n_replicas,n_zero,n_rigid,n_unconverged")
     assert lines[1].startswith("16,3.3,2,0,2,0") and lines[2].startswith("16,4.2,2,2,0,0")
@@ -307,3 +308,90 @@ def test_python_m_spherevm_bad_arguments():
     assert proc.stderr.strip().splitlines() == [proc.stderr.strip()]
     assert proc.stderr.startswith("spherevm: error: ") and "--cells" in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+# ------------------------------------------------------------------------------------ small things (issue 35.9)
+@pytest.mark.parametrize("argv", [["minimize", "--cell", "16"], ["dynamics", "--step", "10"],
+                                  ["rigidity", "--cell", "16"], ["--deb", "info"]])
+def test_no_option_is_taken_from_a_prefix(argv, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)          # were --cell taken for --cells, the sweep would land here
+    rc = cli.main(argv)
+    captured = capsys.readouterr()
+    _assert_one_line_error(captured, rc, 2)
+    assert f"unrecognized arguments: {argv[-2] if argv[0] != '--deb' else '--deb'}" in captured.err
+
+
+def _parsers(parser):
+    yield parser
+    for action in parser._actions:
+        for sub in (getattr(action, "choices", None) or {}).values() if hasattr(action, "add_parser") else ():
+            yield from _parsers(sub)
+
+
+def test_every_parser_refuses_abbreviations():
+    """The command's parsers, and every argparse parser of the examples and benchmarks."""
+    parsers = list(_parsers(cli.build_parser()))
+    assert len(parsers) == 1 + len(cli.COMMAND_NAMES) and not any(p.allow_abbrev for p in parsers)
+    root = pathlib.Path(__file__).resolve().parent.parent
+    scripts = sorted([*root.glob("examples/*.py"), *root.glob("benchmarks/*.py")])
+    calls = [(path.name, node) for path in scripts
+             for node in ast.walk(ast.parse(path.read_text())) if isinstance(node, ast.Call)
+             and getattr(node.func, "attr", getattr(node.func, "id", None)) == "ArgumentParser"]
+    assert len(calls) >= 18
+    for name, node in calls:
+        assert any(k.arg == "allow_abbrev" and k.value.value is False for k in node.keywords), name
+
+
+def test_a_misspelt_force_parameter_is_answered_with_the_nearest(capsys):
+    rc = cli.main(["minimize", "-N", "8", "--force", "bending:b=1"])
+    captured = capsys.readouterr()
+    _assert_one_line_error(captured, rc, 2)
+    assert "force 'bending' has no parameter 'b' (did you mean 'B'?); its parameters: B=0.0" in captured.err
+
+
+class _CtrlC:
+    """A progress display that raises KeyboardInterrupt at its ``at``-th production update."""
+
+    def __init__(self, *args, at=2, **kwargs):
+        self.calls, self.at = 0, at
+
+    def __call__(self, *args):
+        if args[0] != "relax" and args[0] != "equilibrate":
+            self.calls += 1
+            if self.calls == self.at:
+                raise KeyboardInterrupt
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def close(self):
+        pass
+
+
+@pytest.mark.parametrize("command,extra", [
+    ("minimize", ["--write-every", "10", "--check-every", "10", "--p0", "3.9", "--energy-tol", "0"]),
+    ("dynamics", ["--relax", "20", "--equilibrate", "0", "--steps", "400"]),
+])
+def test_ctrl_c_says_how_to_continue_with_restart(command, extra, tmp_path, monkeypatch, capsys):
+    from spherevm.cli import dynamics, minimize
+    from spherevm.cli.arguments import gsd_frames
+    monkeypatch.setattr(minimize, "MinimizeBar", _CtrlC)
+    monkeypatch.setattr(dynamics, "StageBars", _CtrlC)
+    out = tmp_path / "run.gsd"
+    base = [command, "-N", "16", "-R", "1", "--device", "cpu", *extra]
+    assert cli.main([*base, "--out", str(out)]) == 130
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    frames, step = gsd_frames(out)
+    assert frames >= 1 and step > 0
+    assert err == (f"spherevm: interrupted; {out} holds {frames} frame{'s' * (frames != 1)}, the last at step {step}: "
+                   f"continue from it with 'spherevm {command} --restart {out}' and the other options as before")
+    monkeypatch.undo()
+    assert cli.main([*base, "--restart", str(out), "--quiet"]) == 0      # what the line says works
+    capsys.readouterr()
+    monkeypatch.setattr(minimize, "MinimizeBar", _CtrlC)
+    monkeypatch.setattr(dynamics, "StageBars", _CtrlC)
+    assert cli.main(base) == 130                                          # nothing written: the plain line
+    assert capsys.readouterr().err.strip().splitlines()[-1] == "spherevm: interrupted"

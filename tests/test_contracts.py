@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import spherevm as svm
+from conftest import to_numpy
 from spherevm.device import Device
 from spherevm.plugins.base import Force, ForceResult, Integrator
 from spherevm.plugins.forces import VertexModel
@@ -161,3 +162,34 @@ def test_a_stub_surface_is_refused_at_attach(stub):
     with pytest.raises(NotImplementedError, match=r"VertexModel needs cell_geometry, shape_gradient"):
         sim.operations.forces.append(VertexModel())
     assert len(sim.operations.forces) == 0
+
+
+# ------------------------------------------------------------------ the shape-gradient contract
+SURFACES = {"Sphere": lambda: svm.init.random_tiling(24, replicas=2, seed=5, radius=1.7),
+            "PeriodicPlane": lambda: svm.init_plane.random_planar_tiling(24, replicas=2, seed=5)}
+
+
+def test_every_surface_with_a_shape_gradient_is_checked_against_the_contract():
+    base = svm.constraints.Constraint.shape_gradient
+    implementing = {name for name in svm.constraints.__all__
+                    if name != "Constraint" and getattr(svm.constraints, name).shape_gradient is not base}
+    assert implementing == set(SURFACES)
+
+
+@pytest.mark.parametrize("surface", sorted(SURFACES))
+@pytest.mark.parametrize("left_out", [(0,), (1,), (2,), (0, 1), (0, 2), (1, 2), (0, 1, 2)])
+def test_a_none_coefficient_leaves_out_its_term_only(device, surface, left_out):
+    """``shape_gradient`` with some of d_area, d_perimeter, d_area_vector None equals the full
+    gradient with those coefficients zero (constraints/base.py), on every surface and device."""
+    state = SURFACES[surface]().to(device)
+    con, xp = state.constraint, state.device.xp
+    geometry = con.cell_geometry(state, area_vectors=True)
+    rng = np.random.default_rng(7)
+    coef = [xp.asarray(rng.normal(size=shape)) for shape in ((state.n_cells,), (state.n_cells,), (state.n_cells, 3))]
+    zeroed = [xp.zeros_like(c) if i in left_out else c for i, c in enumerate(coef)]
+    given = [None if i in left_out else c for i, c in enumerate(coef)]
+    want = to_numpy(con.shape_gradient(state, geometry, *zeroed))
+    got = to_numpy(con.shape_gradient(state, geometry, *given))
+    assert got.shape == (state.n_vertices, 3)
+    assert np.abs(want).max() > 0 or left_out == (0, 1, 2)
+    assert np.allclose(got, want, rtol=0, atol=1e-14 * max(np.abs(want).max(), 1.0))

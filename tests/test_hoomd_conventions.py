@@ -1,5 +1,8 @@
 """HOOMD-blue conventions (issue 14.7, docs/hoomd.md): writer argument order, Trigger.compute, the
-Logger, FIRE's default step; the old spellings keep working."""
+Logger, FIRE's default step; the old spellings keep working. HOOMD habits (issue 35.4): Table's
+positional logger, ``sim.operations += op``, ``tps``, ``walltime``, ``write_at_start``,
+``Logger(categories=)``."""
+import io
 import warnings
 
 import gsd.hoomd
@@ -9,6 +12,9 @@ import pytest
 import spherevm as svm
 from conftest import fire_simulation
 from spherevm.logging import Logger
+from spherevm.plugins.forces import VertexModel
+from spherevm.plugins.integrators import FIRE, Brownian
+from spherevm.plugins.updaters import T1
 from spherevm.plugins.writers import GSD, Table
 from spherevm.trigger import And, Or, Periodic, Trigger
 
@@ -188,3 +194,104 @@ def test_fire_default_dt_is_the_documented_one():
     fire = svm.plugins.integrators.FIRE()
     assert fire.dt == 0.02 and fire.dt_max == pytest.approx(0.2, rel=1e-15)
     assert build_parser().parse_args(["minimize"]).dt == fire.dt
+
+
+# ---------------------------------------------------------------------- HOOMD habits (issue 35.4)
+def test_table_takes_hoomds_positional_logger_and_output(tmp_path, capsys):
+    sim = _sim()
+    logger = Logger(["mean_shape_index"], categories=["scalar", "string"])   # HOOMD's usual Table logger
+    buffer = io.StringIO()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        to_stdout = Table(Periodic(5), logger)                               # hoomd.write.Table(trigger, logger)
+        to_buffer = Table(Periodic(5), logger, buffer)                       # ... output=buffer
+        by_keyword = Table(trigger=Periodic(5), logger=logger, output=tmp_path / "t.csv")
+    for writer in (to_stdout, to_buffer, by_keyword):
+        assert writer.logger is logger and writer.trigger(5) and not writer.trigger(4)
+        sim.operations.writers.append(writer)
+    sim.run(5)
+    for writer in (to_stdout, to_buffer, by_keyword):
+        writer.close()
+    text = buffer.getvalue()
+    assert not buffer.closed and text.splitlines()[0] == "timestep,replica,mean_shape_index"
+    assert [r.split(",")[:2] for r in text.splitlines()[1:]] == [["0", "0"], ["0", "1"], ["5", "0"], ["5", "1"]]
+    assert capsys.readouterr().out == text == (tmp_path / "t.csv").read_text()
+
+
+def test_table_argument_mistakes_fail_at_construction():
+    with pytest.raises(TypeError, match=r"path must be a file path, an open text file or None \(standard output\), "
+                                        r"got float; HOOMD's order is Table\(trigger, logger, output\)"):
+        Table(5, 3.0)
+    with pytest.raises(TypeError, match="got Logger; HOOMD's order"):
+        Table(5, path=Logger())
+    with pytest.raises(TypeError, match="logger both by position and by keyword"):
+        Table(5, Logger(), logger=Logger())
+    with pytest.raises(TypeError, match="path and output"):
+        Table(5, path="a.csv", output="b.csv")
+
+
+def test_logger_categories_must_include_scalar():
+    assert Logger("energy", categories="scalar").names == ("energy",)
+    with pytest.raises(ValueError, match=r"categories=\['particle'\]\): spherevm logs scalars only .* "
+                                         r"GSD\(cell_quantities=...\)"):
+        Logger(categories=["particle"])
+
+
+def test_operations_add_and_remove_dispatch_by_kind():
+    sim = svm.Simulation(device="cpu", seed=1)
+    sim.state = svm.init.random_tiling(16, replicas=2, seed=1)
+    force, t1, fire, brownian = VertexModel.dimensionless(kr=1.0, p0=3.8), T1(), FIRE(), Brownian(dt=0.01, T=0.0)
+    writer = Table(5, io.StringIO())
+    for op in (force, t1, fire, writer):
+        sim.operations += op
+    assert list(sim.operations.forces) == [force] and list(sim.operations.updaters) == [t1]
+    assert sim.operations.integrator is fire and list(sim.operations.writers) == [writer]
+    assert all(op._simulation is sim for op in (force, t1, fire, writer)) and t1 in sim.operations
+    sim.operations.add(brownian)                      # an integrator replaces the one there
+    assert sim.operations.integrator is brownian and fire._simulation is None and fire not in sim.operations
+    sim.operations -= t1
+    sim.operations.remove(brownian)
+    assert len(sim.operations.updaters) == 0 and t1._simulation is None and sim.operations.integrator is None
+    with pytest.raises(ValueError, match="this T1 is not in sim.operations"):
+        sim.operations.remove(t1)
+    with pytest.raises(ValueError, match="this FIRE is not in sim.operations"):
+        sim.operations -= fire
+    with pytest.raises(TypeError, match=r"sim.operations.add: expected a spherevm.plugins Force, Integrator, "
+                                        r"Updater or Writer, got list"):
+        sim.operations += [t1]
+
+
+def test_tps_and_walltime_time_the_last_run():
+    sim = _sim()
+    assert sim.tps == 0.0 and sim.walltime == 0.0                    # before any run
+    seen = []
+
+    class Clock(svm.plugins.Writer):
+        def write(self, simulation, timestep):
+            seen.append((timestep, simulation.walltime, simulation.tps))
+
+    sim.operations.writers.append(Clock(10))
+    sim.run(30)
+    first = sim.walltime
+    assert first > 0 and sim.tps == 30 / first                       # fixed once the run has ended
+    assert sim.walltime == first
+    walls = [w for _, w, _ in seen]
+    assert [t for t, _, _ in seen] == [0, 10, 20, 30] and walls == sorted(walls) and seen[0][2] == 0.0
+    assert all(tps > 0 for _, _, tps in seen[1:])
+    assert sim.log("walltime") == first and sim.log("tps") == sim.tps   # loggables, as in HOOMD
+    sim.run(0)                                                      # every call starts the clock again
+    assert sim.tps == 0.0 and sim.walltime < first
+    sim.minimize(max_steps=20)
+    assert sim.walltime > 0 and sim.tps > 0
+
+
+@pytest.mark.parametrize("write_at_start,steps", [(True, [0, 5, 10, 15, 20]), (False, [5, 10, 15, 20])])
+def test_write_at_start(write_at_start, steps, tmp_path):
+    """True (the default) writes the timestep a run starts on, once; False is HOOMD's default."""
+    sim = _sim(replicas=1)
+    writer = GSD(5, tmp_path / "w.gsd", final=False)
+    sim.operations.writers.append(writer)
+    sim.run(10, write_at_start=write_at_start)
+    sim.run(10, write_at_start=True)                  # step 10 is written already: not twice
+    writer.close()
+    assert _steps(tmp_path / "w.gsd") == steps

@@ -21,7 +21,7 @@ LAYERS = [
     ["shapes", "gsdio", "init", "init_plane"],
     ["plugins", "testing"],
     ["operations", "plan", "minimization", "tissue_steps", "graphs"],
-    ["simulation"],
+    ["runs", "simulation"],
     ["analysis", "protocols", "sweeps", "export", "render", "ovito"],
     ["cli", "__main__"],
 ]

@@ -162,3 +162,56 @@ def test_example_script_has_the_same_plugin(LineTension):
     a, b = module.LineTension(TENSION).compute(state), LineTension(TENSION).compute(state)
     for name in ("forces", "energy", "cell_energy"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+# ------------------------------------------------------------------ a misspelt keyword (issue 35.9)
+def _first_parameter(cls):
+    import inspect
+    return next(p.name for p in inspect.signature(cls).parameters.values()
+                if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD))
+
+
+@pytest.mark.parametrize("name", sorted(n for n, _, _ in plugins.describe()) + ["line_tension"])
+def test_a_misspelt_keyword_names_the_nearest_parameter(name, line_tension_path):
+    """Every registered plugin, the built-ins and a user's (line_tension): ``dtt=`` for ``dt=``."""
+    cls = plugins.load(name)
+    right = _first_parameter(cls)
+    with pytest.raises(TypeError, match=rf"^{cls.__name__}\(\) got an unexpected keyword argument "
+                                        rf"'{right + right[-1]}' \(did you mean '{right}'\?\); its parameters: "
+                                        rf"{right}, "):
+        cls(**{right + right[-1]: 1.0})
+
+
+class _Tuned(svm.plugins.integrators.FIRE):
+    """A user's subclass that keeps FIRE's constructor."""
+
+
+class _Wrapping(svm.plugins.integrators.FIRE):
+    """A user's integrator whose constructor passes a wrong keyword to its parent's."""
+
+    def __init__(self, strength=1.0):
+        super().__init__(dtt=0.1)
+
+
+class _Open(svm.plugins.Updater):
+    """A user's updater that takes any keyword: Python's own message stands."""
+
+    def __init__(self, **options):
+        super().__init__()
+        self.options = dict(options)
+
+
+def test_keyword_hints_name_the_class_at_fault():
+    with pytest.raises(TypeError, match=r"^_Tuned\(\) got an unexpected keyword argument 'force_tolerance' "
+                                        r"\(did you mean 'force_tol'\?\)"):
+        _Tuned(force_tolerance=1e-8)
+    with pytest.raises(TypeError, match=r"^FIRE\(\) got an unexpected keyword argument 'dtt' \(did you mean 'dt'\?\)"):
+        _Wrapping(strength=2.0)              # the user's call was right: the parent's is named
+    with pytest.raises(TypeError, match=r"^_Wrapping\(\) got an unexpected keyword argument 'strenght' "
+                                        r"\(did you mean 'strength'\?\); its parameters: strength$"):
+        _Wrapping(strenght=2.0)
+    with pytest.raises(TypeError, match=r"^_Tuned\(\) got an unexpected keyword argument 'zzz'; its parameters"):
+        _Tuned(zzz=1)                        # nothing near: no guess
+    assert _Open(anything=1).options == {"anything": 1}
+    with pytest.raises(TypeError, match=r"missing 1 required positional argument"):
+        svm.plugins.forces.Bending.__init__()   # other TypeErrors pass through unchanged

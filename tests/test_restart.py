@@ -3,6 +3,7 @@ bitwise the uninterrupted run, also in a fresh process; every run and minimize e
 import os
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from spherevm.plugins.forces import VertexModel
 from spherevm.plugins.integrators import FIRE, Active, Brownian
 from spherevm.plugins.updaters import T1
 from spherevm.plugins.writers import GSD
+from spherevm.runs import CheckpointMismatchWarning
 
 from conftest import to_numpy
 
@@ -72,21 +74,57 @@ def test_run_restart_is_bitwise(kind, device, tiling, tmp_path):
             assert x.tobytes() == y.tobytes(), name
 
 
+def checkpoint_after(kind, tiling, steps, path):
+    """``path``, a checkpoint of ``make(kind, "cpu")`` on ``tiling`` after ``steps`` steps."""
+    sim = make(kind, "cpu")
+    sim.state = tiling
+    sim.run(steps)
+    svm.write_gsd(sim, path)
+    return path
+
+
+def bare_restart(path):
+    """A CPU Simulation without operations, restored from ``path``."""
+    sim = svm.Simulation(device="cpu", seed=4)
+    sim.create_state_from_gsd(path)
+    return sim
+
+
 def test_operations_attached_after_the_state_pick_up_their_state(tiling, tmp_path):
     whole = make("active", "cpu")
     whole.state = tiling
     whole.run(60)
-    first = make("active", "cpu")
-    first.state = tiling
-    first.run(30)
-    svm.write_gsd(first, tmp_path / "ck.gsd")
-    second = svm.Simulation(device="cpu", seed=4)
-    second.create_state_from_gsd(tmp_path / "ck.gsd")
+    second = bare_restart(checkpoint_after("active", tiling, 30, tmp_path / "ck.gsd"))
     second.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.85))
     second.operations.updaters.append(T1())
     second.operations.integrator = INTEGRATORS["active"]()
     second.run(30)
     assert final(second) == final(whole)
+
+
+def test_a_checkpoint_restored_into_other_operations_says_so_once(tiling, tmp_path):
+    """Written with T1 + Brownian + VertexModel, restored with FIRE alone: the first run warns, once,
+    naming the saved state no operation took (T1's; Brownian and a scalar VertexModel save none) and
+    the operation that started fresh (FIRE); the unclaimed state stays in later checkpoints."""
+    second = bare_restart(checkpoint_after("brownian", tiling, 20, tmp_path / "ck.gsd"))
+    second.operations.integrator = FIRE()
+    with pytest.warns(CheckpointMismatchWarning) as caught:
+        second.run(3)
+    assert len(caught) == 1 and caught[0].filename == __file__
+    assert str(caught[0].message).startswith(
+        f"{tmp_path / 'ck.gsd'}: saved state of updaters.0.T1 found no operation (kept for the next checkpoint); "
+        "integrator.FIRE found no saved state and started fresh. An operation takes its saved state by its key")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        second.run(3)                                          # said once
+        assert "op/updaters.0.T1/total_flips" in second.checkpoint()
+        matching = make("brownian", "cpu")                     # the same operations: nothing to say
+        matching.create_state_from_gsd(tmp_path / "ck.gsd")
+        matching.run(3)
+        replaced = make("fire", "cpu")                         # a State set after the restore drops the file's
+        replaced.create_state_from_gsd(tmp_path / "ck.gsd")
+        replaced.state = tiling
+        replaced.minimize(max_steps=3)
 
 
 def test_restart_in_a_new_process(tiling, tmp_path):

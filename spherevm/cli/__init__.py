@@ -45,7 +45,11 @@ def build_parser():
     from .arguments import USAGE_ERROR, CLIError
 
     class _Parser(argparse.ArgumentParser):
-        """argparse, but a usage error becomes a CLIError (one line, no usage dump, no SystemExit)."""
+        """argparse, but a usage error becomes a CLIError (one line, no usage dump, no SystemExit), and
+        no option is taken from a prefix of its name (``--cell`` is not ``--cells``)."""
+
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **{**kwargs, "allow_abbrev": False})
 
         def error(self, message):
             if message.startswith(f"argument {COMMANDS_METAVAR}: invalid choice:"):
@@ -73,9 +77,9 @@ def main(argv=None) -> int:
     after Ctrl-C, at any point, with one line on standard error)."""
     try:
         return _main(argv)
-    except KeyboardInterrupt:
-        try:
-            sys.stderr.write(f"\n{PROG}: interrupted\n")
+    except KeyboardInterrupt as stop:
+        try:   # a command that was writing a GSD file adds how to continue from it (resume_hint)
+            sys.stderr.write(f"\n{PROG}: interrupted{getattr(stop, 'resume_hint', '')}\n")
             sys.stderr.flush()
         except (OSError, ValueError, KeyboardInterrupt):
             pass

@@ -159,3 +159,24 @@ def build_forces(specs) -> list:
     """Force instances for ``(name, params)`` pairs (after :func:`extra_forces` checked them)."""
     from .. import plugins
     return [plugins.build_force(name, params) for name, params in specs]
+
+
+def gsd_frames(path):
+    """``(frames, step of the last frame)`` of the GSD file ``path``, or ``(None, None)`` if it
+    cannot be read (absent, or not a GSD file)."""
+    try:
+        import gsd.hoomd
+        with gsd.hoomd.open(path, "r") as traj:
+            return len(traj), (int(traj[-1].configuration.step) if len(traj) else None)
+    except Exception:
+        return None, None
+
+
+def resume_hint(command, path) -> str:
+    """The tail of the Ctrl-C line of ``spherevm <command>`` that was writing the GSD file ``path``:
+    what it holds and the ``--restart`` that continues from its last frame ("" if it holds none)."""
+    frames, step = gsd_frames(path) if path is not None else (None, None)
+    if not frames:
+        return ""
+    return (f"; {path} holds {frames} frame{'s' * (frames != 1)}, the last at step {step}: continue from it with "
+            f"'spherevm {command} --restart {path}' and the other options as before")

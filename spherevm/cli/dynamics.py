@@ -9,7 +9,7 @@ import numpy as np
 
 from ..progress import StageBars
 from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_surface, build_forces,
-                        check_in_path, check_out_path, extra_forces, integer, one_line, real)
+                        check_in_path, check_out_path, extra_forces, integer, one_line, real, resume_hint)
 
 
 def add_parser(subparsers):
@@ -71,6 +71,9 @@ def run(args) -> int:
                                   relax_steps=args.relax, surface=args.surface, restart=args.restart,
                                   equilibrate_steps=args.equilibrate, b=args.b, out=args.out,
                                   extra_forces=build_forces(specs), progress=bars)
+    except KeyboardInterrupt as stop:   # the production frames written so far are readable
+        stop.resume_hint = resume_hint("dynamics", args.out)
+        raise
     except (ValueError, TypeError) as exc:
         raise CLIError(one_line(exc), USAGE_ERROR) from exc
     except Exception as exc:

@@ -6,7 +6,8 @@ import time
 
 from ..progress import MinimizeBar
 from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_surface, build_forces,
-                        check_in_path, check_out_path, extra_forces, integer, one_line, real)
+                        check_in_path, check_out_path, extra_forces, gsd_frames, integer, one_line, real,
+                        resume_hint)
 
 
 def add_parser(subparsers):
@@ -74,15 +75,6 @@ def _format_table(result) -> str:
     return "\n".join([fmt(cols)] + [fmt(row) for row in rows])
 
 
-def _count_frames(path):
-    try:
-        import gsd.hoomd
-        with gsd.hoomd.open(path, "r") as traj:
-            return len(traj)
-    except Exception:
-        return None
-
-
 def run(args) -> int:
     """The handler of ``spherevm minimize``."""
     import spherevm as svm
@@ -139,6 +131,11 @@ def run(args) -> int:
             progress.close()
         if writer is not None:   # the writer wrote the last frame itself (GSD(final=True))
             writer.close()
+    except KeyboardInterrupt as stop:   # every frame written so far is readable: say how to go on
+        if writer is not None:
+            writer.close()
+        stop.resume_hint = resume_hint("minimize", args.out)
+        raise
     except Exception as exc:
         raise CLIError(f"minimization failed at step {sim.timestep}: {one_line(exc)}", RUNTIME_ERROR) from exc
     finally:  # also on Ctrl-C: every frame written so far stays readable
@@ -156,7 +153,7 @@ def run(args) -> int:
         msg = (f"spherevm: {n_conv}/{len(result.converged)} replica(s) converged in {sim.timestep} steps, "
                f"{elapsed:.2f} s on {device.name}")
         if writer is not None:
-            frames = _count_frames(args.out)
+            frames = gsd_frames(args.out)[0]
             msg += f"; wrote {args.out}" + ("" if frames is None else f" ({frames} frame{'s' * (frames != 1)})")
         err.write(msg + "\n")
     return 0

@@ -222,7 +222,8 @@ class Sphere(Constraint):
         With ``d_area = dE/dA``, ``d_perimeter = dE/dP`` and ``d_area_vector = dE/da`` (``(n_cells,
         3)``) this is the gradient of any energy of the cell areas, perimeters and area vectors
         (chain rule); the vertex model's forces are minus it (``d_area_vector`` None), the bending
-        force's too (``d_area`` and ``d_perimeter`` None; ``geometry`` with ``area_vectors``).
+        force's too (``d_area`` and ``d_perimeter`` None; ``geometry`` with ``area_vectors``). A
+        coefficient that is None leaves its term out (as zeros would).
 
         Per vertex v with edges to n_k: ``sum_k (dA[k-1] - dA[k]) w(v, n_k) + (dP[k] + dP[k-1])
         dtheta(v, n_k)/dv`` on the unit sphere (see :meth:`_edge_factors`), with ``dA`` scaled by
@@ -234,8 +235,14 @@ class Sphere(Constraint):
         xp = state.device.xp
         g = geometry.corners
         R = state.radius[state.cell_replica]
-        weights = None if d_area is None else xp.stack((d_area * (R * R), d_perimeter * R))
+        weights = None
+        if d_area is not None or d_perimeter is not None:   # a missing one of the two: zero coefficients
+            zero = xp.zeros(state.n_cells)
+            weights = xp.stack(((zero if d_area is None else d_area) * (R * R),
+                                (zero if d_perimeter is None else d_perimeter) * R))
         vectors = None if d_area_vector is None else 0.5 * d_area_vector.T
+        if weights is None and vectors is None:
+            return xp.zeros((state.n_vertices, 3))
         out = xp.empty((state.n_vertices, 3))
 
         def block(pair):

@@ -14,6 +14,7 @@ from __future__ import annotations
 from importlib.metadata import entry_points
 
 from . import forces, integrators, updaters, writers
+from ..validation import did_you_mean
 from .base import Force, ForceResult, Integrator, Operation, Updater, Writer
 from .parameters import Parameter
 
@@ -102,7 +103,8 @@ def build_force(name: str, params=None):
     except (TypeError, ValueError):
         unknown = []
     if unknown:
-        raise ValueError(f"force {name!r} has no parameter {unknown[0]!r}; its parameters: {parameters_of(cls)}")
+        raise ValueError(f"force {name!r} has no parameter {unknown[0]!r}{did_you_mean(unknown[0], sig.parameters)}; "
+                         f"its parameters: {parameters_of(cls)}")
     try:
         return cls(**params)
     except (ValueError, TypeError) as exc:

@@ -6,12 +6,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..trigger import Always, as_trigger
-from ..validation import integer, non_negative
+from ..validation import KeywordHints, integer, non_negative
 from .parameters import Parameter, parameter_names
 from .rows import _host, _index_like, _restored, follow_rows
 
 
-class Operation:
+class Operation(KeywordHints):
     """Something the Simulation runs: it has a trigger and may publish loggable quantities.
 
     ``loggables`` maps a name to a callable ``f(simulation)`` returning a scalar or a per-replica

@@ -30,7 +30,9 @@ def folder_surface(out) -> str:
 def write_tables(out, records: dict, zero_tol=None, plots=True, sigma=None, surface=None) -> dict:
     """Write ``replicas.csv``, ``fraction.csv`` (F(p0,N)), ``p0star.csv`` (p0*(N) beside the pentagon
     bound), ``p0star_density.csv`` and, with matplotlib, ``fraction.png``, ``p0star_distribution.png``
-    (Fig. 2 style, F in the inset), ``p0star_vs_N.png`` and ``critical_perimeter.png`` (Fig. 4).
+    (Fig. 2 style, F in the inset) and ``p0star_vs_N.png``. (Fig. 4's ``P0* = sqrt(<A>) p0*(N)``
+    curves hold nothing p0star_vs_N.png does not: :func:`spherevm.analysis.rigidity.plot_critical_perimeter`
+    and ``examples/fig4_critical_perimeter.py`` draw them.)
 
     ``surface`` (None: the folder manifest's, else "sphere") picks the pentagon bound: spherical per
     N, or the flat one on the plane (and no pentagon markers on the planar distributions).
@@ -65,8 +67,7 @@ def write_tables(out, records: dict, zero_tol=None, plots=True, sigma=None, surf
             for name, fig in (("fraction.png", lambda: rigidity.plot_fraction(frac)),
                               ("p0star_distribution.png", lambda: rigidity.plot_transition(frac, p0star, density,
                                                                                       pentagons=surface != "plane")),
-                              ("p0star_vs_N.png", lambda: rigidity.plot_p0_star(p0star, surface=surface)),
-                              ("critical_perimeter.png", lambda: rigidity.plot_critical_perimeter(p0star))):
+                              ("p0star_vs_N.png", lambda: rigidity.plot_p0_star(p0star, surface=surface))):
                 f = fig()
                 f.tight_layout()
                 f.savefig(os.path.join(path, name), dpi=150)

@@ -26,7 +26,8 @@ import logging
 
 from . import tissue_steps
 from .plan import DeviceClock, Plan
-from .plugins.base import Minimizer, Operation
+from .plugins.base import Operation
+from .plugins.minimizer import Minimizer
 from .trigger import Always, Periodic
 
 log = logging.getLogger("spherevm")

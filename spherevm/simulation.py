@@ -11,7 +11,8 @@ from .graphs import StepGraphs
 from .operations import Operations
 from .minimization import Minimization, MinimizeResult
 from .plan import Plan
-from .plugins.base import Minimizer, compute_all
+from .plugins.base import compute_all
+from .plugins.minimizer import Minimizer
 from .runs import Restored, RunRecords, stepping
 from .validation import GPU_RUN_BYTES_PER_CELL, check_memory, integer
 
@@ -380,15 +381,8 @@ class Simulation(RunRecords):
             self.flush()
 
     def explain(self, minimize: bool = False, steps: int = 1000) -> str:
-        """Which executor would run each operation in a ``run(steps)`` (or ``minimize(max_steps=
-        steps)``) now, and why: step by step, CUDA graphs or the fused small-tissue steps.
-
-        Parameters
-        ----------
-        minimize : bool
-            Explain a minimisation instead of a run.
-        steps : int
-            The length of the run (CUDA graphs serve runs of at least ``graphs.MIN_STEPS``).
+        """Which executor (step by step, CUDA graphs, fused) would run each operation of a
+        ``run(steps)`` (``minimize``: of a ``minimize(max_steps=steps)``) now, and why.
 
         Returns
         -------
@@ -446,7 +440,7 @@ class Simulation(RunRecords):
         Parameters
         ----------
         force_tol, energy_tol, check_every : optional
-            Set the minimiser's own (:class:`spherevm.plugins.base.Minimizer`); None keeps them.
+            Set the minimiser's own (:class:`spherevm.plugins.minimizer.Minimizer`); None keeps them.
         max_steps : int
             Iteration limit; replicas still running then stop with reason ``"max_steps"``.
         progress : callable, optional

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import spherevm as svm
-from spherevm.plugins.base import Minimizer
+from spherevm.plugins.minimizer import Minimizer
 from spherevm.plugins.forces import Bending, VertexModel
 from spherevm.plugins.integrators import FIRE
 from spherevm.plugins.updaters import T1

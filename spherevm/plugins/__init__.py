@@ -16,6 +16,8 @@ from importlib.metadata import entry_points
 from . import forces, integrators, updaters, writers
 from ..validation import did_you_mean
 from .base import Force, ForceResult, Integrator, Operation, Updater, Writer
+from .fusion import FusedStage
+from .minimizer import Minimizer
 from .parameters import Parameter
 
 ENTRY_POINT_GROUP = "spherevm.plugins"
@@ -116,5 +118,6 @@ def available() -> dict:
     return {name: kind for name, kind, _ in describe()}
 
 
-__all__ = ["ENTRY_POINT_GROUP", "Force", "ForceResult", "Integrator", "Operation", "Parameter", "Updater", "Writer",
+__all__ = ["ENTRY_POINT_GROUP", "Force", "ForceResult", "FusedStage", "Integrator", "Minimizer", "Operation", "Parameter",
+           "Updater", "Writer",
            "available", "build_force", "describe", "forces", "integrators", "kind_of", "load", "parameters_of", "updaters", "writers"]

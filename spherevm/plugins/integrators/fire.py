@@ -9,7 +9,8 @@ from ...device import launch, segment_sums, weighted_bincount
 from ...validation import integer, positive
 from ...constraints.kernels import KERNEL_SURFACES, surface_kernels
 from ...kernel_struct import KernelStruct
-from ..base import Minimizer, raise_flagged_step
+from ..base import raise_flagged_step
+from ..minimizer import Minimizer
 from ..fusion import FusedStage, overrides
 from ..parameters import Parameter
 
@@ -38,7 +39,7 @@ class FIRE(Minimizer):
     dt_max, n_min, f_inc, f_dec, alpha_start, f_alpha : optional
         Bitzek's defaults: ``dt_max = 10 dt``, 5, 1.1, 0.5, 0.1, 0.99.
     force_tol, energy_tol, check_every : optional
-        Convergence per replica (:class:`spherevm.plugins.base.Minimizer`), in each replica's
+        Convergence per replica (:class:`spherevm.plugins.minimizer.Minimizer`), in each replica's
         natural units (force ``kP sqrt(<A>)``, energy per cell ``kP <A>`` for the vertex model).
     max_step : float
         Units of sqrt(<A>) (default 1, a cell size: FIRE with ``dt_max = 10 dt`` takes legitimate

@@ -5,7 +5,8 @@ import numpy as np
 
 from ... import folding, topology
 from ...constraints.kernels import KERNEL_SURFACES
-from ..base import Minimizer, Updater
+from ..base import Updater
+from ..minimizer import Minimizer
 from ..parameters import Parameter
 from ...validation import integer, positive
 from .t1_device import DevicePass

@@ -1,6 +1,7 @@
 """Simulation: owns the State and the operations, runs steps and minimisations."""
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -127,6 +128,7 @@ class Simulation:
         updated = int(sim["updated_at"][0]) if "updated_at" in sim else -1
         held = bool(sim["held_back"][0]) if "held_back" in sim else False
         self.timestep = step
+        self._restored_from = (os.path.realpath(path), step)   # a GSD writer into this file appends
         self._set_state(state, pending=saved.get("op", {}), updated_at=None if updated < 0 else updated,
                         held_back=held)
 

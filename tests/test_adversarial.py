@@ -80,13 +80,15 @@ def test_flipped_bytes_are_refused_or_harmless(good_file, tmp_path):
 
 
 def _forge(tmp_path, good, edit):
+    """A copy of ``good`` with ``edit`` applied to its last frame's chunks; without spherevm/checksum
+    (as a file written before checksums, or by a forger), so that the State checks are what reads it."""
     import gsd.fl
     out = tmp_path / "forged.gsd"
     with gsd.fl.open(name=str(good), mode="r") as src:
         names = src.find_matching_chunk_names("")
         n = src.nframes
         chunks = [{name: src.read_chunk(frame=i, name=name) for name in names
-                   if src.chunk_exists(frame=i, name=name)} for i in range(n)]
+                   if src.chunk_exists(frame=i, name=name) and name != svm.gsdio.CHECKSUM} for i in range(n)]
         app, schema, version = src.application, src.schema, src.schema_version
     with gsd.fl.open(name=str(out), mode="w", application=app, schema=schema, schema_version=version) as dst:
         for i, frame in enumerate(chunks):

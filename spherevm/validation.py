@@ -84,7 +84,7 @@ def stored(where: str, value, dtype, shape=None, low=None, high=None, above=None
         checks.append((arr <= above, f"values > {above}"))
     for bad, what in checks:
         if bad is not None and bad.any():
-            at = np.unravel_index(int(np.flatnonzero(bad)[0]), arr.shape)
+            at = tuple(int(i) for i in np.unravel_index(int(np.flatnonzero(bad)[0]), arr.shape))
             raise ValueError(f"{where}: expected {what}, got {arr[at].item()!r} at index {at[0] if arr.ndim == 1 else at}")
     return arr
 

@@ -431,6 +431,23 @@ def test_corrupt_chunks_are_refused_naming_file_frame_chunk_and_expectation(chec
     assert message in text and f"{str(bad)!r}, frame 3" in text and "\n" not in text, text
 
 
+@pytest.mark.parametrize("make, data, message", [
+    (lambda n: VertexModel(kA=np.ones(n), kP=1.0, A0=1.0, P0=3.8), lambda n: {"kA": -np.ones(n)},
+     "VertexModel: saved field 'kA': expected values >= 0, got -1.0"),
+    (lambda n: VertexModel(kA=np.ones(n), kP=1.0, A0=1.0, P0=3.8), lambda n: {"kA": np.ones(n, np.float32)},
+     "VertexModel: saved field 'kA': expected float64, got float32"),
+    (lambda n: svm.plugins.updaters.RadiusSchedule("constant_area"),
+     lambda n: {"area": np.zeros(2), "counts": np.full(2, -1)}, "RadiusSchedule: saved field 'area': expected values > 0"),
+])
+def test_other_operations_check_what_they_restore(make, data, message):
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_tiling(16, replicas=2, seed=1)
+    op = make(sim.state.n_cells)
+    (sim.operations.forces if isinstance(op, VertexModel) else sim.operations.updaters).append(op)
+    with pytest.raises(ValueError, match=re.escape(message)):
+        op.restore_state(data(sim.state.n_cells))
+
+
 def test_planar_box_of_absurd_size_is_refused(tmp_path):
     sim = svm.Simulation(device="cpu")
     sim.state = svm.init.random_planar_tiling(16, seed=1)

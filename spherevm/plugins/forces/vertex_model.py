@@ -8,6 +8,7 @@ import numpy as np
 from ...device import launch, segment_sums, weighted_bincount
 from ...constraints.kernels import KERNEL_SURFACES, surface_kernels
 from ..base import Force, ForceResult
+from ..rows import saved_field, saved_where
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
@@ -121,17 +122,16 @@ class VertexModel(Force):
     def restore_state(self, data: dict):
         """Per-cell parameters come back from the checkpoint, replacing what the model was built with
         (whose length fits the tissue before it grew); a parameter the script gives as a scalar stays
-        the script's."""
+        the script's. Each is checked: float64, finite, >= 0, one per cell."""
         n = self._simulation.state.n_cells
         arrays = self._arrays()
         for name, saved in data.items():
             if name not in arrays or arrays[name].ndim == 0:
                 continue
-            saved = np.asarray(saved, dtype=np.float64)
-            if saved.shape != (n,):
-                raise ValueError(f"VertexModel: saved per-cell {name!r} has shape {saved.shape}, but the State has "
-                                 f"{n} cells; the checkpoint belongs to another State")
-            arrays[name] = saved.copy()
+            if np.shape(saved) != (n,):
+                raise ValueError(f"{saved_where(self, data, name)}: per-cell {name!r} has shape {np.shape(saved)}, but "
+                                 f"the State has {n} cells; the checkpoint belongs to another State")
+            arrays[name] = saved_field(self, data, name, np.float64, (n,), low=0).copy()
         self.kA, self.kP, self.A0, self.P0 = (arrays[k] for k in ("kA", "kP", "A0", "P0"))
         if self._dimensionless is not None:
             self._dimensionless = tuple(arrays[k] for k in ("kr", "p0", "a0"))

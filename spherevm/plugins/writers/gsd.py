@@ -32,7 +32,7 @@ def _per_replica(name, value, n_replicas):
 class GSD(Writer):
     """Write frames to a GSD file (HOOMD schema) that OVITO opens and :func:`spherevm.init.from_gsd` restores.
 
-    ``GSD(trigger, filename, mode="wb", logger=None, ...)``: HOOMD-blue's argument order
+    ``GSD(trigger, filename, mode=None, logger=None, ...)``: HOOMD-blue's argument order
     (``hoomd.write.GSD(trigger, filename)``); keywords work too, and the older order, the path
     first (``GSD("run.gsd", trigger=100)``), still works with a DeprecationWarning.
 

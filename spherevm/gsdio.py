@@ -26,13 +26,17 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
+import zlib
 
 import numpy as np
 
+from . import gsdrecover
 from .constraints import Constraint
 from .device import CPU, resolve
 from .state import State
 from .topology import edges as _edges
+from .validation import stored, stored_size
 
 FORMAT_VERSION = 1
 BOX_FACTOR = 2.2
@@ -44,10 +48,31 @@ ALWAYS = ("format_version", "constraint", "position", "vertex_start", "cell_star
 # "box" (n_replicas, 2) on a periodic plane; the constraint (read first) says which
 TOPOLOGY = ("cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cells")
 CELL_QUANTITIES = ("area", "perimeter", "shape_index", "energy")
+CHECKSUM = PREFIX + "checksum"   # CRC32 of the step and of each spherevm chunk of the frame
+
+
+def _crc(array) -> int:
+    return zlib.crc32(np.ascontiguousarray(array))
 
 
 class FrameIndexError(IndexError, ValueError):
     """A frame index outside the file (both an IndexError and a ValueError)."""
+
+
+class DamagedFileWarning(UserWarning):
+    """A GSD file damaged or cut short: only the complete frames before the damage are read."""
+
+
+class Saved(dict):
+    """One operation's saved fields ``{field: array}`` as read from a checkpoint frame;
+    :meth:`where` names a field's chunk, file and frame for the operation's error messages."""
+
+    def __init__(self, fields, prefix):
+        super().__init__(fields)
+        self.prefix = prefix
+
+    def where(self, field) -> str:
+        return f"{self.prefix}{field}'"
 
 
 # ---------------------------------------------------------------------------------------- constraint
@@ -205,8 +230,11 @@ class FrameWriter:
                 raise TypeError(f"checkpoint field {name!r} has dtype {arr.dtype}; state_to_save must return "
                                 "numeric or bool arrays (encode text as uint8)")
             chunks[name] = arr.reshape(1) if arr.ndim == 0 else arr
+        chunks = {PREFIX + name: np.ascontiguousarray(arr) for name, arr in chunks.items()}
+        sums = [_crc(np.uint64(timestep))] + [_crc(chunks[name]) for name in sorted(chunks)]
+        chunks[CHECKSUM] = np.array(sums, dtype=np.uint32)
         for name, arr in chunks.items():
-            traj.file.write_chunk(PREFIX + name, np.ascontiguousarray(arr))
+            traj.file.write_chunk(name, arr)
         traj.append(frame)
 
 
@@ -240,7 +268,6 @@ class Reader:
     """
 
     def __init__(self, path):
-        import gsd.fl
         if not isinstance(path, (str, os.PathLike)):
             raise TypeError(f"path must be a file path, got {type(path).__name__}")
         self.path = os.fspath(path)
@@ -249,12 +276,16 @@ class Reader:
                                     f"(working directory: {os.getcwd()!r})")
         if os.path.isdir(self.path):
             raise ValueError(f"{self.path!r} is a directory, not a GSD file")
-        try:
-            self.file = gsd.fl.open(name=self.path, mode="r")
-            self.file.find_matching_chunk_names("")   # decodes every chunk name once: a damaged index fails here
-        except (RuntimeError, OSError, UnicodeDecodeError) as exc:
-            raise ValueError(f"{self.path!r} is not a readable GSD file ({exc}); pass a .gsd trajectory written "
-                             "by spherevm.plugins.writers.GSD") from exc
+        self._sums = {}           # frame: {chunk name: CRC32} from its spherevm/checksum (None without one)
+        self.file, problem = gsdrecover.open_file(self.path)
+        self.recovered = problem is not None   # damaged: only the complete frames before the damage are read
+        if self.file is None:
+            raise ValueError(f"{self.path!r} is not a readable GSD file ({problem}); pass a .gsd trajectory written "
+                             "by spherevm.plugins.writers.GSD")
+        if self.recovered:
+            warnings.warn(f"{self.path!r} is damaged or cut short ({problem}): reading its {len(self)} complete "
+                          f"frame(s) before the damage; 'spherevm repair {self.path}' writes them to a new file",
+                          DamagedFileWarning, stacklevel=2)
 
     def __len__(self):
         return int(self.file.nframes)
@@ -279,23 +310,59 @@ class Reader:
                                   f"frame(s); use 0..{n - 1} or -{n}..-1")
         return idx
 
+    def _read(self, idx, name):
+        """Chunk ``name`` of frame ``idx`` (it exists), checked against the frame's CRC32 when it has
+        them; ValueError naming them if gsd cannot read it or it is not what was written."""
+        try:
+            value = self.file.read_chunk(frame=idx, name=name)
+        except (RuntimeError, OSError, KeyError) as exc:
+            raise ValueError(f"{self.path!r}, frame {idx}: chunk {name!r} cannot be read ({exc}); the file is "
+                             f"damaged: 'spherevm repair {self.path}' keeps the frames before the damage") from exc
+        if name.startswith(PREFIX) and name != CHECKSUM:
+            self._verify(idx, name, value)
+        return value
+
+    def _verify(self, idx, name, value):
+        """Compare ``value`` (chunk ``name`` of frame ``idx``) with the CRC32 the writer stored."""
+        if idx not in self._sums:
+            table = None
+            if self.file.chunk_exists(frame=0, name=CHECKSUM) and not self.file.chunk_exists(frame=idx, name=CHECKSUM):
+                raise ValueError(f"{self._where(idx, CHECKSUM)}: missing, although frame 0 has one: the file is damaged")
+            if self.file.chunk_exists(frame=idx, name=CHECKSUM):
+                names = sorted(n for n in self.file.find_matching_chunk_names(PREFIX)
+                               if n != CHECKSUM and self.file.chunk_exists(frame=idx, name=n))
+                sums = stored(self._where(idx, CHECKSUM), self._read(idx, CHECKSUM), np.uint32, (len(names) + 1,))
+                table = dict(zip(["configuration/step"] + names, sums.tolist()))
+            self._sums[idx] = table
+        table = self._sums[idx]
+        if table is not None and _crc(value) != table[name]:
+            raise ValueError(f"{self._where(idx, name)}: expected the CRC32 {table[name]:08x} stored in {CHECKSUM!r}, "
+                             f"got {_crc(value):08x}: the chunk was changed after it was written (the file is damaged)")
+
     def _chunk(self, name, idx):
         """Chunk ``name`` of frame ``idx``, by the HOOMD rule (missing: frame 0's); None if neither has it."""
         for i in (idx, 0):
             if self.file.chunk_exists(frame=i, name=name):
-                return self.file.read_chunk(frame=i, name=name)
+                return self._read(i, name)
         return None
+
+    def _where(self, idx, name) -> str:
+        return f"{self.path!r}, frame {idx}, chunk {name!r}"
 
     def step(self, frame) -> int:
         """The timestep (``configuration/step``) of a frame; 0 where no frame stores it (HOOMD's default)."""
-        step = self._chunk("configuration/step", self.index(frame))
-        return 0 if step is None else int(step[0])
+        idx = self.index(frame)
+        step = self._chunk("configuration/step", idx)
+        step = 0 if step is None else int(stored(self._where(idx, "configuration/step"), step, np.uint64, (1,))[0])
+        self._verify(idx, "configuration/step", np.uint64(step))
+        return step
 
     def _require_spherevm(self):
         path = self.path
         if len(self) == 0:
-            raise ValueError(f"{path!r} holds no complete frame (the writer stopped before its first frame "
-                             "ended, or nothing was written); write the run again")
+            why = ("before its damage" if self.recovered else "(the writer stopped before its first frame ended, or "
+                   "nothing was written)")
+            raise ValueError(f"{path!r} holds no complete frame {why}; write the run again")
         if not self.file.find_matching_chunk_names(PREFIX):
             raise ValueError(f"{path!r} is a GSD file (schema {self.file.schema!r}) without spherevm chunks: it "
                              "was not written by spherevm.plugins.writers.GSD (a plain HOOMD trajectory, say), so "
@@ -316,26 +383,30 @@ class Reader:
                                  "frame was not written by spherevm.plugins.writers.GSD or the file is damaged")
             return value
 
-        version = int(chunk("format_version")[0])
+        def check(name, value, dtype, shape, **bounds):
+            return stored(self._where(idx, PREFIX + name), value, dtype, shape, **bounds)
+
+        version = int(check("format_version", chunk("format_version"), np.uint32, (1,), low=1)[0])
         if version > FORMAT_VERSION:
             raise ValueError(f"{path!r} uses spherevm GSD format version {version}, newer than this spherevm "
                              f"reads ({FORMAT_VERSION}); upgrade spherevm")
         data = {name: chunk(name) for name in ALWAYS[1:-1] + TOPOLOGY}
-        constraint = _constraint_from_json(data.pop("constraint"), path)
+        constraint = _constraint_from_json(check("constraint", data.pop("constraint"), np.uint8, (None,)), path)
         size_name = getattr(constraint, "size_name", "radius")
-        size = {size_name: chunk(size_name)}
-        pos = data["position"]
-        nv, nc = len(pos), len(data["cell_sides"])
+        pos = check("position", data["position"], np.float64, (None, 3), finite=False)   # validate names a bad vertex
+        nv, nc = len(pos), len(check("cell_sides", data["cell_sides"], np.int32, (None,)))
         cv = data["cell_vertices"]
         if cv.ndim == 1:  # gsd stores a (C, 1) table as 1-D; never written by spherevm, but be safe
             cv = cv.reshape(nc, -1)
-        shapes_ok = (pos.ndim == 2 and pos.shape[1] == 3 and data["vertex_neighbors"].shape == (nv, 3)
-                     and data["vertex_cells"].shape == (nv, 3) and cv.ndim == 2 and cv.shape[0] == nc)
-        if not shapes_ok:
-            raise ValueError(f"{path!r}, frame {idx}: inconsistent spherevm chunks (positions {pos.shape}, "
-                             f"vertex_neighbors {data['vertex_neighbors'].shape}, vertex_cells "
-                             f"{data['vertex_cells'].shape}, cell_vertices {cv.shape}, cell_sides "
-                             f"{data['cell_sides'].shape}); the file is damaged")
+        check("cell_vertices", cv, np.int32, (nc, None))
+        for name in ("vertex_neighbors", "vertex_cells"):
+            check(name, data[name], np.int32, (nv, 3))
+        starts = [check(name, data[name], np.int64, (None,), low=0, high=n)
+                  for name, n in (("vertex_start", nv), ("cell_start", nc))]
+        n_rep = len(starts[1]) - 1
+        size = {size_name: check(size_name, chunk(size_name), np.float64,
+                                 (n_rep,) if size_name == "radius" else (n_rep, 2), above=0)}
+        stored_size(self._where(idx, PREFIX + size_name), size[size_name], np.diff(starts[1]))
         where = f"{path!r}, frame {idx} (timestep {self.step(idx)})"
         try:
             state = State(positions=pos, cell_vertices=cv, cell_sides=data["cell_sides"],
@@ -353,10 +424,15 @@ class Reader:
             raise ValueError(f"{where}: the stored state is invalid: {exc}{hint}") from exc
         return state if device is CPU else state.to(device)
 
+    # the Simulation's own checkpoint fields: (dtype, shape, lowest, highest)
+    SIMULATION_FIELDS = {"seed": (np.int64, (1,), 0, 2 ** 32 - 1), "updated_at": (np.int64, (1,), -1, None),
+                         "held_back": (np.int64, (1,), 0, 1)}
+
     def checkpoint(self, frame: int = -1) -> dict:
-        """The saved run state of a frame: ``{"simulation": {field: array}, "op": {key: {field: array}}}``,
+        """The saved run state of a frame: ``{"simulation": {field: array}, "op": {key: Saved}}``,
         from the ``spherevm/simulation/*`` and ``spherevm/op/<key>/<field>`` chunks of that frame
-        only (empty dicts where the frame holds none)."""
+        only (empty dicts where the frame holds none). The Simulation's fields are checked here
+        (:attr:`SIMULATION_FIELDS`); an operation's, which must be numeric, by its ``restore_state``."""
         idx = self.index(frame)
         out = {"simulation": {}, "op": {}}
         for kind in ("simulation/", "op/"):
@@ -364,20 +440,31 @@ class Reader:
                 if not self.file.chunk_exists(frame=idx, name=name):
                     continue
                 rest = name[len(PREFIX + kind):]
-                value = self.file.read_chunk(frame=idx, name=name)
+                value = self._read(idx, name)
+                if not isinstance(value, np.ndarray) or value.dtype.kind not in "uif":
+                    raise ValueError(f"{self._where(idx, name)}: expected a numeric array, got "
+                                     f"{getattr(value, 'dtype', type(value).__name__)}")
                 if kind == "simulation/":
+                    if rest in self.SIMULATION_FIELDS:
+                        dtype, shape, low, high = self.SIMULATION_FIELDS[rest]
+                        value = stored(self._where(idx, name), value, dtype, shape, low=low, high=high)
                     out["simulation"][rest] = value
                 else:
                     key, _, field_name = rest.rpartition("/")
-                    out["op"].setdefault(key, {})[field_name] = value
+                    prefix = f"{self.path!r}, frame {idx}, chunk '{PREFIX}{kind}{key}/"
+                    out["op"].setdefault(key, Saved({}, prefix))[field_name] = value
         return out
 
     def cell_values(self, frame: int = -1) -> dict:
         """The exact per-cell arrays (``area``, ``perimeter``, ``shape_index``, ``energy``) of a frame."""
         self._require_spherevm()
         idx = self.index(frame)
-        return {q: self.file.read_chunk(frame=idx, name=f"{PREFIX}cell_{q}") for q in CELL_QUANTITIES
-                if self.file.chunk_exists(frame=idx, name=f"{PREFIX}cell_{q}")}
+        out = {}
+        for q in CELL_QUANTITIES:
+            name = f"{PREFIX}cell_{q}"
+            if self.file.chunk_exists(frame=idx, name=name):   # NaN where undefined (A <= 0)
+                out[q] = stored(self._where(idx, name), self._read(idx, name), np.float64, (None,), finite=False)
+        return out
 
 
 def n_frames(path) -> int:

@@ -1,6 +1,7 @@
 """Simulation: owns the State and the operations, runs steps and minimisations."""
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,6 +51,8 @@ class Simulation(RunRecords):
         self._held_back = False     # ... in a minimisation, which held back those with in_minimize False
         #: inside CUDA graphs: the device's timestep (:class:`spherevm.plan.DeviceClock`), else None
         self.device_clock = None
+        #: ``(real path, step)`` of the GSD frame the State was last restored from, else None
+        self.restored_from = None
         self._zero_step = None
         self.operations = Operations(self)
 
@@ -118,6 +121,7 @@ class Simulation(RunRecords):
         updated = int(sim["updated_at"][0]) if "updated_at" in sim else -1
         held = bool(sim["held_back"][0]) if "held_back" in sim else False
         self.timestep = step
+        self.restored_from = (os.path.realpath(path), step)   # a GSD writer into this file appends
         self._set_state(state, pending=saved.get("op", {}), updated_at=None if updated < 0 else updated,
                         held_back=held)
         self._restored = Restored(path, saved.get("op", {}), self._pending)   # reported at the next run

@@ -53,6 +53,56 @@ def non_negative(name, value, per_item: str = "a scalar or one value per replica
     return arr
 
 
+def stored(where: str, value, dtype, shape=None, low=None, high=None, above=None, finite=True):
+    """A stored array (a file's chunk, a checkpoint field) as a reader expects it, else ValueError
+    ``"<where>: expected <what>, got <what it is>"``.
+
+    Parameters
+    ----------
+    where : what the array is and where it was read from (file, frame, chunk).
+    dtype : the exact dtype. shape : the exact shape; ``None`` entries take any length.
+    low, high : inclusive bounds of every entry; above : an exclusive lower bound.
+    finite : floats must be finite (default); with False, NaN and infinities pass.
+
+    Returns
+    -------
+    The array (NumPy).
+    """
+    arr = np.asarray(value)
+    dtype = np.dtype(dtype)
+    if arr.dtype != dtype:
+        raise ValueError(f"{where}: expected {dtype}, got {arr.dtype}")
+    if shape is not None and (arr.ndim != len(shape) or any(n is not None and n != m for n, m in zip(shape, arr.shape))):
+        want = "(" + ", ".join("any" if n is None else str(n) for n in shape) + ("," if len(shape) == 1 else "") + ")"
+        raise ValueError(f"{where}: expected shape {want}, got {arr.shape}")
+    checks = [(~np.isfinite(arr) if dtype.kind == "f" and finite else None, "finite values")]
+    if low is not None:
+        checks.append((arr < low, f"values >= {low}"))
+    if high is not None:
+        checks.append((arr > high, f"values <= {high}"))
+    if above is not None:
+        checks.append((arr <= above, f"values > {above}"))
+    for bad, what in checks:
+        if bad is not None and bad.any():
+            at = tuple(int(i) for i in np.unravel_index(int(np.flatnonzero(bad)[0]), arr.shape))
+            raise ValueError(f"{where}: expected {what}, got {arr[at].item()!r} at index {at[0] if arr.ndim == 1 else at}")
+    return arr
+
+
+def stored_size(where: str, size, cells):
+    """Refuse a stored radius (per replica, ``size`` 1-D) or box (per replica, two sides) whose
+    ``cells`` (per replica) would be of a size sqrt(<A>) outside [1e-50, 1e50], the range the
+    tilings accept (areas ~R^2 and energies ~R^4 stay in float64); ValueError naming ``where``."""
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        area = 4 * np.pi * size ** 2 if size.ndim == 1 else size[:, 0] * size[:, 1]
+        unit = np.sqrt(area / np.maximum(cells, 1))
+    bad = ~((unit >= 1e-50) & (unit <= 1e50))
+    if bad.any():
+        r = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{where}: expected a size that gives cells of sqrt(<A>) in [1e-50, 1e50], got "
+                         f"{size[r].tolist()} for replica {r} of {int(cells[r])} cells (sqrt(<A>) = {unit[r]:.3g})")
+
+
 class InsufficientMemory(MemoryError, ValueError):
     """A request that would not fit in memory, refused before allocating (a MemoryError and a ValueError)."""
 

@@ -1,5 +1,7 @@
-"""Bad input caught where it happens (issue 13, items 3, 4, 5, 8, 9)."""
+"""Bad input caught where it happens (issue 13, items 3, 4, 5, 8, 9; issue 36, items 5 and 7)."""
 import os
+import re
+import warnings
 
 import numpy as np
 import pytest
@@ -80,13 +82,15 @@ def test_flipped_bytes_are_refused_or_harmless(good_file, tmp_path):
 
 
 def _forge(tmp_path, good, edit):
+    """A copy of ``good`` with ``edit`` applied to its last frame's chunks; without spherevm/checksum
+    (as a file written before checksums, or by a forger), so that the State checks are what reads it."""
     import gsd.fl
     out = tmp_path / "forged.gsd"
     with gsd.fl.open(name=str(good), mode="r") as src:
         names = src.find_matching_chunk_names("")
         n = src.nframes
         chunks = [{name: src.read_chunk(frame=i, name=name) for name in names
-                   if src.chunk_exists(frame=i, name=name)} for i in range(n)]
+                   if src.chunk_exists(frame=i, name=name) and name != svm.gsdio.CHECKSUM} for i in range(n)]
         app, schema, version = src.application, src.schema, src.schema_version
     with gsd.fl.open(name=str(out), mode="w", application=app, schema=schema, schema_version=version) as dst:
         for i, frame in enumerate(chunks):
@@ -335,3 +339,224 @@ def test_single_p0_sweep_says_why_there_is_no_p0_star(tmp_path, capsys):
     header, row = (tmp_path / "one" / "fraction.csv").read_text().splitlines()
     values = dict(zip(header.split(","), row.split(",")))
     assert values["n_cells"] == "16" and float(values["p0"]) == 3.8 and 0 <= float(values["F"]) <= 1
+
+
+# ------------------------------------------------------------------ issue 36, item 5: every chunk read is checked
+def _fire_t1(seed=0):
+    sim = svm.Simulation(device="cpu", seed=seed)
+    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
+    sim.operations.updaters.append(svm.plugins.updaters.T1())
+    sim.operations.integrator = FIRE(dt=0.05)
+    return sim
+
+
+@pytest.fixture(scope="module")
+def checkpoint_file(tmp_path_factory):
+    """A FIRE + T1 minimisation of 2 x 32 cells stopped half way: frames at steps 0, 40, 80, 100."""
+    path = tmp_path_factory.mktemp("ck") / "ck.gsd"
+    sim = _fire_t1()
+    sim.state = svm.init.random_tiling(32, replicas=2, seed=3)
+    sim.operations.writers.append(GSD(40, path))
+    sim.minimize(max_steps=100, force_tol=1e-12)
+    return path
+
+
+def _replace(name, make):
+    def edit(frame):
+        frame[name] = make(frame[name])
+    return edit
+
+
+def _drop(name):
+    return lambda frame: frame.pop(name)
+
+
+FIRE_KEY, T1_KEY = "spherevm/op/integrator.FIRE/", "spherevm/op/updaters.0.T1/"
+CORRUPT = [
+    ("format_version float", _replace("spherevm/format_version", lambda a: a.astype(np.float64)),
+     "chunk 'spherevm/format_version': expected uint32, got float64"),
+    ("format_version empty", _replace("spherevm/format_version", lambda a: a[:0]),
+     "chunk 'spherevm/format_version': expected shape (1,), got (0,)"),
+    ("seed float", _replace("spherevm/simulation/seed", lambda a: a.astype(np.float64)),
+     "chunk 'spherevm/simulation/seed': expected int64, got float64"),
+    ("seed two values", _replace("spherevm/simulation/seed", lambda a: np.array([1, 2])),
+     "chunk 'spherevm/simulation/seed': expected shape (1,), got (2,)"),
+    ("seed negative", _replace("spherevm/simulation/seed", lambda a: -a - 1),
+     "chunk 'spherevm/simulation/seed': expected values >= 0, got -1"),
+    ("updated_at text", _replace("spherevm/simulation/updated_at", lambda a: "abc"),
+     "chunk 'spherevm/simulation/updated_at': expected a numeric array"),
+    ("float32 positions", _replace("spherevm/position", lambda a: a.astype(np.float32)),
+     "chunk 'spherevm/position': expected float64, got float32"),
+    ("int8 positions", _replace("spherevm/position", lambda a: a.astype(np.int8)),
+     "chunk 'spherevm/position': expected float64, got int8"),
+    ("radius zero", _replace("spherevm/radius", lambda a: a * 0),
+     "chunk 'spherevm/radius': expected values > 0, got 0.0"),
+    ("missing T1 field", _drop(T1_KEY + "total_flips"), f"chunk '{T1_KEY}total_flips': missing"),
+    ("negative T1 counter", _replace(T1_KEY + "total_refused", lambda a: a - a.max() - 1),
+     f"chunk '{T1_KEY}total_refused': expected values >= 0"),
+    ("T1 last pass above total", _replace(T1_KEY + "last_flips", lambda a: a + 10 ** 6),
+     f"chunk '{T1_KEY}last_flips': expected at most total_flips per replica"),
+    ("T1 keys out of order", _replace(T1_KEY + "separated", lambda a: np.array([70, 5], dtype=np.int64)),
+     f"chunk '{T1_KEY}separated': expected sorted distinct keys a * 64 + b of cell pairs a < b"),
+    ("FIRE alpha above alpha_start", _replace(FIRE_KEY + "alpha", lambda a: a * 0 + 0.5),
+     f"chunk '{FIRE_KEY}alpha': expected values <= 0.1, got 0.5"),
+    ("FIRE dt zero", _replace(FIRE_KEY + "replica_dt", lambda a: a * 0),
+     f"chunk '{FIRE_KEY}replica_dt': expected values > 0, got 0.0"),
+    ("FIRE dt above dt_max", _replace(FIRE_KEY + "replica_dt", lambda a: a * 0 + 1e10),
+     f"chunk '{FIRE_KEY}replica_dt': expected values <= 0.5, got 10000000000.0"),
+    ("FIRE velocity NaN", _replace(FIRE_KEY + "velocities", lambda a: _set(a, (4, 1), np.nan)),
+     f"chunk '{FIRE_KEY}velocities': expected finite values, got nan at index (4, 1)"),
+    ("FIRE velocities of another State", _replace(FIRE_KEY + "velocities", lambda a: a[1:]),
+     f"chunk '{FIRE_KEY}velocities': expected shape (120, 3) for this State, got (119, 3)"),
+    ("FIRE counter float", _replace(FIRE_KEY + "n_positive", lambda a: a.astype(np.float64)),
+     f"chunk '{FIRE_KEY}n_positive': expected int64, got float64"),
+    ("stopped flag flipped", _replace(FIRE_KEY + "stopped", lambda a: 1 - a),
+     f"chunk '{FIRE_KEY}reason': expected replica 0's stopped flag, steps, converged flag and reason to agree"),
+    ("flag not 0 or 1", _replace(FIRE_KEY + "active", lambda a: a + 2),
+     f"chunk '{FIRE_KEY}active': expected values <= 1, got 3"),
+    ("reason not UTF-8", _replace(FIRE_KEY + "reason", lambda a: _set(a, 0, 0xFF)),
+     f"chunk '{FIRE_KEY}reason': expected UTF-8 text"),
+]
+
+
+@pytest.mark.parametrize("what, edit, message", CORRUPT, ids=[c[0] for c in CORRUPT])
+def test_corrupt_chunks_are_refused_naming_file_frame_chunk_and_expectation(checkpoint_file, tmp_path, what, edit,
+                                                                           message):
+    """Issue 36, item 5: each chunk a restart reads is checked for dtype, shape and range; a failure is
+    one ValueError line naming the file, the frame, the chunk and what was expected."""
+    bad = _forge(tmp_path, checkpoint_file, edit)
+    with pytest.raises(ValueError) as info:
+        _fire_t1().create_state_from_gsd(bad)
+    text = str(info.value)
+    assert message in text and f"{str(bad)!r}, frame 3" in text and "\n" not in text, text
+
+
+@pytest.mark.parametrize("make, data, message", [
+    (lambda n: VertexModel(kA=np.ones(n), kP=1.0, A0=1.0, P0=3.8), lambda n: {"kA": -np.ones(n)},
+     "VertexModel: saved field 'kA': expected values >= 0, got -1.0"),
+    (lambda n: VertexModel(kA=np.ones(n), kP=1.0, A0=1.0, P0=3.8), lambda n: {"kA": np.ones(n, np.float32)},
+     "VertexModel: saved field 'kA': expected float64, got float32"),
+    (lambda n: svm.plugins.updaters.RadiusSchedule("constant_area"),
+     lambda n: {"area": np.zeros(2), "counts": np.full(2, -1)}, "RadiusSchedule: saved field 'area': expected values > 0"),
+])
+def test_other_operations_check_what_they_restore(make, data, message):
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_tiling(16, replicas=2, seed=1)
+    op = make(sim.state.n_cells)
+    (sim.operations.forces if isinstance(op, VertexModel) else sim.operations.updaters).append(op)
+    with pytest.raises(ValueError, match=re.escape(message)):
+        op.restore_state(data(sim.state.n_cells))
+
+
+def test_planar_box_of_absurd_size_is_refused(tmp_path):
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_planar_tiling(16, seed=1)
+    svm.write_gsd(sim, tmp_path / "plane.gsd")
+    for side, message in ((1e300, "sqrt(<A>) = inf"), (1e-60, "sqrt(<A>) = 2.5e-61"), (-1.0, "expected values > 0")):
+        bad = _forge(tmp_path, tmp_path / "plane.gsd", _replace("spherevm/box", lambda a: a * 0 + side))
+        with pytest.raises(ValueError, match=re.escape(message)) as info:
+            svm.init.from_gsd(bad, validate=False)
+        assert "frame 0, chunk 'spherevm/box': expected" in str(info.value)
+
+
+def _flip_inside(path, tmp_path, name, frame=-1):
+    """A copy of ``path`` with one byte flipped inside chunk ``name`` of ``frame``."""
+    import gsd.fl
+    with gsd.fl.open(str(path), "r") as f:
+        raw = np.ascontiguousarray(f.read_chunk(frame=frame % f.nframes, name=name)).tobytes()
+    data = bytearray(path.read_bytes())
+    at = data.find(raw)
+    assert at > 0 and data.find(raw, at + 1) < 0
+    data[at + len(raw) // 2] ^= 0x01            # the lowest bit of a byte in the middle
+    out = tmp_path / "flipped.gsd"
+    out.write_bytes(bytes(data))
+    return out
+
+
+@pytest.mark.parametrize("name", [FIRE_KEY + "velocities", "spherevm/position", T1_KEY + "total_flips"])
+def test_a_flipped_bit_that_the_schema_cannot_see_is_caught_by_the_checksum(checkpoint_file, tmp_path, name):
+    bad = _flip_inside(checkpoint_file, tmp_path, name)
+    with pytest.raises(ValueError, match=re.escape(f"frame 3, chunk '{name}': expected the CRC32")):
+        _fire_t1().create_state_from_gsd(bad)
+
+
+def test_random_byte_flips_never_change_a_restart_silently(checkpoint_file, tmp_path):
+    """Issue 36, item 5: of byte flips anywhere in a checkpoint file, none restores other state
+    without a word: each is refused in one line naming the file, restores exactly the clean state
+    (the flip hit what a restart does not read), or warns that the file is damaged."""
+    def restore(path):
+        sim = _fire_t1()
+        sim.create_state_from_gsd(path)
+        fire, t1 = sim.operations.integrator, sim.operations.updaters[0]
+        arrays = [sim.state.positions, sim.state.cell_vertices, sim.state.vertex_neighbors, sim.state.radius_np(),
+                  fire.velocities, fire.replica_dt, fire.alpha, fire.n_positive, fire.stopped, fire.steps,
+                  fire.active, np.array([fire.iteration, sim.timestep]), *t1.state_to_save().values()]
+        return b"".join(np.ascontiguousarray(a).tobytes() for a in arrays) + str(list(fire.reason)).encode()
+
+    clean = restore(checkpoint_file)
+    data = checkpoint_file.read_bytes()
+    outcomes = []
+    for k, at in enumerate(np.random.default_rng(36).integers(0, len(data), 60)):
+        flipped = bytearray(data)
+        flipped[at] ^= 0xFF
+        path = tmp_path / f"f{k}.gsd"
+        path.write_bytes(bytes(flipped))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                got = restore(path)
+            except ValueError as exc:
+                assert str(path) in str(exc) and "\n" not in str(exc), str(exc)
+                outcomes.append("refused")
+                continue
+        damaged = any(issubclass(w.category, svm.gsdio.DamagedFileWarning) for w in caught)
+        assert got == clean or damaged, f"byte {at} changed the restart silently"
+        outcomes.append("same" if got == clean else "warned")
+    assert "refused" in outcomes and "same" in outcomes
+
+
+def test_an_index_entry_out_of_frame_order_is_not_trusted(checkpoint_file, tmp_path):
+    """A flipped frame number in gsd's index (gsd checks only some entries) would hide a chunk of the
+    last frame, which the HOOMD rule then takes from frame 0: the reader stops before that frame."""
+    from gsd import pygsd
+    data = bytearray(checkpoint_file.read_bytes())
+    head = pygsd.gsd_header._make(pygsd.gsd_header_struct.unpack(bytes(data[:256])))
+    index = np.frombuffer(bytes(data[head.index_location:head.index_location + 32 * head.index_allocated_entries]),
+                          dtype=svm.gsdrecover.ENTRY)
+    last = np.flatnonzero(index["frame"] == 3)
+    data[head.index_location + 32 * int(last[len(last) // 2])] ^= 0xFF      # frame 3 becomes 252
+    bad = tmp_path / "index.gsd"
+    bad.write_bytes(bytes(data))
+    sim = _fire_t1()
+    with pytest.warns(svm.gsdio.DamagedFileWarning, match="reading its 3 complete frame"):
+        sim.create_state_from_gsd(bad)
+    assert sim.timestep == 80
+
+
+def test_a_chunk_gsd_cannot_read_is_named(checkpoint_file):
+    class Failing:
+        def __init__(self, file):
+            self.file = file
+
+        def __getattr__(self, name):
+            return getattr(self.file, name)
+
+        def read_chunk(self, frame, name):
+            raise RuntimeError("Corrupt GSD file")
+
+    with svm.gsdio.Reader(checkpoint_file) as r:
+        r.file = Failing(r.file)
+        with pytest.raises(ValueError, match=re.escape("frame 3: chunk 'spherevm/format_version' cannot be read "
+                                                       "(Corrupt GSD file); the file is damaged")):
+            r.state()
+
+
+# ------------------------------------------------------------------ issue 36, item 7: the GSD writer's path
+@pytest.mark.skipif(not os.path.isdir("/proc"), reason="needs Linux /proc, where no file can be created")
+def test_gsd_writer_into_proc_says_the_path_and_why():
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_tiling(16, seed=1)
+    with pytest.raises(OSError, match=re.escape("GSD writer: cannot open filename '/proc/run.gsd' for writing "
+                                                "(No such file or directory)")) as info:
+        svm.write_gsd(sim, "/proc/run.gsd")
+    assert "\n" not in str(info.value)

@@ -362,3 +362,82 @@ def test_io_and_shapes_modules_import_only_downwards():
         bad = sorted(m for m in _spherevm_imports(path) if m.startswith(forbidden))
         assert not bad, f"{path.name} imports {bad} from a higher layer"
     assert not hasattr(svm.State, "from_gsd")   # reading a file is spherevm.init.from_gsd
+
+
+# ------------------------------------------------------------------ issue 36, item 4: files cut short
+@pytest.fixture(scope="module")
+def growing_file(tmp_path_factory):
+    """24 frames written one by one, with the file's bytes after each (gsd flushes every frame): the
+    index and the name list were moved to the end of the file several times on the way."""
+    path = tmp_path_factory.mktemp("cut") / "whole.gsd"
+    sim = make_sim(svm.init.random_tiling(16, replicas=2, seed=5))
+    sim.operations.updaters.append(svm.plugins.updaters.T1())
+    writer = GSD(1, path)
+    snapshots = []
+    for _ in range(24):
+        writer.write(sim, sim.timestep)
+        snapshots.append(path.read_bytes())
+        sim.run(3)
+    writer.close()
+    return path, snapshots
+
+
+def _chunks(file, frame):
+    return {name: file.read_chunk(frame=frame, name=name) for name in file.find_matching_chunk_names("")
+            if file.chunk_exists(frame=frame, name=name)}
+
+
+def test_a_file_cut_anywhere_reads_up_to_its_last_complete_frame(growing_file, tmp_path):
+    """Cut at 100 random offsets, the file reads (with a DamagedFileWarning naming the count) exactly
+    the frames that were complete before the cut: frame k is complete when the file as it stood
+    right after frame k holds nothing past the cut but the zero padding gsd reserves for a grown
+    index or name list. Each chunk of the last one comes back bit for bit."""
+    import gsd.fl
+    path, snapshots = growing_file
+    data = path.read_bytes()
+    cut_path = tmp_path / "cut.gsd"
+    with gsd.fl.open(str(path), "r") as whole:
+        for cut in np.random.default_rng(36).integers(0, len(data), 100):
+            cut_path.write_bytes(data[:cut])
+            expected = sum(len(then) <= cut or not any(then[cut:]) for then in snapshots)
+            if cut < 256:
+                with pytest.raises(ValueError, match="not a readable GSD file"):
+                    svm.gsdio.Reader(cut_path)
+                continue
+            with pytest.warns(svm.gsdio.DamagedFileWarning, match=f"reading its {expected} complete frame"):
+                reader = svm.gsdio.Reader(cut_path)
+            with reader:
+                assert len(reader) == expected, cut
+                if expected:
+                    got, want = _chunks(reader.file, expected - 1), _chunks(whole, expected - 1)
+                    assert got.keys() == want.keys()
+                    for name in want:
+                        assert np.array_equal(got[name], want[name]) and np.asarray(got[name]).dtype == \
+                            np.asarray(want[name]).dtype, name
+                    state = reader.state(expected - 1)
+                    assert state.positions.tobytes() == read_state(path, expected - 1).positions.tobytes()
+
+
+def test_repair_writes_the_complete_frames_to_a_new_file(growing_file, tmp_path, capsys):
+    import gsd.fl
+    from spherevm import cli
+    path, snapshots = growing_file
+    cut = tmp_path / "cut.gsd"
+    cut.write_bytes(path.read_bytes()[:len(snapshots[9]) + 10])   # inside frame 10
+    before = cut.read_bytes()
+    assert cli.main(["repair", str(cut)]) == 0
+    out = tmp_path / "cut.repaired.gsd"
+    assert f"wrote its 10 complete frame(s) to {out}" in capsys.readouterr().out
+    assert cut.read_bytes() == before                                     # FILE itself is never changed
+    with gsd.fl.open(str(out), "r") as repaired, gsd.fl.open(str(path), "r") as whole:
+        assert repaired.nframes == 10 and svm.gsdrecover.whole(out)       # gsd opens it as a whole file
+        for frame in (0, 9):
+            got, want = _chunks(repaired, frame), _chunks(whole, frame)
+            assert got.keys() == want.keys() and all(np.array_equal(got[k], want[k]) for k in want)
+    with pytest.warns(svm.gsdio.DamagedFileWarning):
+        assert read_state(cut).positions.tobytes() == read_state(out).positions.tobytes()
+    for argv, message in ((["repair", str(cut)], "exists; give --overwrite"),
+                          (["repair", str(cut), "--out", str(cut)], "is FILE itself")):
+        assert cli.main(argv) == 2
+        assert message in capsys.readouterr().err
+    assert cli.main(["repair", str(cut), "--overwrite", "-o", str(out)]) == 0

@@ -14,7 +14,8 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent / "spherevm"
 # Lowest first. A module may import from its own layer's lower entries only as the graph allows
 # (circles are checked separately) and from any lower layer.
 LAYERS = [
-    ["geometry", "device", "kernel_struct", "validation", "random", "trigger", "logging", "provenance", "progress"],
+    ["geometry", "device", "kernel_struct", "validation", "random", "trigger", "logging", "provenance", "progress",
+     "gsdrecover"],
     ["constraints"],
     ["topology", "folding", "growth"],
     ["state"],

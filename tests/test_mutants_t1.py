@@ -203,7 +203,7 @@ def test_checkpoint_round_trip_and_wrong_replica_count():
     for name in ("last_flips", "last_refused", "total_flips", "total_refused", "flip_backs"):
         assert np.array_equal(getattr(fresh, name), saved[name]), name
     assert np.array_equal(fresh._separated, saved["separated"]) and np.array_equal(fresh._rejoins, saved["rejoins"])
-    with pytest.raises(ValueError, match="'total_flips' has 3 replicas, the State 2"):
+    with pytest.raises(ValueError, match=r"T1: saved field 'total_flips': expected shape \(2,\), got \(3,\)"):
         fresh.restore_state(dict(saved, total_flips=np.zeros(3, dtype=np.int64)))
 
 

@@ -9,6 +9,8 @@ import ast
 import pathlib
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent / "spherevm"
+#: public methods of namedtuples (an underscore only keeps them apart from the fields)
+NAMEDTUPLE = {"_make", "_replace", "_asdict", "_fields"}
 
 
 def _defined(cls_node):
@@ -37,7 +39,7 @@ def reaches(source: str):
             v = node.value
             mine = (isinstance(v, ast.Name) and v.id in ("self", "cls")) or \
                 (isinstance(v, ast.Call) and isinstance(v.func, ast.Name) and v.func.id == "super")
-            if not mine and node.attr not in own:
+            if not mine and node.attr not in own and node.attr not in NAMEDTUPLE:
                 out.append((node.lineno, ast.unparse(node)))
         for child in ast.iter_child_nodes(node):
             visit(child, own)

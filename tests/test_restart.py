@@ -1,6 +1,7 @@
 """Exact restart (issue 13, items 1 and 2): a GSD frame is a checkpoint; continuing from it gives
 bitwise the uninterrupted run, also in a fresh process; every run and minimize ends with a frame."""
 import os
+import re
 import subprocess
 import sys
 import warnings
@@ -278,3 +279,76 @@ def test_cli_dynamics_restart_continues_the_timestep(tmp_path):
 def test_cli_bad_paths_are_usage_errors_naming_the_flag(argv, flag):
     out = _cli(*argv, "-q")
     assert out.returncode == 2 and f"argument {flag}" in out.stderr, out.stderr
+
+
+# ------------------------------------------------------------------ issue 36, item 3: history is never overwritten
+def _steps_and_positions(path):
+    with svm.gsdio.Reader(path) as r:
+        return [r.step(i) for i in range(len(r))], [r.state(i).positions.tobytes() for i in range(len(r))]
+
+
+def test_cli_minimize_restart_into_its_own_file_appends(tmp_path):
+    path = str(tmp_path / "a.gsd")
+    common = ("--write-every", "100", "--force-tol", "0", "--energy-tol", "0", "-q")
+    first = _cli("minimize", "--cells", "16", "--replicas", "2", "--max-steps", "300", "--out", path, *common)
+    assert first.returncode == 0, first.stderr
+    steps, frames = _steps_and_positions(path)
+    again = _cli("minimize", "--restart", path, "--max-steps", "200", "--out", path, *common)
+    assert again.returncode == 0, again.stderr
+    more_steps, more_frames = _steps_and_positions(path)
+    assert steps == [0, 100, 200, 300] and more_steps == [0, 100, 200, 300, 400, 500]   # no second frame at 300
+    assert more_frames[:4] == frames                                                      # the history is kept
+    whole = _cli("minimize", "--cells", "16", "--replicas", "2", "--max-steps", "500", *common)
+    assert again.stdout == whole.stdout
+
+
+def test_cli_existing_outputs_need_overwrite(tmp_path):
+    path = tmp_path / "b.gsd"
+    run = ("minimize", "--cells", "16", "--replicas", "1", "--max-steps", "20", "-q", "--out", str(path))
+    assert _cli(*run).returncode == 0
+    before = path.read_bytes()
+    refused = _cli(*run)
+    assert refused.returncode == 2 and path.read_bytes() == before
+    assert f"argument --out: {str(path)!r} exists; give --overwrite to replace it" in refused.stderr
+    assert _cli(*run, "--seed", "1", "--overwrite").returncode == 0 and path.read_bytes() != before
+    steps, frames = _steps_and_positions(path)
+    kept = _cli("minimize", "--restart", str(path), "--seed", "1", "--max-steps", "20", "-q", "--out", str(path),
+                "--overwrite")                                         # the --restart file is appended to, never replaced
+    assert kept.returncode == 0, kept.stderr
+    assert _steps_and_positions(path)[1][:2] == frames and _steps_and_positions(path)[0] == steps + [40]
+
+
+def test_cli_dynamics_restart_into_its_own_file_appends(tmp_path):
+    path = str(tmp_path / "d.gsd")
+    assert _cli("dynamics", "--cells", "16", "--replicas", "1", "--steps", "40", "--relax", "50", "-q",
+                "--out", path).returncode == 0
+    steps, frames = _steps_and_positions(path)
+    refused = _cli("dynamics", "--restart", path, "--steps", "40", "-q", "--out", path)
+    assert refused.returncode == 2 and "argument --csv" in refused.stderr and "give --overwrite" in refused.stderr
+    again = _cli("dynamics", "--restart", path, "--steps", "40", "-q", "--out", path, "--overwrite")
+    assert again.returncode == 0, again.stderr
+    more_steps, more_frames = _steps_and_positions(path)
+    assert more_frames[:len(frames)] == frames and more_steps[:len(steps)] == steps
+    assert more_steps[-1] == steps[-1] + 40 and np.all(np.diff(more_steps) > 0)
+
+
+def test_gsd_writer_appends_to_the_file_the_simulation_was_restored_from(tiling, tmp_path):
+    path = tmp_path / "c.gsd"
+    sim = minimizer(tiling)
+    sim.operations.writers.append(GSD(50, path))
+    sim.minimize(max_steps=100)
+    steps, frames = _steps_and_positions(path)
+    again = minimizer(tiling)
+    again.create_state_from_gsd(path)
+    again.operations.writers.append(GSD(50, path))                     # the default mode appends here
+    again.minimize(max_steps=100, resume=True)
+    more_steps, more_frames = _steps_and_positions(path)
+    assert more_frames[:len(frames)] == frames and more_steps == steps + [150, 200]
+    for mode, frame, message in (("wb", -1, "mode='wb' would erase the frames it continues"),
+                                 (None, 0, "ends at step 200, but the Simulation was restored from its frame of step 0")):
+        other = minimizer(tiling)
+        other.create_state_from_gsd(path, frame=frame)
+        other.operations.writers.append(GSD(50, path, mode=mode))
+        with pytest.raises(ValueError, match=re.escape(message)):
+            other.run(1)
+    assert _steps_and_positions(path)[0] == more_steps

@@ -7,6 +7,7 @@ Subcommands::
     spherevm rigidity [--cells N ...] [--p0 START:STOP:STEP ...] [--replicas R] [--out FOLDER] ...
     spherevm info [--json]
     spherevm plugins
+    spherevm repair FILE [--out NEW.gsd]
 
 Bad arguments and bad input caught by the library end with one line on standard error,
 ``spherevm: error: ...``, and exit status 2; a failure while a minimisation runs gives status 1.
@@ -23,7 +24,7 @@ import os
 import sys
 
 PROG = "spherevm"
-COMMAND_NAMES = ("minimize", "dynamics", "rigidity", "info", "plugins", "export", "render")
+COMMAND_NAMES = ("minimize", "dynamics", "rigidity", "info", "plugins", "export", "render", "repair")
 COMMANDS_METAVAR = "{" + ",".join(COMMAND_NAMES) + "}"
 INTERRUPTED = 130   # 128 + SIGINT, as a shell reports it
 

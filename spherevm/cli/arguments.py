@@ -77,6 +77,24 @@ def check_out_path(path, flag="--out"):
             pass
 
 
+def add_overwrite(group):
+    """``--overwrite``: replace output files that exist (see :func:`check_existing`)."""
+    group.add_argument("--overwrite", action="store_true",
+                       help="replace output files that exist (without it they are refused); the --restart file "
+                            "itself is never replaced: a run that writes to it appends")
+
+
+def check_existing(path, flag, overwrite, restart=None):
+    """Refuse (status 2) to write over the existing file ``path`` without ``--overwrite``; the file
+    ``restart`` that the run reads is never refused nor replaced (the GSD writer appends to it)."""
+    if path is None or not os.path.exists(path):
+        return
+    if restart is not None and os.path.exists(restart) and os.path.samefile(path, restart):
+        return
+    if not overwrite:
+        raise CLIError(f"argument {flag}: {path!r} exists; give --overwrite to replace it, or another file name")
+
+
 def check_in_path(path, flag):
     """Fail early (status 2) when the file ``path`` cannot be read."""
     if not path or not os.path.isfile(path):

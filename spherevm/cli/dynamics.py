@@ -8,8 +8,9 @@ import time
 import numpy as np
 
 from ..progress import StageBars
-from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_surface, build_forces,
-                        check_in_path, check_out_path, extra_forces, integer, one_line, real, resume_hint)
+from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_overwrite, add_surface,
+                        build_forces, check_existing, check_in_path, check_out_path, extra_forces, integer, one_line,
+                        real, resume_hint)
 
 
 def add_parser(subparsers):
@@ -38,11 +39,13 @@ def add_parser(subparsers):
                    help="FIRE steps of the initial relaxation, 0 to skip (default: %(default)s)")
     g.add_argument("--b", type=real(strict=True), default=0.5, help="self-overlap window, sqrt(<A>) (default: %(default)s)")
     g = d.add_argument_group("output")
-    g.add_argument("--out", "-o", default=None, metavar="FILE.gsd", help="GSD trajectory of the production run")
+    g.add_argument("--out", "-o", default=None, metavar="FILE.gsd",
+                   help="GSD trajectory of the production run; the --restart file itself is appended to")
     g.add_argument("--restart", default=None, metavar="FILE.gsd",
                    help="continue from the last frame of a spherevm GSD file (its state and timestep); "
                         "skips relaxation and equilibration, ignores --cells and --replicas")
     g.add_argument("--csv", default=None, metavar="FILE.csv", help="time, MSD and Q_s (default: next to --out, else none)")
+    add_overwrite(g)
     g.add_argument("--device", choices=("cpu", "gpu", "auto"), default="auto", help="where to run (default: %(default)s)")
     g.add_argument("--quiet", "-q", action="store_true", help="no progress on standard error")
     d.set_defaults(func=run)
@@ -59,6 +62,8 @@ def run(args) -> int:
         check_in_path(args.restart, "--restart")
     specs = extra_forces(args)
     csv_path = args.csv or (os.path.splitext(args.out)[0] + ".csv" if args.out else None)
+    for path, flag in ((args.out, "--out"), (csv_path, "--csv")):
+        check_existing(path, flag, args.overwrite, args.restart)
     err = sys.stderr
     if not args.quiet:
         err.write(f"spherevm: dynamics of {args.replicas} x {args.cells} cells on the {args.surface}, p0={args.p0:g} kr={args.kr:g} "

@@ -5,9 +5,9 @@ import sys
 import time
 
 from ..progress import MinimizeBar
-from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_surface, build_forces,
-                        check_in_path, check_out_path, extra_forces, gsd_frames, integer, one_line, real,
-                        resume_hint)
+from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_overwrite, add_surface,
+                        build_forces, check_existing, check_in_path, check_out_path, extra_forces, gsd_frames, integer,
+                        one_line, real, resume_hint)
 
 
 def add_parser(subparsers):
@@ -45,7 +45,9 @@ def add_parser(subparsers):
                    help="steps between convergence checks and progress updates (default: %(default)s)")
     g = m.add_argument_group("output")
     g.add_argument("--out", "-o", default=None, metavar="FILE.gsd",
-                   help="write a GSD trajectory (first frame, every --write-every steps, last frame)")
+                   help="write a GSD trajectory (first frame, every --write-every steps, last frame); the --restart "
+                        "file itself is appended to")
+    add_overwrite(g)
     g.add_argument("--restart", default=None, metavar="FILE.gsd",
                    help="continue from the last frame of a spherevm GSD file: its state, timestep and FIRE state "
                         "(velocities, dt, alpha, convergence); FIRE goes on (resume) unless --fresh-fire; "
@@ -84,6 +86,7 @@ def run(args) -> int:
         check_in_path(args.restart, "--restart")
     if args.out is not None:
         check_out_path(args.out)
+        check_existing(args.out, "--out", args.overwrite, args.restart)
         import importlib.util
         if importlib.util.find_spec("gsd") is None:  # the GSD writer needs it: fail before any work
             raise CLIError("argument --out: writing GSD files needs the 'gsd' package (pip install gsd)")

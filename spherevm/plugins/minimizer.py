@@ -6,6 +6,7 @@ import numpy as np
 from ..validation import integer, non_negative
 from .base import Integrator
 from .parameters import Parameter
+from .rows import saved_convergence
 
 
 class Minimizer(Integrator):
@@ -82,18 +83,12 @@ class Minimizer(Integrator):
 
     def restore_state(self, data: dict):
         super().restore_state(data)
-        n = self._simulation.state.n_replicas
-        reason = bytes(np.asarray(data["reason"], dtype=np.uint8)).decode("utf-8").split("\n")
-        if len(reason) != n or len(data["stopped"]) != n:
-            raise ValueError(f"{type(self).__name__}: the checkpoint holds {len(reason)} replicas, the State {n}")
-        self.iteration = int(data["iteration"][0])
-        checked = int(data["checked_at"][0])
-        self.checked_at = None if checked < 0 else checked
-        self.replica_converged = np.asarray(data["replica_converged"]).astype(bool)
-        self.stopped = np.asarray(data["stopped"]).astype(bool)
-        self.steps = np.asarray(data["steps"]).astype(np.int64)
-        self.reason = np.array(reason, dtype=object)
-        self.set_active(np.asarray(data["active"]).astype(bool))
+        saved = saved_convergence(self, data, self._simulation.state.n_replicas)
+        self.iteration = saved["iteration"]
+        self.checked_at = None if saved["checked_at"] < 0 else saved["checked_at"]
+        self.replica_converged, self.stopped = saved["replica_converged"], saved["stopped"]
+        self.steps, self.reason = saved["steps"], saved["reason"]
+        self.set_active(saved["active"])
 
     @property
     def converged(self) -> bool:

@@ -11,6 +11,7 @@ from ...kernel_struct import KernelStruct
 from ..base import Force, ForceResult
 from ..fusion import FusedStage, overrides
 from ..parameters import Parameter
+from ..rows import saved_field, saved_where
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
@@ -155,16 +156,16 @@ class VertexModel(Force):
     def restore_state(self, data: dict):
         """Per-cell parameters come back from the checkpoint, replacing what the model was built with
         (whose length fits the tissue before it grew); a parameter the script gives as a scalar stays
-        the script's."""
+        the script's. Each is checked: float64, finite, >= 0, one per cell."""
         n = self._simulation.state.n_cells
         for name, array in self._arrays().items():
             if name not in data or array.ndim == 0:
                 continue
-            saved = np.asarray(data[name], dtype=np.float64)
-            if saved.shape != (n,):
-                raise ValueError(f"VertexModel: saved per-cell {name!r} has shape {saved.shape}, but the State has "
-                                 f"{n} cells; the checkpoint belongs to another State")
-            setattr(self, name, saved.copy())
+            saved = data[name]
+            if np.shape(saved) != (n,):
+                raise ValueError(f"{saved_where(self, data, name)}: per-cell {name!r} has shape {np.shape(saved)}, but "
+                                 f"the State has {n} cells; the checkpoint belongs to another State")
+            setattr(self, name, saved_field(self, data, name, np.float64, (n,), low=0).copy())
 
     def device_parameters(self, state):
         """Per-cell ``(kA, kP, A0, P0)`` on the device, cached for the State they were made for."""

@@ -13,6 +13,7 @@ from ..base import raise_flagged_step
 from ..minimizer import Minimizer
 from ..fusion import FusedStage, overrides
 from ..parameters import Parameter
+from ..rows import saved_field
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
@@ -115,6 +116,14 @@ class FIRE(Minimizer):
         self.n_positive = xp.zeros(r, dtype=xp.int64)
 
     checkpoint_fields = ("velocities", "replica_dt", "alpha", "n_positive")
+
+    def restore_state(self, data: dict):
+        """As every Minimizer, and per replica 0 < dt <= dt_max, 0 <= alpha <= alpha_start (FIRE never
+        leaves these ranges: give the parameters of the run that wrote the checkpoint), n_positive >= 0."""
+        saved_field(self, data, "replica_dt", np.float64, above=0, high=self.dt_max)
+        saved_field(self, data, "alpha", np.float64, low=0, high=self.alpha_start)
+        saved_field(self, data, "n_positive", np.int64, low=0)
+        super().restore_state(data)
     narrowable = True
     per_replica = Minimizer.per_replica + ("replica_dt", "alpha", "n_positive")
     per_vertex = ("velocities",)

@@ -20,6 +20,7 @@ from ...device import launch, load_module
 from ...validation import integer
 from ..base import Updater
 from ..parameters import Parameter
+from ..rows import saved_field
 
 _KERNELS = Path(__file__).with_suffix(".cu")
 
@@ -183,7 +184,7 @@ class Division(Updater):
 
     def restore_state(self, data: dict):
         super().restore_state(data)
-        self._last = int(np.asarray(data["clock"]).reshape(-1)[0])
+        self._last = int(saved_field(self, data, "clock", np.int64, (1,))[0])
 
     def after_minimize(self, simulation):
         """The minimisation's iterations are not time for the rate rule."""

@@ -6,6 +6,7 @@ import numpy as np
 from ...constraints import Sphere
 from ..base import Updater
 from ..parameters import Parameter
+from ..rows import saved_field
 from .division import _rate
 
 
@@ -77,13 +78,10 @@ class RadiusSchedule(Updater):
         """``counts`` always; ``area`` unless the script gives one (the default, each replica's <A> at
         the first attach, is state: after growth the <A> of the restored sphere is only rounded)."""
         n = self._simulation.state.n_replicas
-        for name in ("area", "counts"):
-            if np.asarray(data[name]).shape != (n,):
-                raise ValueError(f"RadiusSchedule: saved {name!r} has shape {np.shape(data[name])}, but the State "
-                                 f"has {n} replicas")
-        self.counts = np.asarray(data["counts"], dtype=np.int64).copy()
+        area = saved_field(self, data, "area", np.float64, (n,), above=0)
+        self.counts = saved_field(self, data, "counts", np.int64, (n,), low=-1).copy()
         if self.area is None:
-            self.target_area = np.asarray(data["area"], dtype=np.float64).copy()
+            self.target_area = area.copy()
 
     def target(self, simulation):
         """The radius each replica should have now (NumPy, per replica)."""

@@ -8,6 +8,7 @@ from ...constraints.kernels import KERNEL_SURFACES
 from ..base import Updater
 from ..minimizer import Minimizer
 from ..parameters import Parameter
+from ..rows import saved_field, saved_where
 from ...validation import integer, positive
 from .t1_device import DevicePass
 
@@ -348,14 +349,25 @@ class T1(DevicePass, Updater):
         return out
 
     def restore_state(self, data: dict):
-        n = self._simulation.state.n_replicas
+        """Counters per replica (>= 0, the last pass's at most the totals) and the flip-back memory:
+        sorted distinct cell-pair keys ``a * n_C + b`` with ``a < b`` cells of this State, and as many
+        re-join counts (>= 0)."""
+        state = self._simulation.state
+        n, n_c = state.n_replicas, state.n_cells
+        saved = {name: saved_field(self, data, name, np.int64, (n,), low=0) for name in self._COUNTERS}
+        for last, total in (("last_flips", "total_flips"), ("last_refused", "total_refused")):
+            over = np.flatnonzero(saved[last] > saved[total])
+            if len(over):
+                raise ValueError(f"{saved_where(self, data, last)}: expected at most {total} per replica, got "
+                                 f"{saved[last][over[0]]} > {saved[total][over[0]]} for replica {over[0]}")
+        keys = saved_field(self, data, "separated", np.int64, (None,), low=0, high=n_c * n_c - 1)
+        if np.any(np.diff(keys) <= 0) or np.any(keys // n_c >= keys % n_c):
+            raise ValueError(f"{saved_where(self, data, 'separated')}: expected sorted distinct keys a * {n_c} + b "
+                             f"of cell pairs a < b, got {keys.tolist()[:8]}")
+        rejoins = saved_field(self, data, "rejoins", np.int64, (len(keys),), low=0)
         for name in self._COUNTERS:
-            value = np.asarray(data[name], dtype=np.int64).reshape(-1)
-            if len(value) != n:
-                raise ValueError(f"T1: the checkpoint's {name!r} has {len(value)} replicas, the State {n}")
-            setattr(self, name, value.copy())
-        self._separated = np.asarray(data["separated"], dtype=np.int64).reshape(-1).copy()
-        self._rejoins = np.asarray(data["rejoins"], dtype=np.int64).reshape(-1).copy()
+            setattr(self, name, saved[name].copy())
+        self._separated, self._rejoins = keys.copy(), rejoins.copy()
         self._gpu = None          # device counters are rebuilt from these totals
 
     def resized(self, change):

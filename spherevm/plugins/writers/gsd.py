@@ -32,7 +32,7 @@ def _per_replica(name, value, n_replicas):
 class GSD(Writer):
     """Write frames to a GSD file (HOOMD schema) that OVITO opens and :func:`spherevm.init.from_gsd` restores.
 
-    ``GSD(trigger, filename, mode="wb", logger=None, ...)``: HOOMD-blue's argument order
+    ``GSD(trigger, filename, mode=None, logger=None, ...)``: HOOMD-blue's argument order
     (``hoomd.write.GSD(trigger, filename)``); keywords work too, and the older order, the path
     first (``GSD("run.gsd", trigger=100)``), still works with a DeprecationWarning. Every frame is
     flushed to disk, so a crash leaves a readable file. After :meth:`close`, a later write reopens
@@ -44,10 +44,12 @@ class GSD(Writer):
         When to write (default every 1000 steps).
     filename : str or path
         The ``.gsd`` file; opened at the first write (not at construction).
-    mode : {"wb", "ab", "xb"}
+    mode : {"wb", "ab", "xb"} or None
         "wb" overwrites (or creates) the file, "ab" appends to it (or creates it), "xb" creates it
-        and fails if it exists; "w", "a", "x" are accepted too. (HOOMD's default is "ab";
-        docs/hoomd.md says why this one overwrites.)
+        and fails if it exists; "w", "a", "x" are accepted too. The default (None) is "wb", except
+        for the file the Simulation was restored from (``create_state_from_gsd``), which it appends
+        to; "wb" on that file is refused, as it would erase the frames the run continues. (HOOMD's
+        default is "ab"; docs/hoomd.md says why this one overwrites.)
     logger : Logger, optional
         What is logged, written as ``log/<name>`` with one value per replica.
     log : sequence of str or Logger, optional
@@ -65,7 +67,7 @@ class GSD(Writer):
     final : bool
         Also write the state a ``run`` or ``minimize`` ends in, whatever the trigger."""
 
-    def __init__(self, *args, trigger=None, filename=None, mode="wb", logger=None, log=None,
+    def __init__(self, *args, trigger=None, filename=None, mode=None, logger=None, log=None,
                  cell_quantities=gsdio.CELL_QUANTITIES, checkpoint=True, final=True):
         trigger, filename = trigger_first("GSD", args, trigger, filename, 1000, "filename")
         super().__init__(trigger)
@@ -73,7 +75,7 @@ class GSD(Writer):
         self.final = bool(final)
         if not isinstance(filename, (str, os.PathLike)) or not os.fspath(filename):
             raise ValueError(f"filename must be a non-empty path, got {filename!r}")
-        if mode not in _MODES:
+        if mode is not None and mode not in _MODES:
             raise ValueError(f"mode must be one of 'wb' (overwrite), 'ab' (append) or 'xb' (create), got {mode!r}")
         if os.path.isdir(filename):
             raise ValueError(f"GSD writer: {os.fspath(filename)!r} is a directory; give a file name such as "
@@ -96,6 +98,7 @@ class GSD(Writer):
         self._opened = False
         self._checked = False    # the logger is checked against the Simulation at the first write
         self._cell_keys = None   # fixed at the first write
+        self._continues = None   # appending to the file the run was restored from: the step it ends at
 
     @property
     def log(self) -> tuple:
@@ -103,11 +106,33 @@ class GSD(Writer):
         return self.logger.names
 
     # ------------------------------------------------------------------ file handling
-    def _open(self):
+    def _mode(self, simulation):
+        """The gsd mode of the first open: see ``mode``. Sets ``_continues`` when the run appends to
+        the file it was restored from (its last frame is the state the run starts from)."""
+        source, step = simulation.restored_from or (None, None)
+        if source is None or os.path.realpath(self.filename) != source or not os.path.exists(source):
+            return _MODES[self.mode or "wb"]
+        mode = _MODES[self.mode or "ab"]
+        if mode == "w":
+            raise ValueError(f"GSD writer: {self.filename!r} is the file this Simulation was restored from; mode='wb' "
+                             "would erase the frames it continues: use mode='ab' (the default for this file) "
+                             "to append, or write to another file")
+        if mode == "a":
+            from ... import gsdio
+            with gsdio.Reader(self.filename) as reader:
+                last = reader.step(-1) if len(reader) else None
+            if last != step:
+                raise ValueError(f"GSD writer: {self.filename!r} ends at step {last}, but the Simulation was restored "
+                                 f"from its frame of step {step}; appending would break its timeline: write to "
+                                 "another file")
+            self._continues = step
+        return mode
+
+    def _open(self, simulation):
         import gsd.hoomd
         if self._frames is not None:
             return self._frames
-        mode = _MODES[self.mode] if not self._opened else "a"
+        mode = self._mode(simulation) if not self._opened else "a"
         folder = os.path.dirname(os.path.abspath(self.filename))
         if not os.path.isdir(folder):
             raise FileNotFoundError(f"GSD writer: folder {folder!r} of {self.filename!r} does not exist; "
@@ -122,7 +147,11 @@ class GSD(Writer):
                                   "use mode='wb' to overwrite or 'ab' to append") from None
         except RuntimeError as exc:
             raise ValueError(f"GSD writer: cannot append to {self.filename!r}: {exc}; use mode='wb' to "
-                             "overwrite it or write to another file") from exc
+                             f"overwrite it, write to another file, or 'spherevm repair {self.filename}' to "
+                             "copy its complete frames to a new file first") from exc
+        except OSError as exc:
+            raise type(exc)(f"GSD writer: cannot open filename {self.filename!r} for writing "
+                            f"({exc.strerror or exc}); choose a file in a folder where files can be created") from None
         self._frames, self._opened = gsdio.FrameWriter(traj), True
         return self._frames
 
@@ -168,7 +197,9 @@ class GSD(Writer):
                                      f"{self.filename!r}")
         if not self._checked:
             self._check_logger(simulation)
-        frames = self._open()
+        frames = self._open(simulation)
+        if timestep == self._continues:   # the frame the file ends with: the run starts from it
+            return
         log = {name: _per_replica(name, value, state.n_replicas) for name, value in self.logger.log(simulation).items()}
         vertex_values = {}
         if simulation.operations.forces:
@@ -208,7 +239,7 @@ class GSD(Writer):
         return f"GSD({self.trigger!r}, {self.filename!r}, mode={self.mode!r}, logger={self.logger!r})"
 
 
-def write_gsd(simulation, filename, mode="wb", **options):
+def write_gsd(simulation, filename, mode=None, **options):
     """Write the Simulation's current state as one frame (a checkpoint by default) at
     ``simulation.timestep``, and close the file: the one-shot form of :class:`GSD`.
 
@@ -216,7 +247,7 @@ def write_gsd(simulation, filename, mode="wb", **options):
     ----------
     simulation : Simulation
     filename : str or path
-    mode : {"wb", "ab", "xb"}
+    mode : {"wb", "ab", "xb"} or None
         As in :class:`GSD` ("ab" appends a frame to an existing file).
     **options
         :class:`GSD`'s other keywords.

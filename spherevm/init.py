@@ -9,7 +9,7 @@ from . import gsdio, topology
 from .constraints import Sphere
 from .device import CPU, resolve
 from .state import State
-from .validation import check_tiling_memory, integer
+from .validation import check_cell_size, check_tiling_memory, integer
 
 REGULAR_TILINGS = ("dodecahedron", "truncated_icosahedron")
 MAX_ATTEMPTS = 1000
@@ -26,11 +26,8 @@ def _check_radius(radius, n_cells):
     r = float(radius)
     if not np.isfinite(r) or r <= 0:
         raise ValueError(f"radius must be positive and finite, got {radius}")
-    unit = r * np.sqrt(4 * np.pi / n_cells)      # sqrt(<A>)
-    if not 1e-50 <= unit <= 1e50:
-        raise ValueError(f"radius {radius:g} gives cells of size sqrt(<A>) = {unit:.3g}: areas (~R^2) and "
-                         "energies (~R^4) would leave the range of float64; choose units in which cells are "
-                         "of order 1 (the default radius sqrt(N/4 pi) gives <A> = 1)")
+    check_cell_size("radius", radius, r * np.sqrt(4 * np.pi / n_cells),
+                    "the default radius sqrt(N/4 pi) gives <A> = 1")
     return r
 
 

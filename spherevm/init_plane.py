@@ -11,7 +11,7 @@ from . import topology
 from .constraints import PeriodicPlane
 from .device import CPU, resolve
 from .state import State
-from .validation import check_tiling_memory, integer
+from .validation import check_cell_size, check_tiling_memory, integer
 
 MAX_ATTEMPTS = 1000
 #: the fewest cells a random periodic tiling may have. Trivalent cells on a torus average 6 sides and
@@ -32,7 +32,8 @@ _SHIFTS = np.array([(i, j) for j in (-1, 0, 1) for i in (-1, 0, 1)], dtype=np.fl
 
 
 def check_box(box, n_cells=None, name="box") -> np.ndarray:
-    """``(Lx, Ly)`` as float64 from a pair or a side (square); the square of area ``n_cells`` if None."""
+    """``(Lx, Ly)`` as float64 from a pair or a side (square); the square of area ``n_cells`` if None.
+    With ``n_cells`` the cells' size sqrt(Lx Ly / n_cells) must lie in ``CELL_SIZE_RANGE`` (1e-50..1e50)."""
     if box is None:
         side = float(np.sqrt(n_cells))
         return np.array([side, side])
@@ -43,6 +44,9 @@ def check_box(box, n_cells=None, name="box") -> np.ndarray:
         raise ValueError(f"{name} must be a side L or a pair (Lx, Ly), got {box!r}")
     if not np.all(np.isfinite(b)) or np.any(b <= 0):
         raise ValueError(f"{name} must be positive and finite, got {box!r}")
+    if n_cells is not None:
+        check_cell_size(name, box, float(np.sqrt(b[0]) * np.sqrt(b[1] / n_cells)),
+                        "the default box, the square of side sqrt(N), gives <A> = 1")
     return b
 
 
@@ -79,7 +83,12 @@ def periodic_voronoi(points, box, margin=True):
     if margin is not None:      # large n: only the images within `margin` of the box
         near = ((images >= -margin) & (images < box + margin)).all(axis=1)
         images, index = images[near], index[near]
-    tri = Delaunay(images).simplices.astype(np.int64)
+    try:
+        tri = Delaunay(images).simplices.astype(np.int64)
+    except RuntimeError as exc:     # QhullError: e.g. a box ~1e300 times longer than wide
+        raise ValueError(f"qhull cannot triangulate {n} points in the box ({box[0]:g}, {box[1]:g}) "
+                         f"({str(exc).strip().splitlines()[0]}); give a box a few cells wide in both "
+                         "directions") from None
     p = images[tri]
     cc = _circumcenters(p)
     keep = ((cc >= 0) & (cc < box)).all(axis=1)
@@ -164,7 +173,10 @@ def _planar_tilings(n, keys, b, sort, device):
             except ValueError:
                 continue
         else:
-            raise RuntimeError(f"no simple periodic Voronoi tiling of {n} cells in {MAX_ATTEMPTS} draws")
+            narrow = float(b.min() / np.sqrt(b.prod() / n))
+            raise ValueError(f"box ({b[0]:g}, {b[1]:g}) gave no simple periodic Voronoi tiling of {n} cells in "
+                             f"{MAX_ATTEMPTS} draws: its narrow side is {narrow:.3g} cells wide; give a box a few "
+                             "cells wide in both directions")
         if sort:
             net = topology.renumber(*net, np.argsort(topology.morton_codes_2d(net[0], b), kind="stable"),
                                     np.argsort(topology.morton_codes_2d(pts, b), kind="stable"))

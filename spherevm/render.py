@@ -16,8 +16,15 @@ from __future__ import annotations
 import numpy as np
 
 from .constraints import PeriodicPlane
-from .export import cell_values, colors, fan_triangles
+from .export import cell_values, check_replica, colors, fan_triangles
 from .gsdio import Reader
+from .validation import check_memory, positive
+
+#: matplotlib's Agg canvas takes fewer than 2^16 pixels along each side
+MAX_PIXELS_PER_SIDE = 2 ** 16 - 1
+#: host memory per pixel of the picture: the RGBA canvas (4 B), rounded up (measured peak of
+#: :func:`render_gsd` at 4e6 and 3.6e7 pixels: 4 B per pixel above matplotlib's own ~70 MB)
+BYTES_PER_PIXEL = 8
 
 LABELS = {"shape_index": "shape index  P / sqrt(A)", "area": "cell area", "perimeter": "cell perimeter",
           "energy": "cell energy"}
@@ -148,7 +155,8 @@ def draw(ax, state, values=None, quantity: str = "shape_index", cmap: str = "vir
     import matplotlib
     from matplotlib.cm import ScalarMappable
     values = cell_values(state, quantity) if values is None else np.asarray(values, dtype=np.float64)
-    cells = np.flatnonzero(state.cell_replica_np() == int(replica))
+    replica = check_replica(state, replica)
+    cells = np.flatnonzero(state.cell_replica_np() == replica)
     vals = values[cells]
     ok = np.isfinite(vals)
     lo = vmin if vmin is not None else (vals[ok].min() if ok.any() else 0.0)
@@ -184,7 +192,9 @@ def render_state(state, out, values=None, quantity: str = "shape_index", size=(6
     quantity : str
         The colour bar's label, and what is computed without ``values``.
     size : (float, float)
-        Figure size in inches.
+        Figure size in inches; with ``dpi``, fewer than 2^16 pixels along each side (matplotlib's
+        limit), and a canvas (``BYTES_PER_PIXEL`` = 8 bytes a pixel) that fits in the host memory
+        available now (else ValueError at once).
     dpi : int
     title : str, optional
     **options
@@ -194,6 +204,7 @@ def render_state(state, out, values=None, quantity: str = "shape_index", size=(6
     -------
     str or path
         ``out``."""
+    check_picture(size, dpi)
     import matplotlib
     matplotlib.use("Agg", force=False) if matplotlib.get_backend().lower() != "agg" and not _interactive() else None
     import matplotlib.pyplot as plt
@@ -206,6 +217,21 @@ def render_state(state, out, values=None, quantity: str = "shape_index", size=(6
     fig.savefig(out, dpi=dpi)
     plt.close(fig)
     return out
+
+
+def check_picture(size, dpi):
+    """Refuse (ValueError naming ``size`` or ``dpi``) a picture of no pixels, one past matplotlib's
+    ``MAX_PIXELS_PER_SIDE`` or one whose canvas would not fit in memory."""
+    if np.ndim(size) != 1 or len(size) != 2:
+        raise ValueError(f"size must be (width, height) in inches, got {size!r}")
+    inches = [positive("size", v) for v in size]
+    dots = positive("dpi", dpi)
+    pixels = [w * dots for w in inches]
+    if max(pixels) > MAX_PIXELS_PER_SIDE:
+        raise ValueError(f"size {tuple(inches)} inches at dpi {dots:g} is {pixels[0]:.0f} x {pixels[1]:.0f} pixels; "
+                         f"matplotlib draws at most {MAX_PIXELS_PER_SIDE} pixels per side: lower dpi or size")
+    check_memory(f"a picture of {pixels[0]:.0f} x {pixels[1]:.0f} pixels (size {tuple(inches)} at dpi {dots:g})",
+                 host_bytes=pixels[0] * pixels[1] * BYTES_PER_PIXEL, advice="lower dpi or size")
 
 
 def _interactive():

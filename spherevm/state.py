@@ -55,6 +55,7 @@ class State:
         self.constraint = constraint if constraint is not None else Sphere()
         xp = self.device.xp
         self.vertex_start = np.asarray(vertex_start, dtype=np.int64)
+        n_rep = max(len(self.vertex_start) - 1, 1)      # the layout itself is checked by _derive_layout
         self.radius = self.box = None
         if getattr(self.constraint, "size_name", "radius") == "box":
             if radius is not None or box is None:
@@ -62,9 +63,10 @@ class State:
                                  f"got radius={'None' if radius is None else 'given'}, "
                                  f"box={'None' if box is None else 'given'}")
             b = np.asarray(self.device.to_numpy(box), dtype=np.float64)
-            if b.ndim not in (1, 2) or b.shape[-1] != 2:
-                raise ValueError(f"box must be (Lx, Ly) or one (Lx, Ly) per replica, got shape {b.shape}")
-            self.box = xp.asarray(np.broadcast_to(b, (len(self.vertex_start) - 1, 2)).copy())
+            if b.ndim not in (1, 2) or b.shape[-1] != 2 or (b.ndim == 2 and len(b) not in (1, n_rep)):
+                raise ValueError(f"box must be (Lx, Ly) or one (Lx, Ly) per replica ({n_rep} replicas), "
+                                 f"got shape {b.shape}")
+            self.box = xp.asarray(np.broadcast_to(b, (n_rep, 2)).copy())
         elif box is not None:
             raise ValueError(f"box is given, but {self.constraint!r} takes a radius; a periodic box needs "
                              "constraint=PeriodicPlane()")
@@ -77,8 +79,11 @@ class State:
         self.vertex_cells = xp.asarray(vertex_cells, dtype=xp.int32)
         self.cell_start = np.asarray(cell_start, dtype=np.int64)
         if self.box is None:
-            self.radius = xp.asarray(np.broadcast_to(np.asarray(self.device.to_numpy(radius), dtype=np.float64),
-                                                     (len(self.vertex_start) - 1,)).copy())
+            r = np.asarray(self.device.to_numpy(radius), dtype=np.float64)
+            if r.ndim > 1 or r.size not in (1, n_rep):
+                raise ValueError(f"radius must be a scalar or one value per replica ({n_rep} replicas), "
+                                 f"got shape {r.shape}")
+            self.radius = xp.asarray(np.broadcast_to(r.reshape(-1), (n_rep,)).copy())
         self.topology_version = 0   # bumped by every topology edit (T1 flips): caches key on it
         self._cached = {}
         self._buffers = {}          # capacity of the arrays resize() refills (Device.fit)

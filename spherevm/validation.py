@@ -29,14 +29,18 @@ def integer(name, value, minimum: int = 0, maximum: int | None = None) -> int:
     return int(value)
 
 
-def real(name, value, strict: bool = False) -> float:
-    """A finite float >= 0, or > 0 with ``strict``."""
+def real(name, value, strict: bool = False, maximum: float | None = None) -> float:
+    """A finite float >= 0, or > 0 with ``strict``; at most ``maximum`` when given."""
     try:
         v = float(value)
     except (TypeError, ValueError):
         v = float("nan")
-    if not np.isfinite(v) or v < 0 or (strict and v == 0):
-        raise ParameterError(name, value, "positive and finite" if strict else "a finite number >= 0")
+    if not np.isfinite(v) or v < 0 or (strict and v == 0) or (maximum is not None and v > maximum):
+        if maximum is not None:
+            allowed = f"a number in {'(' if strict else '['}0, {maximum:g}]"
+        else:
+            allowed = "positive and finite" if strict else "a finite number >= 0"
+        raise ParameterError(name, value, allowed)
     return v
 
 
@@ -101,6 +105,23 @@ def stored_size(where: str, size, cells):
         r = int(np.flatnonzero(bad)[0])
         raise ValueError(f"{where}: expected a size that gives cells of sqrt(<A>) in [1e-50, 1e50], got "
                          f"{size[r].tolist()} for replica {r} of {int(cells[r])} cells (sqrt(<A>) = {unit[r]:.3g})")
+
+
+#: the largest target shape index p0 = P0/sqrt(<A>) the sweeps and the command line take: every
+#: regular polygon has p0 < 4.6 (a triangle: 4.56) and tissues are fluid from p0 ~ 3.81 on, while
+#: energies grow as p0^2 (p0 = 1e300 overflows float64)
+SHAPE_INDEX_MAX = 100.0
+#: the cell sizes sqrt(<A>) the initialisers take: areas (~size^2) and energies (~size^4) then stay
+#: inside the range of float64 with room to spare
+CELL_SIZE_RANGE = (1e-50, 1e50)
+
+
+def check_cell_size(name: str, value, size: float, default: str):
+    """Refuse ``name`` = ``value`` when it makes cells of size sqrt(<A>) = ``size`` outside
+    :data:`CELL_SIZE_RANGE` (ValueError; ``default`` says which value gives <A> = 1)."""
+    if not CELL_SIZE_RANGE[0] <= size <= CELL_SIZE_RANGE[1]:
+        raise ValueError(f"{name} {value!r} gives cells of size sqrt(<A>) = {size:.3g}: areas and energies would "
+                         f"leave the range of float64; choose units in which cells are of order 1 ({default})")
 
 
 class InsufficientMemory(MemoryError, ValueError):

@@ -1,4 +1,4 @@
-"""Bad input caught where it happens (issue 13, items 3, 4, 5, 8, 9; issue 36, items 5 and 7)."""
+"""Bad input caught where it happens (issue 13, items 3, 4, 5, 8, 9; issue 36, items 5, 7, 8, 9)."""
 import os
 import re
 import warnings
@@ -560,3 +560,196 @@ def test_gsd_writer_into_proc_says_the_path_and_why():
                                                 "(No such file or directory)")) as info:
         svm.write_gsd(sim, "/proc/run.gsd")
     assert "\n" not in str(info.value)
+
+
+# ------------------------------------------------------------------ issue 36, item 7: one line, at the mistake
+def _cli(capsys, *argv):
+    """``spherevm argv`` in-process with every Python warning an error: (status, stderr)."""
+    import warnings
+    from spherevm import cli
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rc = cli.main([str(a) for a in argv])
+    return rc, capsys.readouterr().err
+
+
+def _one_error(capsys, argv, message):
+    rc, err = _cli(capsys, *argv)
+    assert rc == 2 and err == f"spherevm: error: {message}\n", err
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """Two-replica, 16-cell minimisations written by the CLI: on the sphere (seed 3) and the plane."""
+    from spherevm import cli
+    folder = tmp_path_factory.mktemp("runs")
+    for surface, seed in (("sphere", 3), ("plane", 0)):
+        assert cli.main(["minimize", "--cells", "16", "--replicas", "2", "--max-steps", "20", "--seed", str(seed),
+                         "--surface", surface, "--device", "cpu", "-q", "--out", str(folder / f"{surface}.gsd")]) == 0
+    return folder
+
+
+@pytest.mark.parametrize("box", [1e-300, 1e300])
+def test_planar_box_beyond_float64_is_refused(box):
+    with pytest.raises(ValueError, match=rf"^box {re.escape(repr(box))} gives cells of size sqrt\(<A>\) = "
+                                         r".*range of float64"):
+        svm.init_plane.random_planar_tiling(32, box=box)
+
+
+@pytest.mark.parametrize("box, message", [
+    ((1e-300, 1e300), r"^qhull cannot triangulate 32 points in the box \(1e-300, 1e\+300\) \(QH6019 [^\n]*\); "
+                      r"give a box"),
+    ((1, 1000), r"^box \(1, 1000\) gave no simple periodic Voronoi tiling of 32 cells in 1000 draws: its narrow side "
+                r"is 0.179 cells wide"),
+])
+def test_planar_box_too_narrow_is_refused_on_one_line(box, message):
+    with pytest.raises(ValueError, match=message):
+        svm.init_plane.random_planar_tiling(32, box=box)
+
+
+def test_per_replica_sizes_of_the_wrong_length_are_named():
+    p = svm.init.random_planar_tiling(16, replicas=2)
+    s = svm.init.random_tiling(16, replicas=2)
+    with pytest.raises(ValueError, match=r"^box must be \(Lx, Ly\) or one \(Lx, Ly\) per replica \(2 replicas\), "
+                                         r"got shape \(3, 2\)$"):
+        svm.State(p.positions, p.cell_vertices, p.cell_sides, p.vertex_neighbors, p.vertex_cells, p.vertex_start,
+                  p.cell_start, box=np.full((3, 2), 4.0), constraint=p.constraint)
+    with pytest.raises(ValueError, match=r"^radius must be a scalar or one value per replica \(2 replicas\), got "
+                                         r"shape \(3,\)$"):
+        svm.State(s.positions, s.cell_vertices, s.cell_sides, s.vertex_neighbors, s.vertex_cells, s.vertex_start,
+                  s.cell_start, radius=[1.0, 1.0, 1.0])
+
+
+def _growing(updater, replicas):
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_tiling(16, replicas=replicas, seed=5)
+    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
+    sim.operations.integrator = svm.plugins.integrators.Brownian(dt=0.01, T=0.0)
+    sim.operations.updaters.append(updater)
+    return sim
+
+
+@pytest.mark.parametrize("radius, message", [
+    (lambda s: [1.0, 1.1, 1.2], r"returned shape \(3,\); it must return a scalar or one radius per replica \(2\)"),
+    (lambda s: "big", r"returned 'big'; radii must be positive and finite"),
+])
+def test_radius_schedule_function_of_the_wrong_length(radius, message):
+    sim = _growing(svm.plugins.updaters.RadiusSchedule(radius), replicas=2)
+    with pytest.raises(ValueError, match="^RadiusSchedule: the radius function " + message):
+        sim.run(2)
+
+
+def test_division_axis_function_of_the_wrong_shape():
+    division = svm.plugins.updaters.Division(rule=lambda s: [0, 1], axis=lambda s, cells: np.ones((len(cells), 2)))
+    sim = _growing(division, replicas=1)
+    with pytest.raises(ValueError, match=r"^Division: the axis function returned shape \(2, 2\); it must return one "
+                                         r"3-D direction per cell to divide, shape \(2, 3\)$"):
+        sim.run(2)
+
+
+def test_check_force_names_a_wrong_force_or_state():
+    from spherevm.testing import check_force
+    vm, state = VertexModel.dimensionless(kr=1.0, p0=3.8), svm.init.random_tiling(16)
+    with pytest.raises(TypeError, match=r"^force must be a spherevm Force \(an object with compute\(state\)\), got "
+                                        r"'notaforce'$"):
+        check_force("notaforce", state)
+    with pytest.raises(TypeError, match="^state must be a spherevm.State, got NoneType$"):
+        check_force(vm, None)
+
+
+def test_render_replica_and_size_are_named(runs, capsys):
+    png = runs / "x.png"
+    _one_error(capsys, ["render", runs / "sphere.gsd", "--out", png, "--replica", "9"],
+               "argument --replica: must be an integer in [0, 1], got 9")
+    _one_error(capsys, ["render", runs / "sphere.gsd", "--out", png, "--size", "0", "0"],
+               "argument --size: must be positive and finite, got '0'")
+    assert not png.exists()
+
+
+def test_p0_beyond_the_shape_index_limit_is_refused(capsys, tmp_path):
+    _one_error(capsys, ["rigidity", "--cells", "16", "--p0", "1e300", "--out", tmp_path / "sweep"],
+               "argument --p0: must be finite numbers in (0, 100], got [1e+300]")
+    _one_error(capsys, ["minimize", "--p0", "1e300"], "argument --p0: must be a number in [0, 100], got '1e300'")
+    _one_error(capsys, ["dynamics", "--p0", "101"], "argument --p0: must be a number in [0, 100], got '101'")
+
+
+def test_single_p0_sweep_with_plots_is_silent_under_quiet(capsys, tmp_path):
+    """matplotlib warned about a legend with no labelled curve (no p0* at one p0 value)."""
+    rc, err = _cli(capsys, "rigidity", "--cells", "16", "--p0", "3.8", "--replicas", "2", "--device", "cpu", "-j", "1",
+                   "-q", "--out", tmp_path / "one")
+    assert rc == 0 and err == ""
+    assert (tmp_path / "one" / "fraction.csv").exists()
+
+
+def test_restart_takes_the_files_seed_and_notes_another(runs, capsys):
+    """No raw Python warning: the file's seed by default, another --seed with one note (none with -q)."""
+    path = runs / "sphere.gsd"
+    argv = ["minimize", "--restart", path, "--max-steps", "5", "--device", "cpu"]
+    rc, err = _cli(capsys, *argv, "--out", runs / "restart_a.gsd")
+    assert rc == 0 and "note" not in err and "Warning" not in err, err
+    assert svm.gsdio.Reader(runs / "restart_a.gsd").checkpoint(-1)["simulation"]["seed"][0] == 3
+    rc, err = _cli(capsys, *argv, "--seed", "5", "--out", runs / "restart_b.gsd")
+    assert rc == 0 and err.splitlines()[0] == (f"spherevm: note: --seed 5 replaces the seed 3 of the run in {path}: "
+                                               "the random numbers from here on differ from that run's"), err
+    assert svm.gsdio.Reader(runs / "restart_b.gsd").checkpoint(-1)["simulation"]["seed"][0] == 5
+    assert _cli(capsys, *argv, "--seed", "5", "-q") == (0, "")
+
+
+# ------------------------------------------------------------------ issue 36, item 8: work a user cannot mean
+def test_export_refuses_a_mesh_that_cannot_fit(runs, capsys):
+    rc, err = _cli(capsys, "export", runs / "sphere.gsd", "--to", runs / "x.ply", "--subdivisions", "100000")
+    assert rc == 2 and err.startswith("spherevm: error: a mesh of ") and err.count("\n") == 1, err
+    assert "x subdivisions^2 = 100000^2 (" in err and "TiB of host memory, but only" in err and \
+        "lower subdivisions" in err
+    assert not (runs / "x.ply").exists()
+
+
+def test_render_refuses_a_picture_past_matplotlibs_limit(runs, capsys, monkeypatch):
+    _one_error(capsys, ["render", runs / "sphere.gsd", "--out", runs / "x.png", "--dpi", "100000"],
+               "size (6.0, 5.0) inches at dpi 100000 is 600000 x 500000 pixels; matplotlib draws at most 65535 "
+               "pixels per side: lower dpi or size")
+    monkeypatch.setattr(svm.validation, "available_host_memory", lambda: 2 ** 30)    # 40000^2 x 8 B = 12 GiB
+    with pytest.raises(svm.validation.InsufficientMemory, match=r"^a picture of 40000 x 40000 pixels \(size \(100.0, "
+                                                                r"100.0\) at dpi 400\) needs about 11.9 GiB"):
+        svm.render.render_state(svm.init.random_tiling(16), runs / "x.png", size=(100, 100), dpi=400)
+
+
+def test_check_force_samples_are_limited():
+    from spherevm.testing import MAX_SAMPLES, check_force
+    with pytest.raises(ValueError, match=rf"^samples must be an integer in \[1, {MAX_SAMPLES}\], got 1000000$"):
+        check_force(VertexModel.dimensionless(kr=1.0, p0=3.8), svm.init.random_tiling(16), samples=10 ** 6)
+
+
+# ------------------------------------------------------------------ issue 36, item 9: flags ignored or doubled
+@pytest.mark.parametrize("flags, message", [
+    (["--force", "bending:B=1,B=2"],
+     "argument --force: force 'bending': parameter B is given twice in 'bending:B=1,B=2'; give it once"),
+    (["--bending", "1", "--force", "bending:B=2"],
+     "argument --bending: --bending 1 and --force bending add the same force twice; give each force once"),
+    (["--force", "bending:B=1", "--force", "bending:B=2"],
+     "argument --force: --force bending and --force bending add the same force twice; give each force once"),
+])
+def test_a_force_given_twice_is_refused(capsys, flags, message):
+    _one_error(capsys, ["minimize", "--cells", "16", "--replicas", "1", "--max-steps", "5", "--device", "cpu", "-q",
+                        *flags], message)
+
+
+@pytest.mark.parametrize("command", ["minimize", "dynamics"])
+@pytest.mark.parametrize("file, flags, message", [
+    ("plane.gsd", ["--surface", "sphere"], "argument --surface: sphere, but --restart '{}' holds a tissue on the "
+                                           "plane"),
+    ("sphere.gsd", ["--surface", "plane"], "argument --surface: plane, but --restart '{}' holds a tissue on the "
+                                           "sphere"),
+    ("sphere.gsd", ["--cells", "32"], "argument --cells: 32, but --restart '{}' holds 16 cells per replica"),
+    ("sphere.gsd", ["--replicas", "3"], "argument --replicas: 3, but --restart '{}' holds 2 replica(s)"),
+])
+def test_restart_refuses_a_contradicting_flag(runs, capsys, command, file, flags, message):
+    path = runs / file
+    _one_error(capsys, [command, "--restart", path, "--device", "cpu", "-q", *flags],
+               message.format(path) + f"; leave {flags[0]} out with --restart")
+
+
+def test_restart_takes_a_flag_that_agrees(runs, capsys):
+    rc, err = _cli(capsys, "dynamics", "--restart", runs / "plane.gsd", "--surface", "plane", "--cells", "16",
+                   "--replicas", "2", "--steps", "5", "--device", "cpu", "-q")
+    assert rc == 0 and err == "", err

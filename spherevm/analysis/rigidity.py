@@ -373,6 +373,13 @@ def size_colors(sizes):
     return {n: cmap(i / (len(sizes) - 1)) for i, n in enumerate(sizes)}
 
 
+def _legend(ax, **options):
+    """A legend of the labelled curves; none when nothing is labelled (p0* of no N is known, for
+    example a sweep of one p0 value), where matplotlib would warn."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(**options)
+
+
 def plot_transition(fractions, p0star, density, ax=None, inset=True, pentagons=True):
     """Fig. 2 (right) of the paper: distributions of p0* per N with F(p0) in an inset, and a
     pentagon marker at the regular-pentagon perimeter of each N (``pentagons=False``: none, as the
@@ -396,7 +403,7 @@ def plot_transition(fractions, p0star, density, ax=None, inset=True, pentagons=T
     ax.set_xlabel(r"$p_0^*$")
     ax.set_ylabel(r"$P(p_0^*) = \partial F / \partial p_0$")
     ax.axhline(0, color="0.6", lw=0.6, zorder=0)
-    ax.legend(fontsize=8, loc="upper right", frameon=False)
+    _legend(ax, fontsize=8, loc="upper right", frameon=False)
     if inset:
         ax.set_ylim(-0.06 * max(ymax, 1.0), 1.8 * max(ymax, 1e-9))   # room for the inset above the curves
         ins = ax.inset_axes([0.08, 0.6, 0.34, 0.36])
@@ -432,7 +439,7 @@ def plot_fraction(fractions, ax=None):
     ax.set_xlabel(r"$p_0$")
     ax.set_ylabel(r"$F(p_0, N)$: fraction of zero-energy states")
     ax.set_ylim(-0.03, 1.03)
-    ax.legend(fontsize=8, frameon=False)
+    _legend(ax, fontsize=8, frameon=False)
     return fig
 
 
@@ -458,7 +465,7 @@ def plot_p0_star(p0star, ax=None, surface: str = "sphere"):
     ax.xaxis.set_minor_formatter(NullFormatter())
     ax.set_xlabel("N (cells)")
     ax.set_ylabel(r"$p_0^*$")
-    ax.legend(fontsize=8, frameon=False, loc="lower right")
+    _legend(ax, fontsize=8, frameon=False, loc="lower right")
     return fig
 
 
@@ -483,5 +490,5 @@ def plot_critical_perimeter(p0star, mean_area=None, ax=None, dashed=1024):
             ax.plot(a, critical_perimeter(p, a), color=colors[n], lw=1.8, label=f"N = {n}")
     ax.set_xlabel(r"$\langle A \rangle$")
     ax.set_ylabel(r"$P_0^*(N, \langle A \rangle) = \sqrt{\langle A \rangle}\, p_0^*(N)$")
-    ax.legend(fontsize=8, frameon=False)
+    _legend(ax, fontsize=8, frameon=False)
     return fig

@@ -22,6 +22,7 @@ from __future__ import annotations
 import importlib
 import os
 import sys
+import warnings
 
 PROG = "spherevm"
 COMMAND_NAMES = ("minimize", "dynamics", "rigidity", "info", "plugins", "export", "render", "repair")
@@ -68,6 +69,16 @@ def build_parser():
     return parser
 
 
+def _as_flag(args, exc) -> str:
+    """The one-line message of ``exc``; a library ParameterError about a parameter that is also a
+    flag of this command as argparse reports that flag (``argument --replica: must be ...``)."""
+    from ..validation import ParameterError
+    from .arguments import one_line
+    if isinstance(exc, ParameterError) and hasattr(args, exc.name):
+        return f"argument --{exc.name.replace('_', '-')}: must be {exc.allowed}, got {exc.value!r}"
+    return one_line(exc)
+
+
 def _report(message):
     sys.stderr.write(f"{PROG}: error: {message}\n")
     sys.stderr.flush()
@@ -101,7 +112,8 @@ def _main(argv):
         _report(f"no command given; choose one of: {', '.join(COMMAND_NAMES)} (see spherevm --help)")
         return USAGE_ERROR
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():     # a filter a subcommand sets ends with it
+            return int(args.func(args) or 0)
     except CLIError as exc:
         if args.debug:
             raise
@@ -116,7 +128,7 @@ def _main(argv):
     except (ValueError, TypeError, FileNotFoundError) as exc:
         if args.debug:
             raise
-        _report(one_line(exc))
+        _report(_as_flag(args, exc))
         return USAGE_ERROR
     except Exception as exc:
         if args.debug:

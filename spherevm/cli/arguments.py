@@ -5,8 +5,13 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
+import warnings
+
+import numpy as np
 
 from .. import validation
+from ..runs import CheckpointMismatchWarning
 
 USAGE_ERROR = 2     # bad arguments or bad input
 RUNTIME_ERROR = 1   # something failed while running
@@ -45,9 +50,15 @@ def integer(minimum=0):
     return _argument_type(int, validation.integer, minimum=minimum)
 
 
-def real(strict=False):
-    """argparse type: a finite number >= 0, > 0 with ``strict`` (:func:`spherevm.validation.real`)."""
-    return _argument_type(float, validation.real, strict=strict)
+def real(strict=False, maximum=None):
+    """argparse type: a finite number >= 0, > 0 with ``strict``, at most ``maximum`` if given
+    (:func:`spherevm.validation.real`)."""
+    return _argument_type(float, validation.real, strict=strict, maximum=maximum)
+
+
+def shape_index():
+    """argparse type of ``--p0``: a target shape index in [0, 100] (``validation.SHAPE_INDEX_MAX``)."""
+    return real(maximum=validation.SHAPE_INDEX_MAX)
 
 
 def check_out_path(path, flag="--out"):
@@ -123,12 +134,72 @@ def add_frame_arguments(parser, replica_default, replica_help):
 SURFACES = ("sphere", "plane")
 
 
-def add_surface(group, what="tilings"):
+def add_surface(group, what="tilings", restart=False):
     """``--surface {sphere,plane}``: random tilings of the sphere (radius sqrt(N/4 pi)) or of the
-    periodic plane (square box of side sqrt(N)); <A> = 1 on both."""
-    group.add_argument("--surface", choices=SURFACES, default="sphere",
+    periodic plane (square box of side sqrt(N)); <A> = 1 on both. ``restart``: the command has
+    ``--restart``, whose file decides (the default is then None, see :func:`settle_restart`)."""
+    default = "sphere; with --restart, the file's" if restart else "sphere"
+    group.add_argument("--surface", choices=SURFACES, default=None if restart else "sphere",
                        help=f"{what} on the sphere (radius sqrt(N/4 pi)) or the periodic plane (square box of side "
-                            "sqrt(N), N >= 8) (default: %(default)s)")
+                            f"sqrt(N), N >= 8) (default: {default})")
+
+
+# ---------------------------------------------------------------------------------------- restart
+#: what ``minimize`` and ``dynamics`` take when neither the command line nor a --restart file says
+SYSTEM_DEFAULTS = {"cells": 64, "replicas": 4, "seed": 0, "surface": "sphere"}
+SEED_WARNING = r".*the checkpoint was written by a Simulation with seed"
+
+
+def add_system_arguments(group, replicas_help, seed_help):
+    """``--cells``, ``--replicas`` and ``--seed`` of a command with ``--restart``: None unless given
+    (:func:`settle_restart` fills them in from :data:`SYSTEM_DEFAULTS` or the file)."""
+    def default(name):
+        return f"(default: {SYSTEM_DEFAULTS[name]}; with --restart, the file's)"
+    group.add_argument("--cells", "-N", type=integer(4), default=None, metavar="N",
+                       help=f"cells per replica, >= 4 {default('cells')}")
+    group.add_argument("--replicas", "-R", type=integer(1), default=None, metavar="R",
+                       help=f"{replicas_help} {default('replicas')}")
+    group.add_argument("--seed", type=integer(0), default=None, help=f"{seed_help} {default('seed')}")
+
+
+def settle_restart(args):
+    """Fill in ``--cells``, ``--replicas``, ``--surface`` and ``--seed`` (None when not given):
+    :data:`SYSTEM_DEFAULTS` without ``--restart``; with it, the file's tissue and seed. A
+    ``--cells``, ``--replicas`` or ``--surface`` that contradicts the file is refused (CLIError
+    naming both flags); a ``--seed`` other than the file's wins, with a one-line note (none under
+    ``--quiet``) instead of the library's warning."""
+    given = {name: getattr(args, name) for name in SYSTEM_DEFAULTS}
+    if args.restart is None:
+        for name, value in SYSTEM_DEFAULTS.items():
+            setattr(args, name, value if given[name] is None else given[name])
+        return
+    from ..constraints import PeriodicPlane, Sphere
+    from ..gsdio import Reader
+    with Reader(args.restart) as reader:
+        state = reader.state(-1, validate=False)
+        saved = reader.checkpoint(-1)["simulation"].get("seed")
+    counts = np.unique(state.cells_per_replica)
+    surface = ("plane" if isinstance(state.constraint, PeriodicPlane) else "sphere"
+               if isinstance(state.constraint, Sphere) else repr(state.constraint))
+    found = {"cells": int(counts[0]) if len(counts) == 1 else counts.tolist(), "replicas": state.n_replicas,
+             "surface": surface}
+    what = {"cells": f"{found['cells']} cells per replica", "replicas": f"{found['replicas']} replica(s)",
+            "surface": f"a tissue on the {surface}"}
+    for name, text in what.items():
+        if given[name] is not None and given[name] != found[name]:
+            raise CLIError(f"argument --{name}: {given[name]}, but --restart {args.restart!r} holds {text}; leave "
+                           f"--{name} out with --restart")
+        setattr(args, name, found[name])
+    saved = None if saved is None else int(saved[0])
+    # a command continues another's file by design (dynamics from a minimize file: FIRE's saved state
+    # stays unused; minimize from a dynamics file: FIRE starts afresh), so the mismatch is no news here
+    warnings.filterwarnings("ignore", category=CheckpointMismatchWarning)
+    args.seed = given["seed"] if given["seed"] is not None else (saved or 0)
+    if saved is not None and args.seed != saved:
+        warnings.filterwarnings("ignore", message=SEED_WARNING)      # said here, on one line
+        if not args.quiet:
+            sys.stderr.write(f"spherevm: note: --seed {args.seed} replaces the seed {saved} of the run in "
+                             f"{args.restart}: the random numbers from here on differ from that run's\n")
 
 
 def force_spec(text):
@@ -140,12 +211,16 @@ def force_spec(text):
     params = {}
     for item in filter(None, (p.strip() for p in rest.split(","))):
         key, eq, value = item.partition("=")
-        if not eq or not key.strip():
+        key = key.strip()
+        if not eq or not key:
             raise argparse.ArgumentTypeError(f"force {name!r}: expected key=value, got {item!r}")
+        if key in params:
+            raise argparse.ArgumentTypeError(f"force {name!r}: parameter {key} is given twice in {text!r}; give it "
+                                             "once")
         try:
-            params[key.strip()] = float(value)
+            params[key] = float(value)
         except ValueError:
-            params[key.strip()] = value.strip()
+            params[key] = value.strip()
     return name, params
 
 
@@ -163,13 +238,21 @@ def extra_forces(args) -> list:
     constructor (CLIError naming the plugin and parameter, status 2)."""
     from .. import plugins
     specs = list(getattr(args, "forces", None) or [])
+    flags = [f"--force {name}" for name, _ in specs]
     if getattr(args, "bending", None) is not None:
         specs.append(("bending", {"B": args.bending}))
-    for name, params in specs:
+        flags.append(f"--bending {args.bending:g}")
+    seen = {}
+    for (name, params), flag in zip(specs, flags):
         try:
+            cls = plugins.load(name)
             plugins.build_force(name, params)
         except (ValueError, TypeError) as exc:
             raise CLIError(f"argument --force: {one_line(exc)}") from exc
+        if cls in seen:     # two of one force add up: B=1 and B=2 would silently be B=3
+            raise CLIError(f"argument {flag.split()[0]}: {flag} and {seen[cls]} add the same force twice; "
+                           "give each force once")
+        seen[cls] = flag
     return specs
 
 

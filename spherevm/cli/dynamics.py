@@ -9,8 +9,8 @@ import numpy as np
 
 from ..progress import StageBars
 from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_overwrite, add_surface,
-                        build_forces, check_existing, check_in_path, check_out_path, extra_forces, integer, one_line,
-                        real, resume_hint)
+                        add_system_arguments, build_forces, check_existing, check_in_path, check_out_path,
+                        extra_forces, integer, one_line, real, resume_hint, settle_restart, shape_index)
 
 
 def add_parser(subparsers):
@@ -21,13 +21,11 @@ def add_parser(subparsers):
                                           "centroids at log-spaced times, and report MSD, self-overlap Q_s and "
                                           "tau_alpha (Q_s = 1/e) in the co-rotating frame.")
     g = d.add_argument_group("system")
-    g.add_argument("--cells", "-N", type=integer(4), default=64, metavar="N", help="cells per replica (default: %(default)s)")
-    g.add_argument("--replicas", "-R", type=integer(1), default=4, metavar="R",
-                   help="independent tissues, averaged (default: %(default)s)")
-    g.add_argument("--seed", type=integer(0), default=0, help="random seed (default: %(default)s)")
-    g.add_argument("--p0", type=real(), default=3.775, metavar="P", help="target shape index (default: %(default)s)")
+    add_system_arguments(g, "independent tissues, averaged", "random seed")
+    g.add_argument("--p0", type=shape_index(), default=3.775, metavar="P",
+                   help="target shape index, in [0, 100] (default: %(default)s)")
     g.add_argument("--kr", type=real(), default=0.0, metavar="K", help="area stiffness (default: %(default)s)")
-    add_surface(g)
+    add_surface(g, restart=True)
     add_force_arguments(g)
     g = d.add_argument_group("dynamics")
     g.add_argument("--T", "-T", dest="T", type=real(), default=0.01, help="temperature, >= 0 (default: %(default)s)")
@@ -43,7 +41,8 @@ def add_parser(subparsers):
                    help="GSD trajectory of the production run; the --restart file itself is appended to")
     g.add_argument("--restart", default=None, metavar="FILE.gsd",
                    help="continue from the last frame of a spherevm GSD file (its state and timestep); "
-                        "skips relaxation and equilibration, ignores --cells and --replicas")
+                        "skips relaxation and equilibration; the file gives --cells, --replicas, --surface and --seed "
+                        "(a contradicting value is refused; another --seed wins, with a note)")
     g.add_argument("--csv", default=None, metavar="FILE.csv", help="time, MSD and Q_s (default: next to --out, else none)")
     add_overwrite(g)
     g.add_argument("--device", choices=("cpu", "gpu", "auto"), default="auto", help="where to run (default: %(default)s)")
@@ -60,6 +59,7 @@ def run(args) -> int:
             check_out_path(path, flag)
     if args.restart is not None:
         check_in_path(args.restart, "--restart")
+    settle_restart(args)
     specs = extra_forces(args)
     csv_path = args.csv or (os.path.splitext(args.out)[0] + ".csv" if args.out else None)
     for path, flag in ((args.out, "--out"), (csv_path, "--csv")):

@@ -6,8 +6,9 @@ import time
 
 from ..progress import MinimizeBar
 from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_overwrite, add_surface,
-                        build_forces, check_existing, check_in_path, check_out_path, extra_forces, gsd_frames, integer,
-                        one_line, real, resume_hint)
+                        add_system_arguments, build_forces, check_existing, check_in_path, check_out_path,
+                        extra_forces, gsd_frames, integer, one_line, real, resume_hint, settle_restart,
+                        shape_index)
 
 
 def add_parser(subparsers):
@@ -17,13 +18,9 @@ def add_parser(subparsers):
                                           "E/(kP <A>) = sum kr (a - 1)^2 + (p - p0)^2 and print one row per "
                                           "replica. Progress goes to standard error, the table to standard output.")
     g = m.add_argument_group("system")
-    g.add_argument("--cells", "-N", type=integer(4), default=64, metavar="N",
-                   help="cells per replica, >= 4 (default: %(default)s)")
-    g.add_argument("--replicas", "-R", type=integer(1), default=4, metavar="R",
-                   help="independent tilings, minimised together (default: %(default)s)")
-    g.add_argument("--seed", type=integer(0), default=0, help="random seed of the tilings (default: %(default)s)")
-    g.add_argument("--p0", type=real(), default=3.8, metavar="P",
-                   help="target shape index p0 = P0/sqrt(<A>), >= 0 (default: %(default)s)")
+    add_system_arguments(g, "independent tilings, minimised together", "random seed of the tilings")
+    g.add_argument("--p0", type=shape_index(), default=3.8, metavar="P",
+                   help="target shape index p0 = P0/sqrt(<A>), in [0, 100] (default: %(default)s)")
     g.add_argument("--kr", type=real(), default=1.0, metavar="K",
                    help="area stiffness kr = kA <A>/kP, >= 0 (default: %(default)s)")
     g.add_argument("--t1", type=real(strict=True), default=0.04, metavar="THRESHOLD",
@@ -31,7 +28,7 @@ def add_parser(subparsers):
                         "new edges 3 x THRESHOLD long (default: %(default)s)")
     g.add_argument("--no-t1", dest="t1", action="store_const", const=None,
                    help="no T1 exchanges (edges may then collapse and stall the minimisation)")
-    add_surface(g)
+    add_surface(g, restart=True)
     add_force_arguments(g)
     g = m.add_argument_group("minimiser")
     g.add_argument("--dt", type=real(strict=True), default=0.02, help="FIRE time step, > 0 (default: %(default)s)")
@@ -51,7 +48,8 @@ def add_parser(subparsers):
     g.add_argument("--restart", default=None, metavar="FILE.gsd",
                    help="continue from the last frame of a spherevm GSD file: its state, timestep and FIRE state "
                         "(velocities, dt, alpha, convergence); FIRE goes on (resume) unless --fresh-fire; "
-                        "ignores --cells and --replicas")
+                        "the file gives --cells, --replicas, --surface and --seed (a contradicting value is "
+                        "refused; another --seed wins, with a note)")
     g.add_argument("--fresh-fire", action="store_true",
                    help="with --restart: start FIRE afresh from the restored state instead of continuing it")
     g.add_argument("--write-every", type=integer(0), default=1000, metavar="STEPS",
@@ -84,6 +82,7 @@ def run(args) -> int:
 
     if args.restart is not None:
         check_in_path(args.restart, "--restart")
+    settle_restart(args)
     if args.out is not None:
         check_out_path(args.out)
         check_existing(args.out, "--out", args.overwrite, args.restart)
@@ -103,7 +102,6 @@ def run(args) -> int:
             sim.state = tiling(args.cells, replicas=args.replicas, seed=args.seed)
         else:
             sim.create_state_from_gsd(args.restart)
-            args.cells, args.replicas = sim.state.cells_per_replica, sim.state.n_replicas
         sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=args.kr, p0=args.p0))
         sim.operations.forces.extend(build_forces(specs))
         if args.t1 is not None:

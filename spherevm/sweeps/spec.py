@@ -8,7 +8,7 @@ import numpy as np
 
 from ..init_plane import MIN_PLANAR_CELLS
 from ..plugins.updaters.t1 import PRESETS
-from ..validation import integer, positive, real
+from ..validation import SHAPE_INDEX_MAX, ParameterError, integer, positive, real
 
 
 @dataclass(frozen=True)
@@ -24,7 +24,7 @@ class RigiditySweep:
     cells : tuple of int
         Cells per tiling, each >= 4, no duplicates (sorted for you).
     p0 : tuple of float
-        The target shape indices, non-empty, finite, > 0 and strictly increasing.
+        The target shape indices, non-empty, in (0, 100] (``SHAPE_INDEX_MAX``) and strictly increasing.
     replicas : int
         Random tilings per (N, p0), >= 1.
     kr : float
@@ -92,8 +92,8 @@ class RigiditySweep:
             raise ValueError(f"p0 must be a list of numbers, got {self.p0!r}") from None
         if len(p0) == 0:
             raise ValueError("p0 grid is empty: give at least one value (two or more to locate p0*)")
-        if not np.all(np.isfinite(p0)) or np.any(p0 <= 0):
-            raise ValueError(f"p0 values must be finite and > 0, got {p0.tolist()}")
+        if not np.all(np.isfinite(p0)) or np.any(p0 <= 0) or np.any(p0 > SHAPE_INDEX_MAX):
+            raise ParameterError("p0", p0.tolist(), f"finite numbers in (0, {SHAPE_INDEX_MAX:g}]")
         if np.any(np.diff(p0) <= 0):
             i = int(np.flatnonzero(np.diff(p0) <= 0)[0])
             raise ValueError(f"p0 grid must be strictly increasing: p0[{i}] = {p0[i]:g} is followed by "

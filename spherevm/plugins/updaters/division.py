@@ -255,7 +255,10 @@ class Division(Updater):
         rep = state.cell_replica_np()[cells]
         editor = growth.Editor(state)
         if callable(self.axis):
-            given = np.asarray(self.axis(simulation, cells), dtype=np.float64).reshape(len(cells), 3)
+            given = np.asarray(state.device.to_numpy(self.axis(simulation, cells)), dtype=np.float64)
+            if given.shape != (len(cells), 3):
+                raise ValueError(f"Division: the axis function returned shape {given.shape}; it must return one "
+                                 f"3-D direction per cell to divide, shape ({len(cells)}, 3)")
         elif self.axis == "random":
             angles = rng.TWO_PI * self._draws(simulation, timestep, cells)[:, 1]
         outcome = []

@@ -90,10 +90,18 @@ class RadiusSchedule(Updater):
             return state.radius_np()
         if self.mode == "constant_area":
             return np.sqrt(state.cells_per_replica * self.target_area / (4.0 * np.pi))
-        r = np.broadcast_to(np.asarray(self.mode(simulation), dtype=np.float64), (state.n_replicas,)).copy()
+        n, given = state.n_replicas, self.mode(simulation)
+        try:
+            r = np.asarray(state.device.to_numpy(given), dtype=np.float64)     # a CuPy array too
+        except (TypeError, ValueError):
+            r = np.full(n, np.nan)          # not numbers: refused below, as a bad radius
+        if r.ndim > 1 or r.size not in (1, n):
+            raise ValueError(f"RadiusSchedule: the radius function returned shape {r.shape}; it must return a "
+                             f"scalar or one radius per replica ({n})")
         if not np.all(np.isfinite(r)) or np.any(r <= 0):
-            raise ValueError(f"the radius schedule returned {r.tolist()}; radii must be positive and finite")
-        return r
+            raise ValueError(f"RadiusSchedule: the radius function returned {given!r}; radii must be positive "
+                             "and finite")
+        return np.broadcast_to(r.reshape(-1), (n,)).copy()
 
     def update(self, simulation, timestep):
         state = simulation.state

@@ -110,6 +110,19 @@ def test_documented_line_tension_kernel_matches_the_numpy_plugin(tmp_path):
     np.testing.assert_allclose(cell_energy, want.cell_energy, rtol=1e-12)
 
 
+def test_the_example_plugin_ships_the_documented_kernel():
+    """tests/plugin_example's FastLineTension compiles the kernel of docs/plugins.md, character for
+    character (its fused stage calls the same line_tension_force)."""
+    sys.path.insert(0, str(ROOT / "tests" / "plugin_example"))
+    try:
+        import spherevm_line_tension
+    finally:
+        sys.path.remove(str(ROOT / "tests" / "plugin_example"))
+    documented = next(p.values[0] for p in BLOCKS if "line_tension(" in p.values[0])
+    assert spherevm_line_tension.KERNEL == documented
+    assert spherevm_line_tension.STAGE.startswith(documented)
+
+
 def _named_in_kernel_comments():
     names = set()
     for path in sorted(PACKAGE.rglob("*.cu*")):

@@ -8,6 +8,8 @@ every few steps; ensembles mix tissue sizes, and a 1,100-cell tissue has more ve
 block has threads. Minimisations (FIRE + T1) are compared the same way: FIRE's state, the
 convergence results and T1's flip-back memory too.
 """
+import pathlib
+
 import numpy as np
 import pytest
 
@@ -29,12 +31,15 @@ def ensemble(surface, sizes):
     return svm.State.concatenate([tiling(n, seed=3 + i) for i, n in enumerate(sizes)])
 
 
-def three_runs(state, steps, t1=True, T=0.3, integrator=None, **run):
+def three_runs(state, steps, t1=True, T=0.3, integrator=None, extra=None, **run):
     """``(snapshot, timestep, T1 counters)`` of the same run, fused, in graphs and step by step
-    (``integrator()``: another than Brownian; its directors join the snapshot)."""
+    (``integrator()``: another than Brownian, its directors join the snapshot; ``extra()``: a force
+    added after the vertex model)."""
     out = []
     for way in WAYS:
         sim = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=T) if integrator is None else integrator())
+        if extra is not None:
+            sim.operations.forces.append(extra())
         if not t1:
             sim.operations.updaters.clear()
         sim.run(steps, **run, **way)
@@ -101,6 +106,23 @@ def test_active_dynamics_fuse_with_the_general_kernels_bits(monkeypatch, directo
     active = lambda: Active(dt=0.01, v0=0.5, Dr=0.5, T=0.05, directors=directors)   # noqa: E731
     assert tissue_steps.why_not(dynamics_simulation(state, "gpu", active())) is None
     assert_same(three_runs(state, 150, integrator=active, check_every=64))
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize("per_block", [10 ** 6, 300])
+def test_a_users_force_fuses_with_the_step_by_step_bits(monkeypatch, per_block):
+    """The example plugin's line tension (tests/plugin_example: a CUDA string with its force function
+    and a fused stage) joins the vertex model, T1 and Brownian dynamics in the fused steps, on one
+    block and on clusters: the same trajectory as its own kernel step by step and in graphs."""
+    monkeypatch.syspath_prepend(str(pathlib.Path(__file__).parent / "plugin_example"))
+    from spherevm_line_tension import FastLineTension
+    monkeypatch.setattr(tissue_steps, "VERTICES_PER_BLOCK", per_block)
+    state = ensemble("sphere", (300, 60))
+    sim = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=0.2))
+    sim.operations.forces.append(FastLineTension(0.3))
+    assert tissue_steps.why_not(sim) is None
+    assert "fused" in sim.explain()
+    assert_same(three_runs(state, 150, T=0.2, extra=lambda: FastLineTension(0.3), check_every=64))
 
 
 @pytest.mark.gpu

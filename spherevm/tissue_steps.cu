@@ -164,9 +164,10 @@ struct NoPass {
 // the step's positions (a barrier); if any edge is short, the first block checks and flips them and
 // computes again the four cells of each flip (a flip moves and re-links only its four cells, and the
 // flips of a pass share no cell: T1's claims), then a barrier; then the forces and the move of every
-// block's vertices (a barrier), and where the move has a cell part (active cell directors) every
-// block's cells (a barrier). The cells are those the general path computes after T1's pass, with
-// two or three barriers a step instead of four.
+// block's vertices (a barrier). Where the move has a cell part (active cell directors), every block
+// does its cells' part of a step's move with the next step's first phase (on the positions before
+// that step's flips, as the general path does it) and after the last step. The cells are those the
+// general path computes after T1's pass, with two or three barriers a step instead of four.
 template <class Forces, class Move, class Pass>
 __device__ __forceinline__ void tissue_steps_body(const TissueState& st, const Forces& forces, const Move& move,
                                                   const Pass& pass, unsigned long long step0, int steps)
@@ -218,6 +219,10 @@ __device__ __forceinline__ void tissue_steps_body(const TissueState& st, const F
         const KeptNorm norm = {shared + inv_now};
         if (Pass::present)   // the pass begins: every block lists the short edges of its vertices
             pass.detect(P, st.vn, st.vc, s, r, vb0, vb1, v0, v1, flipping, count, rank == 0);
+        if constexpr (Move::cell_phase)   // the last step's move, its cell part (active cell directors)
+            if (step > 0)
+                for (int c = cb0 + tid; c < cb1; c += stride)
+                    move.cell(P, st.cell_vertices, st.sides, st.max_sides, c, timestep - 1);
         if constexpr (Forces::measures)   // this block's cells, their coefficients to the other blocks
             tissue_cells<Surface>(P, norm, st.cell_vertices, st.sides, st.max_sides, s, cb1 - cb0,
                                   [=](int i) { return cb0 + i; }, lanes, forces, coef, nc, c0, send);
@@ -250,13 +255,13 @@ __device__ __forceinline__ void tissue_steps_body(const TissueState& st, const F
             keep_norm(bases, inv_next, next, v);
         }
         cluster_sync();
-        if constexpr (Move::cell_phase) {   // the move's cell part on the new positions (active cell directors)
-            for (int c = cb0 + tid; c < cb1; c += stride)
-                move.cell(next, st.cell_vertices, st.sides, st.max_sides, c, timestep);
-            cluster_sync();
-        }
         now = 1 - now;
     }
+    if constexpr (Move::cell_phase)   // the last step's cell part, on its new positions
+        if (steps > 0)
+            for (int c = cb0 + tid; c < cb1; c += stride)
+                move.cell(shared + at_pos + 3L * nv * now, st.cell_vertices, st.sides, st.max_sides, c,
+                          step0 + steps - 1);
     for (int j = 3 * (vb0 - v0) + tid; j < 3 * (vb1 - v0); j += stride)
         st.pos[3L * v0 + j] = shared[at_pos + 3L * nv * now + 3L * v0 + j];
 }

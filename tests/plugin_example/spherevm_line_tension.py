@@ -81,8 +81,10 @@ KERNEL = r"""#include "geometry/sphere.cuh"
 #include "device_common.cuh"
 
 // The line tension's force on vertex v: minus the surface gradient of tension R times its three
-// geodesic edge lengths (pos indexed by global vertex index, vn the vertex_neighbors table).
-__device__ __forceinline__ vec3 line_tension_force(const double* pos, const int* vn, long v, double R,
+// geodesic edge lengths (pos indexed by global vertex index, vn the vertex_neighbors table). Not
+// inlined, so that the kernel below and the fused stage run the same instructions: inlined, the
+// compiler would share work with the kernel's energy loop and round differently.
+__device__ __noinline__ vec3 line_tension_force(const double* pos, const int* vn, long v, double R,
                                                    double tension)
 {
     vec3 x = load3(pos, v);

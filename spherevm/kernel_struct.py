@@ -54,6 +54,16 @@ class KernelStruct:
     def pack(self, **values) -> np.void:
         """A record of the struct's layout holding ``values`` (CuPy arrays for pointers, or None).
 
+        Parameters
+        ----------
+        **values
+            One value per field, by name.
+
+        Returns
+        -------
+        numpy.void
+            The record, which CuPy passes to a kernel by value.
+
         Raises
         ------
         ValueError

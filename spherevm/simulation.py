@@ -20,8 +20,7 @@ from .validation import GPU_RUN_BYTES_PER_CELL, check_memory, integer
 
 @dataclass
 class _ForceCache:
-    """What :meth:`Simulation.compute_forces` keeps for the current state, and the convergence
-    summary read from it (:meth:`Simulation.replica_summary`: the device array, then its host copy)."""
+    """The forces of the current state and their convergence summary (device array, host copy)."""
     forces: object
     energy: object
     cell_energy: object
@@ -388,6 +387,11 @@ class Simulation(RunRecords):
         """Which executor (step by step, CUDA graphs, fused) would run each operation of a
         ``run(steps)`` (``minimize``: of a ``minimize(max_steps=steps)``) now, and why.
 
+        Parameters
+        ----------
+        minimize : bool
+        steps : int
+
         Returns
         -------
         str
@@ -450,14 +454,12 @@ class Simulation(RunRecords):
         progress : callable, optional
             ``progress(step, n_done, n_replicas)``, called at every check.
         narrow : bool
-            Once at most half of the replicas run, step a State of those alone (the same numbers;
-            without writers, with ``narrowable`` operations).
+            Once at most half run, step a State of those alone (same numbers; no writers, ``narrowable`` ops).
         resume : bool
             False: start afresh (FIRE's velocities, dt, alpha reset). True: go on for ``max_steps`` more
             (``minimize(1000)`` then ``minimize(1000, resume=True)`` is bitwise ``minimize(2000)``).
         graphs, fused : bool, optional
-            As in :meth:`run`, for the iterations between two checks (the same minimisation bit for
-            bit); a ``progress`` callback must not change the operations' parameters then.
+            As in :meth:`run`, for the iterations between two checks (the same minimisation bit for bit).
 
         Returns
         -------

@@ -104,7 +104,7 @@ def edges(vertex_neighbors):
     return np.stack([u[keep], v[keep]], axis=1).astype(np.int32)
 
 
-def check(state, tol: float = 1e-9, orientation: bool = True, cover: bool = True):
+def check(state, tol: float = 1e-9, orientation: bool = True, cover: bool = True, simple: bool = True):
     """Validate a State; raise ValueError naming the first offending cell or vertex.
 
     Checks: finite positions on the surface, trivalent network with reciprocal neighbours, cell
@@ -114,8 +114,8 @@ def check(state, tol: float = 1e-9, orientation: bool = True, cover: bool = True
     (their areas add up to its area, none over a hemisphere), simple (no edge crossing another of
     its cell) and counter-clockwise (positive area) cells. ``orientation=False`` skips the last two:
     at kA = 0 the energy does not care about area, and minimisation may legitimately fold a cell
-    over. ``cover=False`` skips all of them, for networks that are not physical states (random
-    walks of T1 tests on tiny spheres).
+    over; ``simple=False`` skips the crossing test alone. ``cover=False`` skips all of them, for
+    networks that are not physical states (random walks of T1 tests on tiny spheres).
     """
     pos = state.device.to_numpy(state.positions)
     vn = state.device.to_numpy(state.vertex_neighbors)
@@ -180,7 +180,7 @@ def check(state, tol: float = 1e-9, orientation: bool = True, cover: bool = True
         r = int(np.flatnonzero((chi != want) | (nvr % 2 == 1))[0])
         raise ValueError(f"replica {r} has Euler characteristic V - E + F = {int(chi[r])}, {con!r} needs {want}")
     if cover and not con.missing(("cell_geometry",)):
-        simplicity.check(state, orientation=orientation)
+        simplicity.check(state, orientation=orientation, simple=simple)
 
 
 def cell_table(vertex_neighbors, vertex_cells, n_cells: int, min_width: int = 0):

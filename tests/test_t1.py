@@ -340,3 +340,17 @@ def test_untangle_is_a_flag_and_runs_on_the_cpu_only(device):
             sim.run(1)
     else:
         sim.run(1)
+
+
+def test_untangle_set_mid_run_takes_effect_at_the_next_step(device, tmp_path):
+    """The rule of tests/test_parameters.py (NumPy only: on a GPU State the change is refused)."""
+    from test_parameters import DYNAMICS, _changed_run, _restarted_run, _simulation
+    if device == "gpu":
+        sim = _simulation(DYNAMICS, device)
+        sim.run(1)
+        with pytest.raises(ValueError, match=r"T1.untangle = True refused: T1\(untangle=True\) runs on the CPU"):
+            sim.operations.updaters[0].untangle = True
+        return
+    changed, path = _changed_run(DYNAMICS, device, T1, "untangle", True, tmp_path)
+    assert changed == _restarted_run(DYNAMICS, device, path, {"T1": {"untangle": True}})
+    assert changed != _restarted_run(DYNAMICS, device, path, {})

@@ -100,7 +100,7 @@ def cost(sizes=(1000, 65536), repeats=5):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument("--surface", nargs="+", default=["sphere", "plane"], choices=["sphere", "plane"])
     ap.add_argument("--cells", type=int, nargs="+", default=[64, 256])
     ap.add_argument("--replicas", type=int, default=4)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import simplicity
 from .topology import t1_cells, t1_new_positions
 
 CLEAN, INVERTED, FOLDS = 0, 1, 2    # fold levels of a placement, see t1_fold_level
@@ -101,3 +102,29 @@ def _inverted(con, w, ring, size):
     cross = np.cross(e, np.roll(e, -1, axis=-2))
     turns = (np.einsum("...j,...kj->...k", normal, cross) < 0).sum(axis=-1)
     return turns >= 2
+
+
+def inverted_edges(state):
+    """Edges ``(u, slot)`` (``u < vertex_neighbors[u, slot]``) turned past zero length: with
+    ``C1 = (.., a, u, v, d, ..)`` and ``C2 = (.., c, v, u, b, ..)`` the cells on its sides
+    (:func:`spherevm.topology.t1_cells`), the edges ``a u`` and ``v d`` cross, or ``c v`` and ``u b``:
+    the bow tie such an edge makes of its cells (the crossings hot dynamics make; a T1 flip of
+    the edge undoes them). Vectorised over the edges, on the host."""
+    con = state.constraint
+    if not simplicity.measurable(con):
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    to_np = state.device.to_numpy
+    vn, vc, pos = to_np(state.vertex_neighbors), to_np(state.vertex_cells), to_np(state.positions)
+    corner = np.flatnonzero((np.arange(len(vn))[:, None] < vn).reshape(-1))
+    u, slot = corner // 3, corner % 3
+    v, a, b, c, d = t1_cells(vn, vc, u, slot)[:5]
+    if hasattr(con, "unwrapped_cells"):            # each end's image nearest u
+        size = con.size_np(state)[state.vertex_replica_np()[u]]
+        pu = simplicity.points(state, pos[u])
+        pa, pb, pc, pd, pv = (simplicity.points(state, pos[w], pos[u], size) for w in (a, b, c, d, v))
+    else:
+        unit = simplicity.points(state, pos)
+        pu, pa, pb, pc, pd, pv = (unit[w] for w in (u, a, b, c, d, v))
+    # in a triangle the two edges share a vertex (a = d, or b = c) and never cross
+    bow = ((a != d) & simplicity.arcs_cross(pa, pu, pv, pd)) | ((b != c) & simplicity.arcs_cross(pc, pv, pu, pb))
+    return u[bow], slot[bow]

@@ -21,6 +21,13 @@ MAX_ATTEMPTS = 1000
 #: shorter than half the box (300 each): N <= 7: 0, 8: 2%, 9: 6%, 10: 21%, 12: 48%, 16: 87%, 20: 97%;
 #: other draws are redrawn, which conditions the small-N ensemble.
 MIN_PLANAR_CELLS = 8
+#: The fewest cells per replica with which :class:`~spherevm.plugins.updaters.T1` runs on a periodic
+#: plane (docs/plane.md): an edge's minimum image is right only while it spans less than half the
+#: box, sqrt(N)/2 sqrt(<A>), and the longest edges of random tilings and their relaxed states measure
+#: 1.8-2.1 sqrt(<A>) at N = 12-24. Measured (32 replicas each, FIRE + T1 then hot Brownian with T1,
+#: benchmarks/crossings.py): cells stopped closing at N = 10, 12 (T = 0.05, dt = 0.05) and 14
+#: (T = 0.2, dt = 0.01), never at N >= 16 there; at T = 0.5 also at 16 and 20.
+MIN_T1_PLANAR_CELLS = 16
 #: from this many cells on, periodic_voronoi triangulates only the images near the box (the full 3 x 3
 #: images cost 44 s at 1e5 cells on a 2-core VM, ~10 min at 1e6); below it the result is bitwise
 #: what it was before the margin existed

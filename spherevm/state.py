@@ -221,15 +221,16 @@ class State:
         self.topology_changed()
 
     # ------------------------------------------------------------------ checks and copies
-    def validate(self, tol: float = 1e-9, orientation: bool = True, cover: bool = True):
+    def validate(self, tol: float = 1e-9, orientation: bool = True, cover: bool = True, simple: bool = True):
         """Raise ValueError naming the first offending cell or vertex if the network is invalid.
 
         ``tol`` is the allowed distance from the surface in units of R; ``orientation=False`` skips
         the positive-area test (cells may fold over at kA = 0); ``cover=False`` skips it and the
-        total-area test (cells cover the surface once, none over a hemisphere): see
+        total-area test (cells cover the surface once, none over a hemisphere); ``simple=False``
+        skips the test for cells crossing themselves (docs/validation.md): see
         :func:`spherevm.topology.check`.
         """
-        topology.check(self, tol=tol, orientation=orientation, cover=cover)
+        topology.check(self, tol=tol, orientation=orientation, cover=cover, simple=simple)
         return self
 
     def to(self, device) -> "State":

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import simplicity
+
 
 def pad_cells(cells, min_width: int = 0):
     """List of vertex lists -> (padded int32 table, sides)."""
@@ -102,16 +104,18 @@ def edges(vertex_neighbors):
     return np.stack([u[keep], v[keep]], axis=1).astype(np.int32)
 
 
-def check(state, tol: float = 1e-9, orientation: bool = True, cover: bool = True):
+def check(state, tol: float = 1e-9, orientation: bool = True, cover: bool = True, simple: bool = True):
     """Validate a State; raise ValueError naming the first offending cell or vertex.
 
     Checks: finite positions on the surface, trivalent network with reciprocal neighbours, cell
     table and vertex tables consistent (so every edge is shared by exactly two cells, once in each
-    direction), replica layout, V - E + F = 2 per replica, the cells covering the surface once
-    (their areas add up to its area, none over a hemisphere) and counter-clockwise cells (positive
-    area). ``orientation=False`` skips the area sign test: at kA = 0 the energy does not care
-    about area, and minimisation may legitimately fold a cell over. ``cover=False`` skips both area
-    tests, for networks that are not physical states (random walks of T1 tests on tiny spheres).
+    direction), replica layout, V - E + F = 2 per replica, then :func:`spherevm.simplicity.check`:
+    cells closed under the minimum image (a periodic plane), the cells covering the surface once
+    (their areas add up to its area, none over a hemisphere), simple (no edge crossing another of
+    its cell) and counter-clockwise (positive area) cells. ``orientation=False`` skips the last two:
+    at kA = 0 the energy does not care about area, and minimisation may legitimately fold a cell
+    over; ``simple=False`` skips the crossing test alone. ``cover=False`` skips all of them, for
+    networks that are not physical states (random walks of T1 tests on tiny spheres).
     """
     pos = state.device.to_numpy(state.positions)
     vn = state.device.to_numpy(state.vertex_neighbors)
@@ -175,54 +179,8 @@ def check(state, tol: float = 1e-9, orientation: bool = True, cover: bool = True
     if np.any(nvr % 2) or np.any(chi != want):
         r = int(np.flatnonzero((chi != want) | (nvr % 2 == 1))[0])
         raise ValueError(f"replica {r} has Euler characteristic V - E + F = {int(chi[r])}, {con!r} needs {want}")
-    if not cover or con.missing(("cell_geometry",)):
-        return
-    areas = con.cell_areas_np(state)
-    _check_cover(state, areas)
-    if not orientation:
-        return
-    # orientation: counter-clockwise cells have positive area
-    neg = areas <= 0
-    if neg.any():
-        c = int(np.flatnonzero(neg)[0])
-        raise ValueError(f"cell {c} has area {areas[c]:.3g} <= 0: it is listed clockwise seen from outside "
-                         "(list cell vertices counter-clockwise) or it is folded")
-
-
-def _check_cover(state, areas):
-    """The cells cover the surface exactly once: their areas add up to its area, and on a sphere
-    none covers more than a hemisphere. A cell's area is a fan of signed triangles, exact below a
-    hemisphere; a larger cell measures A - 4 pi R^2 (and looks clockwise), so the sum catches it."""
-    con = state.constraint
-    try:
-        surface = con.total_area_np(con.size_np(state))
-    except NotImplementedError:       # a surface that does not know its area: nothing to compare
-        return
-    crep = state.cell_replica_np()
-    total = np.bincount(crep, weights=areas, minlength=state.n_replicas)
-    wrong = np.flatnonzero(np.abs(total - surface) > 1e-9 * surface)
-    if len(wrong) and getattr(con, "euler_characteristic", 2) == 0:
-        r = int(wrong[0])
-        raise ValueError(f"replica {r}: the cells cover an area {total[r]:.12g}, but the box's is {surface[r]:.12g}; "
-                         "some cell wraps around the box or overlaps another")
-    if len(wrong):
-        r = int(wrong[0])
-        cells = np.flatnonzero(crep == r)
-        if abs(total[r] + surface[r]) <= 1e-9 * surface[r]:
-            raise ValueError(f"replica {r}: cell {int(cells[0])} and every other cell is listed clockwise seen from "
-                             "outside (their areas add up to -4 pi R^2); list cell vertices counter-clockwise")
-        c = int(cells[np.argmin(areas[cells])])
-        raise ValueError(f"replica {r}: the cell areas add up to {total[r]:.12g}, not the sphere's 4 pi R^2 = "
-                         f"{surface[r]:.12g}: cell {c} (measured {areas[c]:.6g}) is larger than a hemisphere, which "
-                         "spherevm cannot measure (areas are fans of spherical triangles: such a cell gets "
-                         "A - 4 pi R^2), or cells overlap; use more cells, so that every cell is smaller than a "
-                         "hemisphere")
-    if getattr(con, "euler_characteristic", 2) == 2:
-        big = np.flatnonzero(areas > 0.5 * surface[crep])
-        if len(big):
-            c = int(big[0])
-            raise ValueError(f"cell {c} covers {areas[c] / surface[crep[c]]:.3g} of its sphere, more than a "
-                             "hemisphere: spherevm measures cells smaller than a hemisphere only; use more cells")
+    if cover and not con.missing(("cell_geometry",)):
+        simplicity.check(state, orientation=orientation, simple=simple)
 
 
 def cell_table(vertex_neighbors, vertex_cells, n_cells: int, min_width: int = 0):

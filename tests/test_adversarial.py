@@ -206,8 +206,8 @@ def test_a_cell_over_a_hemisphere_measured_right_is_refused_too():
     big = area.copy()
     big[0], big[1:] = 0.6 * area.sum(), 0.4 * area.sum() / (len(area) - 1)
     with pytest.raises(ValueError, match="cell 0 covers 0.6 of its sphere, more than a hemisphere"):
-        svm.topology._check_cover(s, big)
-    svm.topology._check_cover(s, area)
+        svm.simplicity.check_cover(s, big)
+    svm.simplicity.check_cover(s, area)
 
 
 def test_small_random_tilings_have_no_cell_over_a_hemisphere():

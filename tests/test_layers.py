@@ -17,7 +17,7 @@ LAYERS = [
     ["geometry", "device", "kernel_struct", "validation", "random", "trigger", "logging", "provenance", "progress",
      "gsdrecover"],
     ["constraints"],
-    ["topology", "folding", "growth"],
+    ["simplicity", "topology", "folding", "growth"],
     ["state"],
     ["shapes", "gsdio", "init", "init_plane"],
     ["plugins", "testing"],

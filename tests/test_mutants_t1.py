@@ -20,7 +20,7 @@ def test_documented_defaults_and_preset():
     sig = inspect.signature(T1)
     defaults = {k: p.default for k, p in sig.parameters.items()}
     assert defaults == dict(threshold=0.04, new_length=0.12, length_factor=None, preset=None, trigger=1,
-                            reset_velocities=True, max_flip_backs=100, count_flip_backs=None)
+                            reset_velocities=True, max_flip_backs=100, count_flip_backs=None, untangle=False)
     t = T1()
     assert (t.threshold, t.new_length, t.length_factor, t.max_flip_backs, t.reset_velocities) == \
         (0.04, 0.12, None, 100, True)

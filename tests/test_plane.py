@@ -353,3 +353,17 @@ def test_minimize_narrows_a_planar_ensemble_bitwise():
     a, b = run(True), run(False)
     np.testing.assert_array_equal(a.positions, b.positions)
     np.testing.assert_array_equal(a.box_np(), b.box_np())
+
+
+def test_t1_refuses_a_box_of_fewer_than_16_cells_per_replica():
+    """Smaller boxes let edges reach half the box under T1 (docs/plane.md): refused at attach."""
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.State.concatenate([svm.init.random_planar_tiling(16, seed=0),
+                                       svm.init.random_planar_tiling(14, seed=0)])
+    with pytest.raises(ValueError, match=r"^T1 needs at least 16 cells per replica on a periodic plane, but replica 1 "
+                                         r"has 14: in a smaller box edges reach half the box"):
+        sim.operations.updaters.append(T1())
+    sim.state = svm.init.random_planar_tiling(16, replicas=2, seed=0)
+    sim.operations.updaters.append(T1())
+    sim.operations.integrator = Brownian(dt=0.01, T=0.01)
+    sim.run(2)

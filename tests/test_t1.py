@@ -287,3 +287,70 @@ def test_flip_back_bookkeeping_only_where_something_halts_on_it(device):
     assert t_quiet.counting(quiet)
     with pytest.raises(ValueError, match="count_flip_backs"):
         T1(count_flip_backs="yes")
+
+
+# ------------------------------------------------------------------ untangle (docs/validation.md)
+def _brownian(untangle, T, device="cpu", seed=3, dt=0.02, state=None):
+    """Brownian dynamics with T1(untangle=untangle) of two 48-cell tissues (or ``state``)."""
+    sim = svm.Simulation(device=device, seed=seed)
+    sim.state = svm.init.random_tiling(48, replicas=2, seed=seed) if state is None else state
+    sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=3.8))
+    t1 = T1(untangle=untangle)
+    sim.operations.updaters.append(t1)
+    sim.operations.integrator = svm.plugins.integrators.Brownian(dt=dt, T=T)
+    return sim, t1
+
+
+def test_untangling_changes_nothing_where_no_edge_is_crossed():
+    from spherevm import folding
+    relaxed, _ = _brownian(False, T=0.0)
+    relaxed.operations.integrator = FIRE(dt=0.02)
+    relaxed.run(300)
+    runs = {}
+    for untangle in (False, True):
+        sim, _ = _brownian(untangle, T=0.002, dt=0.05, state=relaxed.state.copy())
+        for _ in range(100):
+            assert len(folding.inverted_edges(sim.state)[0]) == 0      # nothing for untangling to take
+            sim.run(1)
+        runs[untangle] = sim
+    assert np.array_equal(runs[False].state.positions, runs[True].state.positions)
+    assert runs[True].log("t1_total_flips").sum() > 0
+
+
+def test_untangling_flips_the_crossed_edges_and_changes_that_trajectory():
+    from spherevm import folding
+    sims = {u: _brownian(u, T=0.1) for u in (False, True)}
+    for _ in range(40):
+        for untangle, (sim, t1) in sims.items():
+            sim.run(1)
+            if untangle:
+                t1.untangle_pass(sim)
+    plain, untangled = sims[False][0].state, sims[True][0].state
+    assert len(folding.inverted_edges(untangled)) < len(folding.inverted_edges(plain)) or \
+        not np.array_equal(plain.positions, untangled.positions)
+    assert sims[True][1].total_flips.sum() > sims[False][1].total_flips.sum()
+
+
+def test_untangle_is_a_flag_and_runs_on_the_cpu_only(device):
+    with pytest.raises(ValueError, match="untangle must be True or False, got 1"):
+        T1(untangle=1)
+    sim, _ = _brownian(True, T=1e-3, device=device)
+    if device == "gpu":
+        with pytest.raises(ValueError, match=r"T1\(untangle=True\) runs on the CPU \(NumPy\) only"):
+            sim.run(1)
+    else:
+        sim.run(1)
+
+
+def test_untangle_set_mid_run_takes_effect_at_the_next_step(device, tmp_path):
+    """The rule of tests/test_parameters.py (NumPy only: on a GPU State the change is refused)."""
+    from test_parameters import DYNAMICS, _changed_run, _restarted_run, _simulation
+    if device == "gpu":
+        sim = _simulation(DYNAMICS, device)
+        sim.run(1)
+        with pytest.raises(ValueError, match=r"T1.untangle = True refused: T1\(untangle=True\) runs on the CPU"):
+            sim.operations.updaters[0].untangle = True
+        return
+    changed, path = _changed_run(DYNAMICS, device, T1, "untangle", True, tmp_path)
+    assert changed == _restarted_run(DYNAMICS, device, path, {"T1": {"untangle": True}})
+    assert changed != _restarted_run(DYNAMICS, device, path, {})

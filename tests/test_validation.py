@@ -47,3 +47,105 @@ def test_non_negative_arrays():
     assert np.array_equal(validation.non_negative("T", [0.0, 1.0]), [0.0, 1.0])
     with pytest.raises(ValueError, match=r"T must be finite and >= 0"):
         validation.non_negative("T", [[1.0]])
+
+
+# ------------------------------------------------------------------ simple tilings (spherevm.simplicity)
+import re  # noqa: E402
+
+import spherevm as svm  # noqa: E402
+from spherevm import folding, simplicity  # noqa: E402
+
+from test_fuzz import brute_force_crossings  # noqa: E402
+
+TILINGS = {"sphere": svm.init.random_tiling, "plane": svm.init.random_planar_tiling}
+
+
+def _kicked(surface, scale, seed=3):
+    """Two 60-cell tilings with every vertex kicked by ``scale`` sqrt(<A>) (no forces: crossings)."""
+    state = TILINGS[surface](60, replicas=2, seed=seed)
+    con, rng = state.constraint, np.random.default_rng(seed)
+    kick = rng.normal(scale=scale * np.sqrt(state.mean_cell_area[0]), size=state.positions.shape)
+    state.positions = con.project_normal(state.positions + con.project_tangent(state.positions, kick),
+                                         con.size(state, state.vertex_replica))
+    return state
+
+
+def _swapped(surface):
+    """A tiling whose edge 7 vertices into replica 1 has its two ends swapped: the bow tie a step
+    makes of an edge that it pushes through zero length."""
+    state = TILINGS[surface](60, replicas=2, seed=1)
+    u = int(state.vertex_start[1]) + 7
+    v = int(state.vertex_neighbors[u, 0])
+    pos = state.positions.copy()
+    pos[[u, v]] = pos[[v, u]]
+    state.positions = pos
+    return state, u, v
+
+
+@pytest.mark.parametrize("surface", ["sphere", "plane"])
+def test_crossings_are_those_a_brute_force_finds(surface):
+    state = _kicked(surface, 0.3 if surface == "sphere" else 0.12)
+    cell, i, j = simplicity.self_crossings(state)
+    found = set(zip(cell.tolist(), i.tolist(), j.tolist()))
+    assert found == brute_force_crossings(state) and len(found) > 10, len(found)
+    counts = simplicity.counts(state)
+    assert counts["crossed"].sum() == len(set(cell.tolist()))
+
+
+def test_arcs_meeting_only_at_their_antipodes_do_not_cross():
+    deg = np.pi / 180
+    a, b = np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]])            # the equator from 0 to 90 degrees
+
+    def meridian(lon):
+        return [np.array([[np.cos(10 * deg) * np.cos(lon * deg), np.cos(10 * deg) * np.sin(lon * deg),
+                           s * np.sin(10 * deg)]]) for s in (-1, 1)]
+    assert simplicity.arcs_cross(a, b, *meridian(45)).all()
+    assert not simplicity.arcs_cross(a, b, *meridian(225)).any()
+
+
+@pytest.mark.parametrize("surface", ["sphere", "plane"])
+def test_validate_names_the_replica_the_cell_and_the_crossing_edges(surface):
+    state, u, v = _swapped(surface)
+    with pytest.raises(ValueError, match=r"^replica 1: cell \d+ is not a simple polygon: its edges \d+ -> \d+ and "
+                                         r"\d+ -> \d+ cross \(2 such cell\(s\) in all\)$") as info:
+        state.validate()
+    c = int(re.match(r"replica 1: cell (\d+)", str(info.value)).group(1))
+    assert {c for c, _, _ in brute_force_crossings(state)} >= {c}
+    state.validate(orientation=False)      # folded cells allowed (kA = 0): crossings too
+    iu, islot = folding.inverted_edges(state)
+    assert [(int(x), int(state.vertex_neighbors[x, k])) for x, k in zip(iu, islot)] == [(min(u, v), max(u, v))]
+
+
+@pytest.mark.parametrize("surface", ["sphere", "plane"])
+def test_a_vertex_pushed_into_its_neighbour_is_caught(surface):
+    """Overlap without comparing cells: a vertex moved across its cell's far side, into another
+    cell, leaves some cell crossed, inverted or the areas' sum wrong (simplicity's degree argument)."""
+    state = TILINGS[surface](60, seed=2)
+    con = state.constraint
+    pos = state.positions.copy()
+    w, c = 10, int(state.vertex_cells[10, 0])
+    ring = state.cell_vertices[c, :state.cell_sides[c]]
+    far = pos[ring[(list(ring).index(w) + len(ring) // 2) % len(ring)]]
+    far = con.unwrap(far[None], pos[w][None], con.size_np(state)[:1])[0]
+    pos[w] = con.project_normal((pos[w] + 2.5 * (far - pos[w]))[None], con.size_np(state)[:1])[0]
+    state.positions = pos
+    with pytest.raises(ValueError, match=r"^replica 0: (cell \d+ is not a simple polygon|cell \d+ has area|the cell)"):
+        state.validate()
+
+
+def test_an_edge_reaching_half_the_box_is_named():
+    state = svm.init.random_planar_tiling(16, seed=0)
+    box = state.box[0]
+    u = np.repeat(np.arange(state.n_vertices), 3)
+    d = state.constraint.displacement(state, u, state.vertex_neighbors.reshape(-1))
+    k = int(np.argmax(np.abs(d[:, 0])))
+    a, b = int(u[k]), int(state.vertex_neighbors.reshape(-1)[k])
+    pos = state.positions.copy()                    # b pushed along the edge until it passes half the box
+    pos[b, 0] = (pos[b, 0] + np.sign(d[k, 0]) * (0.5 * box[0] - abs(d[k, 0]) + 0.05)) % box[0]
+    state.positions = pos
+    with pytest.raises(ValueError, match=r"^replica 0: edge \d+ -> \d+ of cell \d+ reached half the box "
+                                         r"\[4\.0, 4\.0\]: its minimum image jumped") as info:
+        state.validate(orientation=False)
+    named = {int(x) for x in re.match(r"replica 0: edge (\d+) -> (\d+)", str(info.value)).groups()}
+    assert named == {a, b}
+    assert simplicity.counts(state)["open"].sum() == 2      # the two cells on its sides

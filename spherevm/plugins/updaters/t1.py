@@ -3,8 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ... import folding, topology
+from ... import folding, simplicity, topology
 from ...constraints.kernels import KERNEL_SURFACES
+from ...init_plane import MIN_T1_PLANAR_CELLS
 from ..base import Updater
 from ..minimizer import Minimizer
 from ..parameters import Parameter
@@ -22,6 +23,12 @@ def _preset(name, value):
     if value is not None and value not in PRESETS:
         raise ValueError(f"preset must be one of {sorted(PRESETS)} or None, got {value!r}")
     return value
+
+
+def _flag(name, value):
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
 
 
 def _count_flip_backs(name, value):
@@ -71,7 +78,13 @@ class T1(DevicePass, Updater):
     count_flip_backs : bool, optional
         Keep the flip-back bookkeeping (a record of every separated cell pair). None: unless the
         integrator is a dynamics integrator that is not a Minimizer (Brownian, Active): there flips
-        back and forth are physics, and the record grows with every flip."""
+        back and forth are physics, and the record grows with every flip.
+    untangle : bool
+        Also flip the edges that a step turned past zero length (a bow tie: the edges before and
+        after one cross, :func:`spherevm.folding.inverted_edges`), by the same rules, so that cells
+        stay simple polygons; where no edge is crossed the pass is the same to the bit. NumPy only
+        for now (refused on a GPU State). :meth:`untangle_pass` flips them alone, for a call after
+        the integrator's step. Default False; see docs/validation.md."""
 
     preset = Parameter(_preset)
     threshold = Parameter(positive)
@@ -80,9 +93,10 @@ class T1(DevicePass, Updater):
     max_flip_backs = Parameter(lambda name, value: integer(name, value, minimum=1))
     reset_velocities = Parameter(lambda name, value: bool(value))
     count_flip_backs = Parameter(_count_flip_backs)
+    untangle = Parameter(_flag)
 
     def __init__(self, threshold=0.04, new_length=0.12, length_factor=None, preset=None, trigger=1,
-                 reset_velocities=True, max_flip_backs=100, count_flip_backs=None):
+                 reset_velocities=True, max_flip_backs=100, count_flip_backs=None, untangle=False):
         super().__init__(trigger)
         if preset is not None:
             threshold, new_length, length_factor = (PRESETS[_preset("preset", preset)][k] for k in
@@ -95,11 +109,15 @@ class T1(DevicePass, Updater):
         self.max_flip_backs = max_flip_backs
         self.reset_velocities = reset_velocities
         self.count_flip_backs = count_flip_backs
+        self.untangle = untangle
         self.preset = preset
         self._reset_counters(0)
 
     def check_parameters(self):
-        """Exactly one of new_length (> threshold) and length_factor (> 1)."""
+        """Exactly one of new_length (> threshold) and length_factor (> 1); untangling on the CPU."""
+        simulation = self.__dict__.get("_simulation")
+        if simulation is not None:
+            self._check_untangle(simulation.state)
         if self.length_factor is not None:
             if self.length_factor <= 1:
                 raise ValueError(f"length_factor must be > 1 (a shorter new edge is short again and flips "
@@ -109,6 +127,11 @@ class T1(DevicePass, Updater):
         elif self.new_length <= self.threshold:
             raise ValueError(f"new_length must be finite and > threshold={self.threshold} "
                              f"(else the new edge flips straight back), got {self.new_length!r}")
+
+    def _check_untangle(self, state):
+        if self.untangle and state.device.is_gpu:
+            raise ValueError("T1(untangle=True) runs on the CPU (NumPy) only for now; use device='cpu' or "
+                             "untangle=False")
 
     def parameters_changed(self, name):
         """A preset sets threshold, new_length and length_factor; setting one of those leaves the
@@ -141,6 +164,14 @@ class T1(DevicePass, Updater):
     surface_needs = ("normal", "project_normal", "edge_lengths", "chord_length", "total_area_np", "triangle_area")
 
     def attach(self, simulation):
+        state = simulation.state
+        if getattr(state.constraint, "euler_characteristic", 2) == 0 and state.n_cells:
+            smallest = int(np.argmin(state.cells_per_replica))
+            if state.cells_per_replica[smallest] < MIN_T1_PLANAR_CELLS:
+                raise ValueError(f"T1 needs at least {MIN_T1_PLANAR_CELLS} cells per replica on a periodic plane, but "
+                                 f"replica {smallest} has {int(state.cells_per_replica[smallest])}: in a smaller box "
+                                 "edges reach half the box under T1 and cells stop closing (docs/plane.md)")
+        self._check_untangle(state)
         super().attach(simulation)
         self._update = self.implementation("update", simulation.state)
         self._gpu = None
@@ -232,10 +263,47 @@ class T1(DevicePass, Updater):
 
     def _update_cpu(self, simulation):
         state = simulation.state
-        n_rep = state.n_replicas
-        self.last_flips = np.zeros(n_rep, dtype=np.int64)
-        self.last_refused = np.zeros(n_rep, dtype=np.int64)
+        self.last_flips = np.zeros(state.n_replicas, dtype=np.int64)
+        self.last_refused = np.zeros(state.n_replicas, dtype=np.int64)
         u, slot, lengths = self.short_edges(state)
+        if self.untangle:
+            u, slot, lengths = self._with_inverted(state, u, slot, lengths)
+        self._flip_pass(simulation, u, slot, lengths)
+
+    def untangle_pass(self, simulation, rounds: int = 4):
+        """Flip the edges that are turned past zero length (:func:`spherevm.folding.inverted_edges`)
+        by this updater's rules, adding to this step's counts, again while a round flips some (at
+        most ``rounds``: edges of one cell wait for the next round): a call right after the
+        integrator's step leaves what writers and checks see simple. Nothing happens where no edge
+        is crossed. Returns the flips made."""
+        before = int(self.total_flips.sum())
+        empty = np.zeros(0, dtype=np.int64)
+        for _ in range(rounds):
+            made = int(self.total_flips.sum())
+            self._flip_pass(simulation, *self._with_inverted(simulation.state, empty, empty, np.zeros(0)))
+            if int(self.total_flips.sum()) == made:
+                break
+        return int(self.total_flips.sum()) - before
+
+    def _with_inverted(self, state, u, slot, lengths):
+        """The candidates ``(u, slot, lengths)`` joined by the inverted edges, in edge index order."""
+        iu, islot = folding.inverted_edges(state)
+        index = 3 * np.asarray(u, dtype=np.int64) + slot
+        new = ~np.isin(3 * iu + islot, index)
+        if not new.any():
+            return u, slot, lengths
+        iu, islot = iu[new], islot[new]
+        xp = state.device.xp
+        ilen = state.device.to_numpy(state.constraint.edge_lengths(
+            state, xp.asarray(iu), state.vertex_neighbors[xp.asarray(iu), xp.asarray(islot)]))
+        order = np.argsort(np.concatenate([index, 3 * iu + islot]))
+        return (np.concatenate([u, iu])[order], np.concatenate([slot, islot])[order],
+                np.concatenate([lengths, ilen])[order])
+
+    def _flip_pass(self, simulation, u, slot, lengths):
+        """Flip the candidates ``(u, slot, lengths)`` of active replicas by the rules, counting."""
+        state = simulation.state
+        n_rep = state.n_replicas
         integrator = simulation.operations.integrator
         if len(u) and integrator is not None:
             keep = integrator.active[state.vertex_replica_np()[u]]
@@ -244,8 +312,9 @@ class T1(DevicePass, Updater):
             return
         flip, refused, cells, turn = self.select(state, u, slot, lengths)
         rep = state.vertex_replica_np()[u]
-        self.last_refused = np.bincount(rep[refused], minlength=n_rep)
-        self.total_refused += self.last_refused
+        refusals = np.bincount(rep[refused], minlength=n_rep)
+        self.last_refused = self.last_refused + refusals
+        self.total_refused += refusals
         if not flip.any():
             return
         u, slot, lengths, cells, rep = u[flip], slot[flip], lengths[flip], cells[flip], rep[flip]
@@ -253,8 +322,9 @@ class T1(DevicePass, Updater):
         if self.counting(simulation):
             self._count_flip_backs(state, cells, rep)
         moved = topology.t1_flip(state, u, slot, new, turn=turn[flip])
-        self.last_flips = np.bincount(rep, minlength=n_rep)
-        self.total_flips += self.last_flips
+        flips = np.bincount(rep, minlength=n_rep)
+        self.last_flips = self.last_flips + flips
+        self.total_flips += flips
         if self.reset_velocities and integrator is not None:
             integrator.reset_vertices(state.device.asarray(moved))
         simulation.state_changed()

@@ -1,0 +1,220 @@
+"""Simple tilings: every cell a simple polygon (no edge crossing another edge of the same cell), each
+closed under the minimum image on a periodic plane, with positive area, and the cells covering the
+surface exactly once (docs/validation.md).
+
+Why these checks are enough to rule out overlapping cells without comparing cells pairwise: the
+cells, glued along their shared edges, map a closed surface onto the sphere (or the periodic box).
+Where every cell is simple and counter-clockwise (signed area > 0), a point inside no edge is
+covered once, with the sign +1, by every cell that covers it, so the number of cells covering it
+is the map's degree: the cells' areas summed over the surface's area. A sum equal to the surface's
+area (degree 1) means every point is covered exactly once. So crossings between cells need no
+search: a vertex pushed into a neighbour leaves some cell crossed, inverted or the sum wrong.
+
+All tests here are vectorised NumPy over the corners and the pairs of edges of every cell (no
+loop over cells); the tables live on the host.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: Relative size of a cell's closing sum (the sum of its minimum-image edges) that counts as open.
+OPEN_TOLERANCE = 1e-9
+
+
+def _pairs(width: int):
+    """Every pair ``(i, j)`` of edges of a ``width``-gon that share no vertex, ordered by ``j`` and
+    then by decreasing ``i``: those of an ``s``-gon are the first ``s (s - 3) / 2`` rows."""
+    return np.array([(i, j) for j in range(2, width) for i in range(j - 2, -1, -1)], dtype=np.int64).reshape(-1, 2)
+
+
+def measurable(constraint) -> bool:
+    """Whether the crossing tests know this surface: the sphere's arcs or the plane's minimum images."""
+    return hasattr(constraint, "unwrapped_cells") or getattr(constraint, "name", "") == "sphere"
+
+
+def points(state, positions, reference=None, size=None):
+    """Points as 3-vectors whose triple products give orientations: unit vectors on the sphere (a
+    great circle's normal is ``a x b``), ``(x, y, 1)`` on the plane (``(a x b) . c`` is twice the
+    signed area of the triangle a, b, c). On the plane ``positions`` are unwrapped to the images
+    nearest ``reference`` first (given: they are unwrapped already)."""
+    con = state.constraint
+    if hasattr(con, "unwrapped_cells"):
+        p = positions if reference is None else con.unwrap(positions, reference, size)
+        out = np.ones(p.shape[:-1] + (3,))
+        out[..., :2] = p[..., :2]
+        return out
+    return positions / np.linalg.norm(positions, axis=-1)[..., None]
+
+
+def arcs_cross(a, b, c, d):
+    """Mask: the arc (great-circle arc or segment, in :func:`_points` coordinates) ``a b`` crosses
+    ``c d`` properly, the ends of each strictly on both sides of the other's great circle or line;
+    on the sphere also the crossing point of the arcs, not of their antipodes (``(a x b) . d`` and
+    ``(c x d) . a`` of one sign). Arrays ``(n, 3)``."""
+    def triple(x, y, z):            # (x cross y) . z, column by column
+        return ((x[:, 1] * y[:, 2] - x[:, 2] * y[:, 1]) * z[:, 0] + (x[:, 2] * y[:, 0] - x[:, 0] * y[:, 2]) * z[:, 1]
+                + (x[:, 0] * y[:, 1] - x[:, 1] * y[:, 0]) * z[:, 2])
+    s1, s2, s3, s4 = triple(a, b, c), triple(a, b, d), triple(c, d, a), triple(c, d, b)
+    return (s1 * s2 < 0) & (s3 * s4 < 0) & (s2 * s3 > 0)
+
+
+def _corner_points(state, sides):
+    """Each cell's edges as ``(start, stop)`` in :func:`_points` coordinates, ``(corners, 3)`` with
+    the corners of cell 0 first, in slot order; on the plane each polygon unwrapped from its first
+    vertex along its minimum-image edges."""
+    con = state.constraint
+    to_np = state.device.to_numpy
+    if hasattr(con, "unwrapped_cells"):
+        _, valid, e, r = con.unwrapped_cells(state)
+        valid, e, r = to_np(valid), to_np(e), to_np(r)
+        return points(state, r[valid]), points(state, r[valid] + e[valid])
+    pos, cv = to_np(state.positions), to_np(state.cell_vertices)
+    col = np.arange(cv.shape[1])[None, :]
+    valid = col < sides[:, None]
+    nxt = np.where(col + 1 < sides[:, None], np.roll(cv, -1, axis=1), cv[:, :1])
+    unit = points(state, pos)
+    return unit[cv[valid]], unit[nxt[valid]]
+
+
+def self_crossings(state):
+    """The crossing edge pairs inside cells: ``(cell, i, j)`` arrays, edge ``i`` (from slot i to slot
+    i + 1 of ``cell_vertices[cell]``) crossing edge ``j > i`` of the same cell (:func:`arcs_cross`).
+    Edges that share a vertex are not compared. ``None`` on a surface this cannot measure (one
+    without a sphere's arcs or the plane's minimum images)."""
+    if not measurable(state.constraint):
+        return None
+
+    def build():
+        sides = state.device.to_numpy(state.cell_sides).astype(np.int64)
+        count = sides * (sides - 3) // 2
+        cell = np.repeat(np.arange(len(sides)), count)
+        k = np.arange(len(cell)) - np.repeat(np.cumsum(count) - count, count)
+        pair = _pairs(int(sides.max(initial=3)))[k]
+        first = (np.cumsum(sides) - sides)[cell]
+        return sides, cell, pair[:, 0], pair[:, 1], first + pair[:, 0], first + pair[:, 1]
+
+    sides, cell, i, j, ci, cj = state.cached(("simplicity", "pairs"), build, topology=True)
+    start, stop = _corner_points(state, sides)
+    cross = arcs_cross(start[ci], stop[ci], start[cj], stop[cj])
+    return cell[cross], i[cross], j[cross]
+
+
+def open_cells(state):
+    """Cells whose minimum-image edges do not add up to zero (a periodic surface only; otherwise an
+    empty array): an edge of theirs reached half the box, and its minimum image jumped to another
+    image. Returns ``(cells, edge slots)``: for each open cell the slot of its edge longest along
+    the box (relative to the box side), the one that jumped."""
+    con = state.constraint
+    if not hasattr(con, "unwrapped_cells"):
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    _, valid, e, _ = con.unwrapped_cells(state)
+    e = state.device.to_numpy(e)
+    box = state.device.to_numpy(state.box)[state.cell_replica_np()]              # (C, 2)
+    closing = np.abs(e.sum(axis=1)) / box                                         # (C, 2)
+    bad = np.flatnonzero((closing > OPEN_TOLERANCE).any(axis=1))
+    reach = (np.abs(e[bad]) / box[bad, None, :]).max(axis=2)                     # (bad, W)
+    return bad, np.argmax(reach, axis=1)
+
+
+def counts(state, areas=None):
+    """Per replica: cells that cross themselves, open cells (periodic plane), cells of signed area
+    <= 0, and whether the areas fail to add up to the surface's (1 or 0); a dict of int arrays.
+    ``areas``: the cells' signed areas if already measured."""
+    crep = state.cell_replica_np()
+    n = state.n_replicas
+    found = self_crossings(state)
+    crossed = np.zeros(n, dtype=np.int64) if found is None else \
+        np.bincount(crep[np.unique(found[0])], minlength=n)
+    opened = np.bincount(crep[open_cells(state)[0]], minlength=n)
+    con = state.constraint
+    areas = con.cell_areas_np(state) if areas is None else areas
+    total = np.bincount(crep, weights=areas, minlength=n)
+    surface = con.total_area_np(con.size_np(state))
+    return dict(crossed=crossed, open=opened, inverted=np.bincount(crep[areas <= 0], minlength=n),
+                uncovered=(np.abs(total - surface) > 1e-9 * surface).astype(np.int64))
+
+
+def check_closed(state):
+    """Raise ValueError naming the replica, the cell and the edge if a cell does not close under the
+    minimum image (a periodic plane): that edge reached half the box at this step."""
+    cells, slot = open_cells(state)
+    if len(cells):
+        cv, sides = state.device.to_numpy(state.cell_vertices), state.device.to_numpy(state.cell_sides)
+        c, k = int(cells[0]), int(slot[0])
+        r = int(state.cell_replica_np()[c])
+        raise ValueError(f"replica {r}: edge {int(cv[c, k])} -> {int(cv[c, (k + 1) % sides[c]])} of cell {c} reached "
+                         f"half the box {state.device.to_numpy(state.box)[r].tolist()}: its minimum image jumped and "
+                         f"the cell no longer closes ({len(cells)} open cell(s)); the box is too small for its "
+                         "cells, or the step too large")
+
+
+def check_cover(state, areas):
+    """The cells cover the surface exactly once: their areas add up to its area, and on a sphere
+    none covers more than a hemisphere. A cell's area is a fan of signed triangles, exact below a
+    hemisphere; a larger cell measures A - 4 pi R^2 (and looks clockwise), so the sum catches it."""
+    con = state.constraint
+    try:
+        surface = con.total_area_np(con.size_np(state))
+    except NotImplementedError:       # a surface that does not know its area: nothing to compare
+        return
+    crep = state.cell_replica_np()
+    total = np.bincount(crep, weights=areas, minlength=state.n_replicas)
+    wrong = np.flatnonzero(np.abs(total - surface) > 1e-9 * surface)
+    if len(wrong) and getattr(con, "euler_characteristic", 2) == 0:
+        r = int(wrong[0])
+        raise ValueError(f"replica {r}: the cells cover an area {total[r]:.12g}, but the box's is {surface[r]:.12g}; "
+                         "some cell wraps around the box or overlaps another")
+    if len(wrong):
+        r = int(wrong[0])
+        cells = np.flatnonzero(crep == r)
+        if abs(total[r] + surface[r]) <= 1e-9 * surface[r]:
+            raise ValueError(f"replica {r}: cell {int(cells[0])} and every other cell is listed clockwise seen from "
+                             "outside (their areas add up to -4 pi R^2); list cell vertices counter-clockwise")
+        c = int(cells[np.argmin(areas[cells])])
+        raise ValueError(f"replica {r}: the cell areas add up to {total[r]:.12g}, not the sphere's 4 pi R^2 = "
+                         f"{surface[r]:.12g}: cell {c} (measured {areas[c]:.6g}) is larger than a hemisphere, which "
+                         "spherevm cannot measure (areas are fans of spherical triangles: such a cell gets "
+                         "A - 4 pi R^2), or cells overlap; use more cells, so that every cell is smaller than a "
+                         "hemisphere")
+    if getattr(con, "euler_characteristic", 2) == 2:
+        big = np.flatnonzero(areas > 0.5 * surface[crep])
+        if len(big):
+            c = int(big[0])
+            raise ValueError(f"cell {c} covers {areas[c] / surface[crep[c]]:.3g} of its sphere, more than a "
+                             "hemisphere: spherevm measures cells smaller than a hemisphere only; use more cells")
+
+
+def check_simple(state):
+    """Raise ValueError naming the replica, the cell and its two crossing edges if a cell crosses itself."""
+    found = self_crossings(state)
+    if found is not None and len(found[0]):
+        cv, sides = state.device.to_numpy(state.cell_vertices), state.device.to_numpy(state.cell_sides)
+        c, i, j = (int(x[0]) for x in found)
+        edge = lambda k: f"{int(cv[c, k])} -> {int(cv[c, (k + 1) % sides[c]])}"   # noqa: E731
+        raise ValueError(f"replica {int(state.cell_replica_np()[c])}: cell {c} is not a simple polygon: its edges "
+                         f"{edge(i)} and {edge(j)} cross ({len(np.unique(found[0]))} such cell(s) in all)")
+
+
+def check_orientation(state, areas):
+    """Raise ValueError naming the replica and the cell if a cell's signed area is <= 0."""
+    neg = areas <= 0
+    if neg.any():
+        c = int(np.flatnonzero(neg)[0])
+        raise ValueError(f"replica {int(state.cell_replica_np()[c])}: cell {c} has area {areas[c]:.3g} <= 0: it is "
+                         "listed clockwise seen from outside (list cell vertices counter-clockwise) or it is "
+                         f"folded ({int(neg.sum())} such cell(s) in all)")
+
+
+def check(state, orientation: bool = True, simple: bool = True):
+    """The tiling is simple, or ValueError naming the replica and the cells: every cell closed under
+    the minimum image (:func:`check_closed`), the areas adding up to the surface's
+    (:func:`check_cover`), and with ``orientation`` every cell simple (:func:`check_simple`; not
+    with ``simple=False``) with signed area > 0 (:func:`check_orientation`); by the degree argument
+    of this module's docstring, no two cells then overlap. Called by :func:`spherevm.topology.check` (``State.validate``)."""
+    check_closed(state)
+    areas = state.constraint.cell_areas_np(state)
+    check_cover(state, areas)
+    if orientation:
+        if simple:
+            check_simple(state)
+        check_orientation(state, areas)

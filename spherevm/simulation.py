@@ -1,12 +1,12 @@
 """Simulation: owns the State and the operations, runs steps and minimisations."""
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 
 import numpy as np
 
-from . import shapes
+from . import shapes, simplicity
+from .checkpoints import Checkpoints
 from .device import read_replica_summary, replica_summary, resolve
 from .graphs import StepGraphs
 from .operations import Operations
@@ -14,7 +14,7 @@ from .minimization import Minimization, MinimizeResult
 from .plan import Plan
 from .plugins.base import compute_all
 from .plugins.minimizer import Minimizer
-from .runs import Restored, RunRecords, stepping
+from .runs import RunRecords, stepping
 from .validation import GPU_RUN_BYTES_PER_CELL, check_memory, integer
 
 
@@ -28,7 +28,7 @@ class _ForceCache:
     summary_host: tuple = None
 
 
-class Simulation(RunRecords):
+class Simulation(Checkpoints, RunRecords):
     """A State plus the operations acting on it (HOOMD-blue style).
 
     Parameters
@@ -79,70 +79,6 @@ class Simulation(RunRecords):
         for key, op in list(self.operations.keyed()):
             op.attach(self)
             self.restore_saved_state(op, key, keyed=True)
-
-    def restore_saved_state(self, op, where, keyed=False):
-        """Hand ``op`` (just attached) its saved state from the checkpoint, if there is one.
-
-        Parameters
-        ----------
-        op : spherevm.plugins.Operation
-            The operation that just attached.
-        where : str
-            Its place (``"integrator"``, ``"forces.0"``, ...), or its checkpoint key if ``keyed``.
-        """
-        key = where if keyed else op.checkpoint_key(where)
-        data = self._pending.pop(key, None)
-        if data is not None:
-            op.restore_state(data)
-
-    def create_state_from_gsd(self, path, frame: int = -1, validate: bool = True):
-        """Set the State, the timestep and every operation's saved state (now or when it attaches)
-        from a GSD frame, exactly: running on is bitwise the uninterrupted run (docs/file-format.md).
-
-        Parameters
-        ----------
-        path : str or path
-        frame : int
-            Frame index, negative from the end.
-        validate : bool
-            Check the stored network (:func:`spherevm.gsdio.read_state`)."""
-        from . import gsdio
-        with gsdio.Reader(path) as reader:
-            state = reader.state(frame, device=self.device, validate=validate)
-            step = reader.step(frame)
-            saved = reader.checkpoint(frame)
-        sim = saved.pop("simulation", {})
-        if "seed" in sim and int(sim["seed"][0]) != self.seed:
-            import warnings
-            warnings.warn(f"{path}: the checkpoint was written by a Simulation with seed={int(sim['seed'][0])}, "
-                          f"this one has seed={self.seed}; the random numbers will differ from the original run",
-                          stacklevel=2)
-        updated = int(sim["updated_at"][0]) if "updated_at" in sim else -1
-        held = bool(sim["held_back"][0]) if "held_back" in sim else False
-        self.timestep = step
-        self.restored_from = (os.path.realpath(path), step)   # a GSD writer into this file appends
-        self._set_state(state, pending=saved.get("op", {}), updated_at=None if updated < 0 else updated,
-                        held_back=held)
-        self._restored = Restored(path, saved.get("op", {}), self._pending)   # reported at the next run
-
-    def checkpoint(self) -> dict:
-        """What a checkpoint frame holds besides the State: ``op/<key>/<field>`` for every operation's
-        :meth:`~spherevm.plugins.base.Operation.state_to_save`, ``simulation/<field>`` for the Simulation's.
-
-        Returns
-        -------
-        dict"""
-        out = {"simulation/seed": np.array([self.seed], dtype=np.int64),
-               "simulation/updated_at": np.array([-1 if self._updated_at is None else self._updated_at],
-                                                 dtype=np.int64),
-               "simulation/held_back": np.array([int(self._held_back)], dtype=np.int64)}
-        for key, op in self.operations.keyed():
-            for field_name, value in op.state_to_save().items():
-                out[f"op/{key}/{field_name}"] = value
-        for key, data in self._pending.items():   # not picked up yet: keep it for a later restart
-            for field_name, value in data.items():
-                out.setdefault(f"op/{key}/{field_name}", value)
-        return out
 
     def require_state(self):
         """Raise RuntimeError saying how to set one if the Simulation has no State yet."""
@@ -403,7 +339,8 @@ class Simulation(RunRecords):
 
     def check_finite(self):
         """Raise FloatingPointError naming the first vertex with a non-finite position (or the
-        integrator's own error, such as an exploding step flagged on the GPU)."""
+        integrator's own error, such as an exploding step flagged on the GPU), and, on the CPU,
+        ValueError naming the edge of a cell that no longer closes (:func:`spherevm.simplicity.check_closed`)."""
         if self.operations.integrator is not None:
             self.operations.integrator.check(self)
         state = self._state
@@ -416,6 +353,11 @@ class Simulation(RunRecords):
             r = int(state.vertex_replica_np()[v])
             raise FloatingPointError(f"non-finite position at timestep {self.timestep}: replica {r}, vertex {v}; "
                                      "reduce dt or check the forces (the last good frame is on disk)")
+        if not state.device.is_gpu:   # cells that no longer close on a periodic surface (nothing elsewhere)
+            try:
+                simplicity.check_closed(state)
+            except ValueError as exc:
+                raise ValueError(f"at timestep {self.timestep}: {exc}") from None
 
     def narrow(self, keep):
         """Step only replicas ``keep`` (of the stepped State) from now on (a minimisation's finished

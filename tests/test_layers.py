@@ -22,7 +22,7 @@ LAYERS = [
     ["shapes", "gsdio", "init", "init_plane"],
     ["plugins", "testing"],
     ["operations", "plan", "minimization", "tissue_steps", "graphs"],
-    ["runs", "simulation"],
+    ["runs", "checkpoints", "simulation"],
     ["analysis", "protocols", "sweeps", "export", "render", "ovito"],
     ["cli", "__main__"],
 ]

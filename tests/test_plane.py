@@ -367,3 +367,29 @@ def test_t1_refuses_a_box_of_fewer_than_16_cells_per_replica():
     sim.operations.updaters.append(T1())
     sim.operations.integrator = Brownian(dt=0.01, T=0.01)
     sim.run(2)
+
+
+def test_a_run_stops_at_the_step_a_cell_stops_closing():
+    """Hot Brownian steps on tiny periodic boxes: an edge reaches half the box; the run's check (every
+    step on the CPU) names the timestep, replica and edge at the step it happens, not later."""
+    import re
+    from spherevm import simplicity
+    from spherevm.plugins.forces import VertexModel
+    from spherevm.plugins.integrators import Brownian
+
+    def hot():
+        sim = svm.Simulation(device="cpu", seed=2)
+        sim.state = svm.init.random_planar_tiling(10, replicas=16, seed=1)
+        sim.operations.forces.append(VertexModel.dimensionless(kr=1, p0=3.8))
+        sim.operations.integrator = Brownian(dt=0.005, T=0.5, max_step=5)
+        return sim
+
+    with pytest.raises(ValueError, match=r"at timestep \d+: replica \d+: edge \d+ -> \d+ of cell \d+ reached half "
+                                         r"the box") as caught:
+        hot().run(100)
+    t = int(re.search(r"at timestep (\d+)", str(caught.value)).group(1))
+    before = hot()
+    before.run(t - 1)
+    assert len(simplicity.open_cells(before.state)[0]) == 0, "every cell closed the step before"
+    before.operations.integrator.step(before, before.compute_forces()[0])
+    assert len(simplicity.open_cells(before.state)[0]) > 0, "and one stopped closing at that step"

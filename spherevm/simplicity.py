@@ -127,7 +127,7 @@ def counts(state, areas=None):
         np.bincount(crep[np.unique(found[0])], minlength=n)
     opened = np.bincount(crep[open_cells(state)[0]], minlength=n)
     con = state.constraint
-    areas = con.cell_areas_np(state) if areas is None else areas
+    areas = con.tiling_areas_np(state) if areas is None else areas
     total = np.bincount(crep, weights=areas, minlength=n)
     surface = con.total_area_np(con.size_np(state))
     return dict(crossed=crossed, open=opened, inverted=np.bincount(crep[areas <= 0], minlength=n),
@@ -212,7 +212,7 @@ def check(state, orientation: bool = True, simple: bool = True):
     with ``simple=False``) with signed area > 0 (:func:`check_orientation`); by the degree argument
     of this module's docstring, no two cells then overlap. Called by :func:`spherevm.topology.check` (``State.validate``)."""
     check_closed(state)
-    areas = state.constraint.cell_areas_np(state)
+    areas = state.constraint.tiling_areas_np(state)
     check_cover(state, areas)
     if orientation:
         if simple:

@@ -146,7 +146,7 @@ def test_device_path_is_looked_up_once_and_gpu_surfaces_are_checked():
     assert vm.implementation("compute", cpu_state) is vm.implementation("compute", cpu_state)
     # a state on the GPU (only its device and surface matter here) on a surface the kernels do not know
     fake = SimpleNamespace(device=Device("gpu", np), constraint=svm.constraints.Torus(3.0, 1.0))
-    with pytest.raises(ValueError, match=r"VertexModel on the GPU supports Sphere, PeriodicPlane surfaces only, but the "
+    with pytest.raises(ValueError, match=r"VertexModel on the GPU supports GeodesicSphere, PeriodicPlane surfaces only, but the "
                                          r"state is on Torus\(major_radius=3.0, minor_radius=1.0\)"):
         vm.implementation("compute", fake)
     sphere = SimpleNamespace(device=Device("gpu", np), constraint=svm.constraints.Sphere())
@@ -165,7 +165,13 @@ def test_a_stub_surface_is_refused_at_attach(stub):
 
 
 # ------------------------------------------------------------------ the shape-gradient contract
+def _flat(state):
+    state.constraint = svm.constraints.Sphere(metric="flat")
+    return state
+
+
 SURFACES = {"Sphere": lambda: svm.init.random_tiling(24, replicas=2, seed=5, radius=1.7),
+            "FlatSphere": lambda: _flat(svm.init.random_tiling(24, replicas=2, seed=5, radius=1.7)),
             "PeriodicPlane": lambda: svm.init_plane.random_planar_tiling(24, replicas=2, seed=5)}
 
 

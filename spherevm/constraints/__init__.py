@@ -2,7 +2,7 @@
 from .base import Constraint
 from .bump import GaussianBump
 from .plane import PeriodicPlane
-from .sphere import Sphere
+from .sphere import FlatSphere, Sphere
 from .torus import Torus
 
-__all__ = ["Constraint", "GaussianBump", "PeriodicPlane", "Sphere", "Torus"]
+__all__ = ["Constraint", "FlatSphere", "GaussianBump", "PeriodicPlane", "Sphere", "Torus"]

@@ -11,9 +11,20 @@ from ..device import launch, load_module
 from .plane import PeriodicPlane
 from .sphere import Sphere
 
+class _Metric(type):
+    def __instancecheck__(cls, constraint):
+        return isinstance(constraint, Sphere) and constraint.metric == "geodesic"
+
+
+class GeodesicSphere(metaclass=_Metric):
+    """The sphere the kernels compile: ``isinstance(c, GeodesicSphere)`` holds for a :class:`Sphere`
+    measuring with its geodesic metric (the default), not for ``Sphere(metric="flat")``, whose metric
+    runs on device="cpu" only: operations listing KERNEL_SURFACES in ``gpu_surfaces`` refuse it."""
+
+
 #: The surfaces with CUDA kernels and the macros that compile geometry/surface.cuh for each: one
 #: kernel source per operation serves them all (``gpu_surfaces`` of the built-in operations).
-SURFACE_DEFINES = {Sphere: (), PeriodicPlane: ("SVM_SURFACE_PLANE",)}
+SURFACE_DEFINES = {GeodesicSphere: (), PeriodicPlane: ("SVM_SURFACE_PLANE",)}
 KERNEL_SURFACES = tuple(SURFACE_DEFINES)
 _CELL_MEASURES = Path(__file__).parent.parent / "geometry" / "cell_measures.cu"
 

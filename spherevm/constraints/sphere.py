@@ -10,6 +10,10 @@ from ..geometry import sphere as geo
 from .base import Constraint
 from .cell_rows import fan_rows, fold
 from .corners import corner_index, in_parallel
+from .flat import FlatFacets
+
+#: the metrics a Sphere measures with (docs/surfaces.md)
+METRICS = ("geodesic", "flat")
 
 
 class CellGeometry:
@@ -58,9 +62,25 @@ class Sphere(Constraint):
     about the cell's first vertex, with the triple product taken of differences so that small
     cells keep full relative accuracy. Area gradients come from the edges alone (each edge's end
     sweeps a thin triangle), with no fan apex. Normal: ``x/|x|``; ``P_N(x) = R x/|x|``.
+
+    Parameters
+    ----------
+    metric : {"geodesic", "flat"}
+        "geodesic" (default): the exact metric above. "flat": straight chords and flat vector areas
+        (:class:`FlatSphere`, the metric every other surface uses; NumPy only).
     """
 
     name = "sphere"
+    metric = "geodesic"
+
+    def __new__(cls, *args, metric=None, **kwargs):
+        if metric is not None and metric not in METRICS:
+            raise ValueError(f"metric must be one of {METRICS}, got {metric!r}")
+        return super().__new__(FlatSphere if cls is Sphere and metric == "flat" else cls)
+
+    def __init__(self, metric=None):
+        if metric is not None and metric != self.metric:
+            raise ValueError(f"{type(self).__name__} measures with the {self.metric} metric, got metric={metric!r}")
 
     def normal(self, x):
         return geo.normalize(x)
@@ -298,3 +318,22 @@ class Sphere(Constraint):
         pos = state.positions
         return state.radius[state.vertex_replica[u]] * geo.geodesic_length(geo.normalize(pos[u]),
                                                                            geo.normalize(pos[v]))
+
+
+class FlatSphere(FlatFacets, Sphere):
+    """The sphere under the flat-facet metric, made by ``Sphere(metric="flat")``: edges are straight
+    chords and cell areas flat vector areas (:mod:`spherevm.constraints.flat`), whose errors against
+    the geodesic ones shrink as (cell size / R)^2 (docs/surfaces.md). Everything that is about the
+    sphere itself rather than about measuring cells stays the sphere's: normals, projections,
+    ``total_area_np`` (4 pi R^2, so <A> and the parameters keep their scale), and the signed
+    geodesic areas that judge a tiling (:meth:`tiling_areas_np`, :meth:`triangle_area`: which points
+    of the sphere each cell covers). The GPU kernels implement the geodesic metric only."""
+
+    metric = "flat"
+
+    def tiling_areas_np(self, state):
+        """The cells' exact spherical areas: the flat ones do not add up to 4 pi R^2."""
+        return state.device.to_numpy(Sphere.cell_geometry(self, state).area)
+
+    def __repr__(self):
+        return "Sphere(metric='flat')"

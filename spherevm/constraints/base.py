@@ -4,6 +4,20 @@ from __future__ import annotations
 import numpy as np
 
 
+class CellMeasures:
+    """Base of what ``cell_geometry`` returns: ``center``, each cell's centre ``(n_cells, 3)``, is
+    computed on first use from the callable a subclass keeps in ``_center`` (the forces do not
+    need it)."""
+
+    _center = None
+
+    @property
+    def center(self):
+        if callable(self._center):
+            self._center = self._center()
+        return self._center
+
+
 class Constraint:
     """A surface that holds the vertices and measures lengths and areas on itself.
 

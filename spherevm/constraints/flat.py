@@ -12,9 +12,10 @@ from __future__ import annotations
 from ..device import weighted_bincount
 from ..geometry import flat
 from ..geometry.sphere import _cross, _norm
+from .base import CellMeasures
 
 
-class FlatGeometry:
+class FlatGeometry(CellMeasures):
     """Per-cell ``area`` (signed flat areas), ``perimeter`` (sums of chords) and ``area_vector``
     (``(n_cells, 3)``), and the per-corner ``edge`` ``(V, 3, 3)``: ``x[vertex_neighbors[v, k]] -
     x[v]`` (nearest image), which the gradient reuses. ``center`` (the surface's cell centres) is
@@ -23,12 +24,6 @@ class FlatGeometry:
     def __init__(self, area, perimeter, area_vector, edge, center):
         self.area, self.perimeter, self.area_vector, self.edge = area, perimeter, area_vector, edge
         self._center = center
-
-    @property
-    def center(self):
-        if callable(self._center):
-            self._center = self._center()
-        return self._center
 
 
 def _per_cell(state, values):
@@ -90,7 +85,8 @@ class FlatFacets:
             w = xp.zeros((state.n_cells, 3)) if d_area_vector is None else d_area_vector
             if d_area is not None:
                 area = geometry.area
-                w = w + (xp.where(area != 0, d_area, 0.0) / xp.where(area != 0, area, 1.0))[:, None] * geometry.area_vector
+                per_area = xp.where(area != 0, d_area, 0.0) / xp.where(area != 0, area, 1.0)
+                w = w + per_area[:, None] * geometry.area_vector
             out += flat.vector_area_gradient(xp.roll(edge, -1, axis=1), edge, w[vc]).sum(axis=1)
         if d_perimeter is not None:
             p = d_perimeter[vc]

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..device import array_module
-from .base import Constraint
+from .base import CellMeasures, Constraint
 
 
 def _wrap(xp, x, box):
@@ -19,7 +19,7 @@ def minimum_image(d, box):
     return d - box * xp.rint(d / box)
 
 
-class PlaneGeometry:
+class PlaneGeometry(CellMeasures):
     """Per-cell area and perimeter, and the per-corner edge vectors that the gradient reuses.
 
     ``edge`` (2 components, 3 slots, V) is the minimum image of ``x[vertex_neighbors[v, k]] - x[v]``,
@@ -37,12 +37,6 @@ class PlaneGeometry:
         out = xp.zeros((len(self.area), 3))
         out[:, 2] = self.area
         return out
-
-    @property
-    def center(self):
-        if callable(self._center):
-            self._center = self._center()
-        return self._center
 
 
 class PeriodicPlane(Constraint):

@@ -7,7 +7,7 @@ import numpy as np
 
 from ..device import array_module, weighted_bincount
 from ..geometry import sphere as geo
-from .base import Constraint
+from .base import CellMeasures, Constraint
 from .cell_rows import fan_rows, fold
 from .corners import corner_index, in_parallel
 from .flat import FlatFacets
@@ -16,7 +16,7 @@ from .flat import FlatFacets
 METRICS = ("geodesic", "flat")
 
 
-class CellGeometry:
+class CellGeometry(CellMeasures):
     """Per-cell area and perimeter, the unit vertex directions, and the per-corner terms that the
     gradients reuse. ``center`` (the normalised vertex centroid of each cell, ``(n_cells, 3)``) is
     computed on first use: the forces do not need it."""
@@ -26,12 +26,6 @@ class CellGeometry:
         self.area_vector = area_vector
         self.corners = corners
         self._center = center
-
-    @property
-    def center(self):
-        if callable(self._center):
-            self._center = self._center()
-        return self._center
 
 
 # Vectors are (3, n) arrays, one contiguous row per Cartesian component: elementwise vector

@@ -5,12 +5,14 @@ logarithms against log(h / R), h = sqrt(<A>) = sqrt(4 pi R^2 / N) the cell size.
 
     python benchmarks/flat_metric.py                     # N = 64 .. 4096, 4 replicas each
     python benchmarks/flat_metric.py --sizes 64 256 1024 4096 16384 --replicas 2
+    python benchmarks/flat_metric.py --cost              # a VertexModel force under each metric
 
 Takes a few seconds on one core.
 """
 from __future__ import annotations
 
 import argparse
+import timeit
 
 import numpy as np
 
@@ -35,11 +37,30 @@ def slope(h, values) -> float:
     return float(np.polyfit(np.log(h), np.log(values), 1)[0])
 
 
+def cost(sizes):
+    """Print the best of 5 x 5 VertexModel force evaluations (NumPy) per metric and size."""
+    print("| N | geodesic | flat |")
+    print("| --- | --- | --- |")
+    for n in sizes:
+        state = svm.init.random_tiling(n, seed=1)
+        model = svm.plugins.forces.VertexModel.dimensionless(kr=1.0, p0=3.8)
+        times = []
+        for metric in ("geodesic", "flat"):
+            state.constraint = Sphere(metric=metric)
+            model.compute(state)
+            times.append(min(timeit.repeat(lambda: model.compute(state), number=5, repeat=5)) / 5)
+        print(f"| {n} | {times[0] * 1e3:.2f} ms | {times[1] * 1e3:.2f} ms |")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     parser.add_argument("--sizes", type=int, nargs="+", default=[64, 256, 1024, 4096], help="cells per tiling")
     parser.add_argument("--replicas", type=int, default=4, help="tilings per size")
+    parser.add_argument("--cost", action="store_true", help="time a force at 1,024 and 16,384 cells instead")
     args = parser.parse_args(argv)
+    if args.cost:
+        cost([1024, 16384])
+        return
     rows = np.array([differences(n, args.replicas) for n in args.sizes])
     print("| N | h / R | area: mean rel. difference | perimeter: mean rel. difference | 1 - sum A / 4 pi R^2 |")
     print("| --- | --- | --- | --- | --- |")

@@ -11,7 +11,10 @@ from ..device import launch, load_module
 from .plane import PeriodicPlane
 from .sphere import Sphere
 
+
 class _Metric(type):
+    """Makes ``isinstance`` ask for the metric too (as abc.ABCMeta lets classes answer it)."""
+
     def __instancecheck__(cls, constraint):
         return isinstance(constraint, Sphere) and constraint.metric == "geodesic"
 

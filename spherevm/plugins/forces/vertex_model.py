@@ -191,7 +191,6 @@ class VertexModel(Force):
         return kA * dA_cell ** 2 + kP * dP_cell ** 2, 2.0 * kA * dA_cell, 2.0 * kP * dP_cell
 
     def _compute_cpu(self, state) -> ForceResult:
-        xp = state.device.xp
         geometry = state.constraint.cell_geometry(state)
         cell_energy, d_area, d_perimeter = self.cell_terms(state, geometry)
         energy = weighted_bincount(state.cell_replica, weights=cell_energy, minlength=state.n_replicas)

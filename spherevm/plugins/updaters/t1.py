@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ... import folding, simplicity, topology
+from ... import folding, topology
 from ...constraints.kernels import KERNEL_SURFACES
 from ...init_plane import MIN_T1_PLANAR_CELLS
 from ..base import Updater

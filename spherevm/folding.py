@@ -97,7 +97,7 @@ def _per_row(size, axes):
 def _inverted(con, w, ring, size):
     """Corners ``w`` (..., 3) whose edges to ``ring`` (..., 3, 3) turn clockwise: two of the three
     turns between consecutive edges negative about the outward normal."""
-    normal = con.normal(w)
+    normal = con.normal(w, _per_row(size, 1))
     e = con.unwrap(ring, w[..., None, :], _per_row(size, 2)) - w[..., None, :]
     cross = np.cross(e, np.roll(e, -1, axis=-2))
     turns = (np.einsum("...j,...kj->...k", normal, cross) < 0).sum(axis=-1)

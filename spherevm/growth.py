@@ -128,7 +128,7 @@ class Editor:
         size = self._size(c)
         cen = self.constraint.project_normal(q.mean(axis=0)[None], size[None])
         cen = self.constraint.unwrap(cen, q[:1], size[None])[0]
-        return cen, self.constraint.normal(cen[None])[0], q
+        return cen, self.constraint.normal(cen[None], size[None])[0], q
 
     # ------------------------------------------------------------------ division
     def divide(self, c, m):

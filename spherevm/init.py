@@ -65,8 +65,8 @@ def _oriented_hull(points):
 
 
 def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, vertices="centroid",
-                  sort: bool = True, device=CPU) -> State:
-    """Random tilings of the sphere, the paper's initial condition.
+                  sort: bool = True, device=CPU, surface=None, size=None) -> State:
+    """Random tilings of the sphere, the paper's initial condition (or of another surface: ``surface``).
 
     For each replica: ``n_cells`` points uniform on the sphere, their convex hull, and one vertex at
     the centroid of each hull facet pushed onto the sphere. Replica ``r`` uses the random stream
@@ -89,10 +89,26 @@ def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, v
         Number cells and vertices along a Morton curve (:func:`spherevm.topology.morton_codes`), so
         that neighbours are close in memory (the GPU kernels gather several times faster).
     device : Device or str
+    surface : ImplicitSurface, optional
+        Tile this surface instead (the torus, the ellipsoid, a periodic height field:
+        :mod:`spherevm.init_surface`); ``radius`` and ``vertices`` do not apply.
+    size : array (k,) or (replicas, k), optional
+        With ``surface``: its parameters per replica; default its own, scaled so that <A> = 1.
 
     Returns
     -------
     State"""
+    if surface is not None and not isinstance(surface, Sphere):
+        from .constraints import ImplicitSurface
+        if not isinstance(surface, ImplicitSurface) or radius is not None:
+            raise ValueError(f"surface must be a Sphere or an ImplicitSurface (with size, not radius), got {surface!r}"
+                             f"{'' if radius is None else ' and radius'}; for the periodic plane use "
+                             "random_planar_tiling")
+        from .init_surface import surface_tiling
+        n = integer("n_cells", n_cells, minimum=4)
+        keys = [(integer("seed", seed), r) for r in range(integer("replicas", replicas, minimum=1))]
+        check_tiling_memory(f"random_tiling({n}, replicas={len(keys)})", n, len(keys), gpu=resolve(device).is_gpu)
+        return surface_tiling(surface, n, keys, size=size, sort=sort, device=device)
     n = integer("n_cells", n_cells, minimum=4)
     replicas = integer("replicas", replicas, minimum=1)
     seed = integer("seed", seed)

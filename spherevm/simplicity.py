@@ -64,6 +64,8 @@ def _corner_points(state, sides):
     vertex along its minimum-image edges."""
     con = state.constraint
     to_np = state.device.to_numpy
+    if hasattr(con, "cell_plane_points"):
+        return con.cell_plane_points(state)
     if hasattr(con, "unwrapped_cells"):
         _, valid, e, r = con.unwrapped_cells(state)
         valid, e, r = to_np(valid), to_np(e), to_np(r)
@@ -79,9 +81,9 @@ def _corner_points(state, sides):
 def self_crossings(state):
     """The crossing edge pairs inside cells: ``(cell, i, j)`` arrays, edge ``i`` (from slot i to slot
     i + 1 of ``cell_vertices[cell]``) crossing edge ``j > i`` of the same cell (:func:`arcs_cross`).
-    Edges that share a vertex are not compared. ``None`` on a surface this cannot measure (one
-    without a sphere's arcs or the plane's minimum images)."""
-    if not measurable(state.constraint):
+    Edges that share a vertex are not compared; on an implicit surface each cell is drawn in the
+    plane tangent at its centre (``cell_plane_points``). ``None`` on a surface this cannot measure."""
+    if not (measurable(state.constraint) or hasattr(state.constraint, "cell_plane_points")):
         return None
 
     def build():
@@ -131,7 +133,7 @@ def counts(state, areas=None):
     total = np.bincount(crep, weights=areas, minlength=n)
     surface = con.total_area_np(con.size_np(state))
     return dict(crossed=crossed, open=opened, inverted=np.bincount(crep[areas <= 0], minlength=n),
-                uncovered=(np.abs(total - surface) > 1e-9 * surface).astype(np.int64))
+                uncovered=(np.abs(total - surface) > con.cover_tolerance * surface).astype(np.int64))
 
 
 def check_closed(state):
@@ -159,7 +161,7 @@ def check_cover(state, areas):
         return
     crep = state.cell_replica_np()
     total = np.bincount(crep, weights=areas, minlength=state.n_replicas)
-    wrong = np.flatnonzero(np.abs(total - surface) > 1e-9 * surface)
+    wrong = np.flatnonzero(np.abs(total - surface) > con.cover_tolerance * surface)
     if len(wrong) and getattr(con, "euler_characteristic", 2) == 0:
         r = int(wrong[0])
         raise ValueError(f"replica {r}: the cells cover an area {total[r]:.12g}, but the box's is {surface[r]:.12g}; "

@@ -161,7 +161,7 @@ def check_force(force, state, *, samples: int = 8, rtol: float = 1e-6, h: float 
 
     try:
         # 2. tangency
-        normal = _np(state, constraint.normal(x0))
+        normal = _np(state, constraint.normal(x0, constraint.size(state, state.vertex_replica)))
         radial = np.abs((forces * normal).sum(axis=1))
         rel = radial / np.maximum(fnorm + rms[vrep], np.finfo(float).tiny)
         i = int(np.argmax(rel))
@@ -193,7 +193,7 @@ def check_force(force, state, *, samples: int = 8, rtol: float = 1e-6, h: float 
             local = np.array([rng.integers(vstart[r + 1] - vstart[r]) for r in range(nr)])
             verts = vstart[:-1] + local
             vd = xp.asarray(verts)
-            t = _np(state, constraint.project_tangent(x0[vd], xp.asarray(rng.standard_normal((nr, 3)))))
+            t = _np(state, constraint.project_tangent(x0[vd], xp.asarray(rng.standard_normal((nr, 3))), size_v[vd]))
             t /= np.linalg.norm(t, axis=1)[:, None]
             td = xp.asarray(t)
 
@@ -230,7 +230,7 @@ def check_force(force, state, *, samples: int = 8, rtol: float = 1e-6, h: float 
         if nr > 1:
             x = x0.copy()
             v = xp.asarray([0])
-            t = constraint.project_tangent(x0[v], xp.asarray(rng.standard_normal((1, 3))))
+            t = constraint.project_tangent(x0[v], xp.asarray(rng.standard_normal((1, 3))), size_v[v])
             t = t / xp.sqrt((t * t).sum(axis=1))[:, None]
             x[v] = constraint.geodesic_offset(x0[v], t, xp.asarray([0.1 * scale[0]]), size_v[v])
             state.positions = x

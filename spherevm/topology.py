@@ -272,11 +272,11 @@ def t1_new_positions(state, pos, u, v, a, b, c, d, new_length, turn=None):
     pu = pos[u]
     pv, pa, pb, pc, pd = (con.unwrap(pos[w], pu, radius) for w in (v, a, b, c, d))  # nearest images
     mid = con.project_normal(0.5 * (pu + pv), radius)
-    normal = con.normal(mid)
-    along = con.project_tangent(mid, pv - pu)
+    normal = con.normal(mid, radius)
+    along = con.project_tangent(mid, pv - pu, radius)
     norm = np.linalg.norm(along, axis=1)
     # a zero-length edge has no direction: fall back to the direction between the cells' sides
-    across_c1 = con.project_tangent(mid, 0.5 * (pa + pd) - 0.5 * (pb + pc))
+    across_c1 = con.project_tangent(mid, 0.5 * (pa + pd) - 0.5 * (pb + pc), radius)
     tiny = norm <= 1e-12 * con.length_scale(radius)
     perp = np.cross(normal, along / np.where(tiny, 1.0, norm)[:, None])
     perp[tiny] = across_c1[tiny]

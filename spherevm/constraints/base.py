@@ -38,6 +38,9 @@ class Constraint:
     size_name = "radius"
     #: V - E + F of every network on this surface (2 on a sphere, 0 on a torus or periodic plane)
     euler_characteristic = 2
+    #: how far, relative to the surface's area, the cells' areas (``tiling_areas_np``) may add up
+    #: from it in a tiling that covers the surface once (:mod:`spherevm.simplicity`)
+    cover_tolerance = 1e-9
 
     def size(self, state, index):
         """The surface size of the given replicas (per vertex when ``index`` is vertex_replica)."""
@@ -55,11 +58,14 @@ class Constraint:
         """The image of ``x`` nearest ``reference`` (periodic surfaces); ``x`` itself otherwise."""
         return x
 
-    def normal(self, x):
+    def normal(self, x, size=None):
+        """The unit outward normal at the points ``x`` (..., 3); ``size`` per point (a surface whose
+        shape depends on its size needs it: the torus, the ellipsoid)."""
         raise NotImplementedError(f"{type(self).__name__}.normal is not implemented yet")
 
-    def project_tangent(self, x, v):
-        n = self.normal(x)
+    def project_tangent(self, x, v, size=None):
+        """P_T: the part of ``v`` tangent to the surface at ``x`` (``size`` as in :meth:`normal`)."""
+        n = self.normal(x, size)
         return v - (v * n).sum(axis=-1)[..., None] * n
 
     def project_normal(self, x, radius):

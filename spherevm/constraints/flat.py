@@ -62,7 +62,7 @@ class FlatFacets:
         apex = state.cell_vertices[state.vertex_cells, 0]
         r = x[:, None] - self.unwrap(x[apex], x[:, None], size)
         vector = _per_cell(state, 0.5 * _cross(r, edge))
-        normals = state.device.xp.broadcast_to(self.normal(x)[:, None], edge.shape)
+        normals = state.device.xp.broadcast_to(self.normal(x, size[:, 0])[:, None], edge.shape)
         perimeter = weighted_bincount(state.vertex_cells.reshape(-1), weights=_norm(edge).reshape(-1),
                                       minlength=state.n_cells)
         return FlatGeometry(area=flat.signed_area(vector, _per_cell(state, normals)), perimeter=perimeter,
@@ -95,7 +95,8 @@ class FlatFacets:
             return xp.zeros((state.n_vertices, 3))
         corners = sum(terms)
         # three slices added: a strided sum over the slot axis took several times longer
-        return self.project_tangent(state.positions, corners[:, 0] + corners[:, 1] + corners[:, 2])
+        return self.project_tangent(state.positions, corners[:, 0] + corners[:, 1] + corners[:, 2],
+                                    self.size(state, state.vertex_replica))
 
     def edge_lengths(self, state, u, v):
         """Chord lengths ``|x[v] - x[u]|`` of the edges (u[i], v[i]) (nearest images)."""

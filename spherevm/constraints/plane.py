@@ -54,13 +54,13 @@ class PeriodicPlane(Constraint):
     euler_characteristic = 0
 
     # ------------------------------------------------------------------ pointwise
-    def normal(self, x):
+    def normal(self, x, size=None):
         xp = array_module(x)
         n = xp.zeros_like(x)
         n[..., 2] = 1.0
         return n
 
-    def project_tangent(self, x, v):
+    def project_tangent(self, x, v, size=None):
         out = v.copy()
         out[..., 2] = 0.0
         return out

@@ -76,10 +76,10 @@ class Sphere(Constraint):
         if metric is not None and metric != self.metric:
             raise ValueError(f"{type(self).__name__} measures with the {self.metric} metric, got metric={metric!r}")
 
-    def normal(self, x):
+    def normal(self, x, size=None):
         return geo.normalize(x)
 
-    def project_tangent(self, x, v):
+    def project_tangent(self, x, v, size=None):
         """``v - (v.n) n`` with ``n = x/|x|`` (last axis of length 3)."""
         xp = array_module(x, v)
         c = xp.einsum("...i,...i->...", v, x) / xp.einsum("...i,...i->...", x, x)

@@ -1,53 +1,76 @@
-"""Torus: the surface exists with its projections; its metric is not implemented yet."""
+"""The ring torus about the z axis: closed-form normals and closest points, the flat-facet metric."""
 from __future__ import annotations
 
 import numpy as np
 
 from ..device import array_module
-from .base import Constraint
+from .implicit import ImplicitSurface
 
 
-class Torus(Constraint):
-    """Torus about the z axis: tube of radius ``minor_radius`` around a circle of ``major_radius``.
+class Torus(ImplicitSurface):
+    """Torus about the z axis: a tube of radius ``minor_radius`` r around the circle of radius
+    ``major_radius`` R in the plane z = 0, ``F = (rho - R)^2 + z^2 - r^2`` (``rho = sqrt(x^2 +
+    y^2)``), a ring torus (R > r > 0). Area 4 pi^2 R r, Euler characteristic 0.
 
-    ``(sqrt(x^2 + y^2) - R)^2 + z^2 = r^2`` with ``R > r > 0`` (a ring torus, no self-intersection).
-    Normals and the projections P_T, P_N are available; geodesic lengths and polygon areas (and so
-    vertex-model forces) are not implemented yet and raise NotImplementedError. Initial tilings of
-    a torus also do not exist yet: its Euler characteristic is 0, not 2.
-    """
+    The normal ``(x - c)/|x - c|`` and the closest point ``c + r (x - c)/|x - c|``, with ``c = R
+    (x, y, 0)/rho`` the nearest point of the core circle, are closed forms. (R, r) are per replica
+    (``size``); the instance's values are the shape a tiling starts from
+    (:func:`spherevm.init.random_tiling` scales both by one factor).
+
+    Parameters
+    ----------
+    major_radius, minor_radius : float
+        R > r > 0."""
 
     name = "torus"
+    size_names = ("major_radius", "minor_radius")
+    euler_characteristic = 0
 
-    def __init__(self, major_radius: float, minor_radius: float):
-        R, r = float(major_radius), float(minor_radius)
-        if not np.isfinite(r) or r <= 0:
-            raise ValueError(f"minor_radius must be positive and finite, got {minor_radius}")
-        if not np.isfinite(R) or R <= r:
-            raise ValueError(f"major_radius must be finite and larger than minor_radius={r}, got {major_radius}")
-        self.major_radius, self.minor_radius = R, r
+    def __init__(self, major_radius: float = 3.0, minor_radius: float = 1.0):
+        self.shape = tuple(self.check_size([major_radius, minor_radius])[0])
 
-    def _tube_centre(self, x):
+    def check_parameters(self, R, r):
+        bad = ~(np.asarray(R) > np.asarray(r))
+        if bad.any():
+            raise ValueError(f"major_radius must be larger than minor_radius (a ring torus), got major_radius="
+                             f"{np.asarray(R)[bad][0]:g} and minor_radius={np.asarray(r)[bad][0]:g}")
+
+    def _core(self, x, R):
+        """The nearest point of the core circle (radius ``R``, z = 0) and ``x`` minus it."""
         xp = array_module(x)
         rho = xp.sqrt(x[..., 0] ** 2 + x[..., 1] ** 2)
-        centre = xp.zeros_like(x)
-        centre[..., 0] = self.major_radius * x[..., 0] / rho
-        centre[..., 1] = self.major_radius * x[..., 1] / rho
-        return centre
+        c = xp.zeros_like(x)
+        c[..., 0] = R * x[..., 0] / rho
+        c[..., 1] = R * x[..., 1] / rho
+        return c, x - c
 
-    def normal(self, x):
-        d = x - self._tube_centre(x)
-        return d / array_module(x).sqrt((d * d).sum(axis=-1))[..., None]
+    def F(self, x, size):
+        R, r = self.parameters(size)
+        rho = array_module(x).sqrt(x[..., 0] ** 2 + x[..., 1] ** 2)
+        return (rho - R) ** 2 + x[..., 2] ** 2 - r * r
 
-    def project_normal(self, x, radius=None):
-        """Closest point on the torus (``radius`` is ignored: the torus carries its own size)."""
-        return self._tube_centre(x) + self.minor_radius * self.normal(x)
+    def grad_F(self, x, size):
+        R, _ = self.parameters(size)
+        return 2.0 * self._core(x, R)[1]
 
-    def distance_to_surface(self, x, radius=None):
-        d = x - self._tube_centre(x)
-        return array_module(x).sqrt((d * d).sum(axis=-1)) - self.minor_radius
+    def project_normal(self, x, size):
+        """``c + r (x - c)/|x - c|`` (closed form)."""
+        xp = array_module(x)
+        R, r = self.parameters(xp.asarray(size))
+        c, d = self._core(x, R)
+        return c + (r / xp.sqrt((d * d).sum(axis=-1)))[..., None] * d
 
-    def total_area_np(self, radius=None):
-        return 4.0 * np.pi ** 2 * self.major_radius * self.minor_radius
+    def distance_to_surface(self, x, size):
+        xp = array_module(x)
+        R, r = self.parameters(xp.asarray(size))
+        d = self._core(x, R)[1]
+        return xp.sqrt((d * d).sum(axis=-1)) - r
 
-    def __repr__(self):
-        return f"Torus(major_radius={self.major_radius}, minor_radius={self.minor_radius})"
+    def length_scale(self, size):
+        """The minor radius r."""
+        return size[..., 1]
+
+    def total_area_np(self, size):
+        """4 pi^2 R r per row of ``size``."""
+        s = np.asarray(size, dtype=np.float64)
+        return 4.0 * np.pi ** 2 * s[..., 0] * s[..., 1]

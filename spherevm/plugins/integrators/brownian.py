@@ -79,7 +79,8 @@ class Brownian(Integrator):
         amp = self._per_replica(state)[1][state.vertex_replica]
         eta = xp.asarray(rng.normal(simulation.seed, rng.STREAM_BROWNIAN, simulation.timestep,
                                     np.arange(state.n_vertices), 3))
-        dr = con.project_tangent(state.positions, self.dt * self._drift(simulation, forces) + amp[:, None] * eta)
+        dr = con.project_tangent(state.positions, self.dt * self._drift(simulation, forces) + amp[:, None] * eta,
+                                 con.size(state, state.vertex_replica))
         self._guard(simulation, dr)
         state.positions = con.project_normal(state.positions + dr, con.size(state, state.vertex_replica))
         self._after_move(simulation)
@@ -238,7 +239,7 @@ class Active(Brownian):
         con = state.constraint
         if self.mode == "cell":
             return con.cell_normals(state)
-        return con.normal(state.positions)
+        return con.normal(state.positions, con.size(state, state.vertex_replica))
 
     def attach(self, simulation):
         super().attach(simulation)
@@ -271,7 +272,7 @@ class Active(Brownian):
         p = self.directors
         if self.mode == "cell":
             p = p[state.vertex_cells].mean(axis=1)
-            p = state.constraint.project_tangent(state.positions, p)
+            p = state.constraint.project_tangent(state.positions, p, state.constraint.size(state, state.vertex_replica))
         return self.mu * forces + self.v0 * p
 
     def _after_move(self, simulation):

@@ -186,9 +186,9 @@ class FIRE(Minimizer):
         per_vertex = xp.take(xp.stack((keep, scale, dt)), rep, axis=1)[..., None]
         v = per_vertex[0] * v + (per_vertex[1] + per_vertex[2]) * forces
         self._guard(simulation, per_vertex[2] * v, on[rep])
-        x = state.constraint.project_normal(state.positions + per_vertex[2] * v,
-                                              state.constraint.size(state, rep))
-        v = state.constraint.project_tangent(x, v)
+        size = state.constraint.size(state, rep)
+        x = state.constraint.project_normal(state.positions + per_vertex[2] * v, size)
+        v = state.constraint.project_tangent(x, v, size)
         if bool(on.all()):
             state.positions, self.velocities = x, v
         else:

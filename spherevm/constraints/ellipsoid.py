@@ -1,0 +1,60 @@
+"""The ellipsoid x^2/a^2 + y^2/b^2 + z^2/c^2 = 1: Newton projections, area by quadrature."""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from .implicit import ImplicitSurface
+
+#: Gauss-Legendre nodes in cos(theta) and equal steps in phi of the area quadrature (the integrand is
+#: smooth, and periodic in phi: both converge spectrally; 1e-15 relative at axis ratios up to 10)
+QUADRATURE_NODES = (256, 512)
+
+
+def area_element(u, phi, a, b, c):
+    """The ellipsoid's area per ``du dphi`` at ``(a sqrt(1-u^2) cos phi, b sqrt(1-u^2) sin phi, c u)``:
+    ``sqrt(a^2 b^2 u^2 + c^2 (1 - u^2) (b^2 cos^2 phi + a^2 sin^2 phi))``."""
+    return np.sqrt((a * b * u) ** 2 + c * c * (1 - u * u) * ((b * np.cos(phi)) ** 2 + (a * np.sin(phi)) ** 2))
+
+
+@lru_cache(maxsize=256)
+def ellipsoid_area(a: float, b: float, c: float) -> float:
+    """The area of the ellipsoid of semi-axes a, b, c by quadrature (Gauss-Legendre in ``u = cos
+    theta``, the trapezoid rule in phi)."""
+    nu, nphi = QUADRATURE_NODES
+    u, w = np.polynomial.legendre.leggauss(nu)
+    phi = np.arange(nphi) * (2 * np.pi / nphi)
+    return float((w[:, None] * area_element(u[:, None], phi[None], a, b, c)).sum() * (2 * np.pi / nphi))
+
+
+class Ellipsoid(ImplicitSurface):
+    """The ellipsoid of semi-axes a, b, c along x, y, z: ``F = x^2/a^2 + y^2/b^2 + z^2/c^2 - 1``.
+    Closest points by Newton iterations (:class:`ImplicitSurface`), the area by quadrature
+    (:func:`ellipsoid_area`), Euler characteristic 2. (a, b, c) are per replica (``size``); the
+    instance's values are the shape a tiling starts from.
+
+    Parameters
+    ----------
+    a, b, c : float
+        Positive semi-axes."""
+
+    name = "ellipsoid"
+    size_names = ("a", "b", "c")
+    euler_characteristic = 2
+
+    def __init__(self, a: float = 1.0, b: float = 1.0, c: float = 1.0):
+        self.shape = tuple(self.check_size([a, b, c])[0])
+
+    def F(self, x, size):
+        a, b, c = self.parameters(size)
+        return (x[..., 0] / a) ** 2 + (x[..., 1] / b) ** 2 + (x[..., 2] / c) ** 2 - 1.0
+
+    def grad_F(self, x, size):
+        return 2.0 * x / size ** 2
+
+    def total_area_np(self, size):
+        """The area per row of ``size`` (:func:`ellipsoid_area`)."""
+        s = np.asarray(size, dtype=np.float64)
+        flat = s.reshape(-1, 3)
+        return np.array([ellipsoid_area(*map(float, row)) for row in flat]).reshape(s.shape[:-1])

@@ -1,0 +1,250 @@
+"""Surfaces given implicitly, ``F(x) = 0``: the base class of the torus, the ellipsoid, the Gaussian
+bump and a user's own surface.
+
+A subclass gives ``F`` and ``grad F`` as functions of the points ``x`` (..., 3) and of the surface's
+parameters ``size`` (..., k), one row per point, whose last axis holds the parameters named in
+``size_names`` (a State keeps one row per replica, so one batched State holds surfaces of different
+sizes). Everything else follows: the normal ``n = grad F / |grad F|``, ``P_T = I - n n^T``, the closest
+point ``P_N`` (Newton iterations, or a closed form the subclass gives by overriding
+:meth:`ImplicitSurface.project_normal`) and the flat-facet metric of
+:mod:`spherevm.constraints.flat` (straight chords, vector areas, exact gradients). With
+``periodic = True`` the first two parameters are a periodic box ``(Lx, Ly)`` in x and y: positions
+are stored wrapped into it and edges are minimum images, as on the periodic plane.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..device import array_module
+from ..geometry import flat
+from ..geometry.sphere import _cross, _dot
+from .base import Constraint
+from .flat import FlatFacets
+
+#: the step, in units of the length scale, of the second difference that tells a smooth surface from
+#: one whose gradient vanishes on it (:meth:`ImplicitSurface.check_regular`)
+REGULARITY_STEP = 1e-4
+
+
+class ImplicitSurface(FlatFacets, Constraint):
+    """A surface ``F(x, size) = 0`` measured with the flat-facet metric. Subclass it and give
+    :meth:`F`, :meth:`grad_F`, ``size_names``, ``euler_characteristic`` and :meth:`total_area_np`
+    (and, optionally, a closed-form :meth:`project_normal` and :meth:`length_scale`).
+
+    The closest point of ``x`` is found by iterating ``p <- p + P_T(p) (x - p) - F(p) grad F / |grad
+    F|^2`` from ``p = x``: each step moves along the level set towards ``x`` and onto ``F = 0`` (a
+    Newton step in the normal direction), so the fixed point is the point of the surface where ``x -
+    p`` is normal to it. The iterations stop when a step is below ``tolerance`` times the length
+    scale (1e-14), or raise after ``max_iterations``.
+    """
+
+    name = "implicit"
+    metric = "flat"
+    #: the per-replica parameters, the last axis of ``size``; ``size_shape`` follows from them
+    size_names = ()
+    size_shape = (0,)
+    size_name = "size"
+    #: True: the first two parameters are a periodic box (Lx, Ly) in x and y
+    periodic = False
+    max_iterations = 60
+    tolerance = 1e-14
+    #: flat facets cut corners: their areas add up to less than the surface's, by a relative
+    #: O(<A> curvature^2); a tiling covers the surface once when the sum is the area to within half
+    #: of it (twice over it would be twice the area)
+    cover_tolerance = 0.5
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        cls.size_shape = (len(cls.size_names),)
+
+    # ------------------------------------------------------------------ what a subclass gives
+    def F(self, x, size):
+        """The implicit function at the points ``x`` (..., 3), ``size`` (..., k) per point."""
+        raise NotImplementedError(f"{type(self).__name__} must define F(x, size)")
+
+    def grad_F(self, x, size):
+        """``grad F`` (..., 3) at the points ``x``."""
+        raise NotImplementedError(f"{type(self).__name__} must define grad_F(x, size)")
+
+    def length_scale(self, size):
+        """A length per row of ``size`` (tolerances scale with it): the largest parameter."""
+        return array_module(size).abs(size).max(axis=-1)
+
+    def parameters(self, size):
+        """The columns of ``size`` (..., k), one array each, in the order of ``size_names``."""
+        return tuple(size[..., i] for i in range(len(self.size_names)))
+
+    def check_size(self, size) -> np.ndarray:
+        """``size`` as a float64 array (n, k), or ValueError naming the parameter that is out of
+        range (each must be positive and finite; subclasses check more in :meth:`check_parameters`)."""
+        s = np.asarray(size, dtype=np.float64)
+        k = len(self.size_names)
+        if s.shape[-1:] != (k,) or s.ndim > 2:
+            raise ValueError(f"{self!r} takes the parameters {self.size_names} per replica: size must have shape "
+                             f"({k},) or (n_replicas, {k}), got {s.shape}")
+        s = s.reshape(-1, k)
+        for i, name in enumerate(self.size_names):
+            bad = ~(np.isfinite(s[:, i]) & (s[:, i] > 0))
+            if bad.any():
+                raise ValueError(f"{name} must be positive and finite, got {s[bad, i][0]}")
+        self.check_parameters(*s.T)
+        return s
+
+    def check_parameters(self, *columns):
+        """Raise ValueError if the parameters (one array each) do not make this surface."""
+
+    def size(self, state, index):
+        """The parameters of the given replicas (rows of ``state.size``); ValueError if the State
+        lives on a surface of another kind."""
+        if type(state.constraint) is not type(self):
+            raise ValueError(f"the State lives on {state.constraint!r}, not on a {type(self).__name__}: give each "
+                             "surface its own States")
+        return super().size(state, index)
+
+    # ------------------------------------------------------------------ pointwise
+    def normal(self, x, size=None):
+        """``grad F / |grad F|``; ValueError where the gradient vanishes."""
+        g = self._gradient(x, self._required(size))
+        return g / array_module(g).sqrt(_dot(g, g))[..., None]
+
+    def _required(self, size):
+        if size is None:
+            raise TypeError(f"{self!r}: normals and tangent projections need the surface's parameters (size)")
+        return array_module(size).asarray(size)
+
+    def _gradient(self, x, size):
+        g = self.grad_F(x, size)
+        g2 = _dot(g, g)
+        bad = ~(g2 > 0)
+        if bad.any():
+            xp = array_module(x)
+            first = np.asarray(xp.broadcast_to(x, g.shape)[bad][0].tolist())
+            raise ValueError(f"{self!r}: grad F vanishes at {int(bad.sum())} of {bad.size} points (first at "
+                             f"{first.tolist()}): normals and projections need a smooth surface, grad F != 0 on it")
+        return g
+
+    def unwrap(self, x, reference, size):
+        """On a periodic surface the image of ``x`` nearest ``reference`` in x and y; else ``x``."""
+        if not self.periodic:
+            return x
+        box = size[..., :2]
+        out = x.copy()
+        d = x[..., :2] - reference[..., :2]
+        out[..., :2] = reference[..., :2] + d - box * array_module(d).rint(d / box)
+        return out
+
+    def wrap(self, x, size):
+        """Positions with x and y wrapped into the periodic box (a copy; ``x`` itself if not periodic)."""
+        if not self.periodic:
+            return x
+        xp = array_module(x)
+        box = size[..., :2]
+        out = x.copy()
+        w = x[..., :2] - box * xp.floor(x[..., :2] / box)
+        out[..., :2] = xp.where(w >= box, w - box, w)
+        return out
+
+    def outside_box(self, x, size):
+        """Mask of the points not stored inside the periodic box (none on a closed surface)."""
+        if not self.periodic:
+            return array_module(x).zeros(x.shape[:-1], dtype=bool)
+        return ((x[..., :2] < 0) | (x[..., :2] >= size[..., :2])).any(axis=-1)
+
+    def project_normal(self, x, size):
+        """P_N: the closest point of the surface (Newton iterations, see the class docstring),
+        wrapped into the box on a periodic surface. RuntimeError, naming the surface, the number of
+        points and the largest step left, if they do not converge; ValueError if grad F vanishes."""
+        xp = array_module(x)
+        size = xp.asarray(size)
+        p = xp.array(x, dtype=xp.float64)
+        limit = self.tolerance * xp.broadcast_to(self.length_scale(size), p.shape[:-1])
+        for _ in range(self.max_iterations):
+            g = self._gradient(p, size)
+            g2 = _dot(g, g)
+            d = x - p
+            step = d - ((_dot(d, g) + self.F(p, size)) / g2)[..., None] * g
+            p = p + step
+            moved = xp.sqrt(_dot(step, step))
+            if bool((moved <= limit).all()):
+                break
+        else:
+            self.check_regular(p, size)
+            worst = float((moved / limit).max()) * self.tolerance
+            raise RuntimeError(f"{self!r}: projecting {int(moved.size)} points onto the surface did not converge in "
+                               f"{self.max_iterations} Newton iterations (largest last step {worst:.3g} of the length "
+                               f"scale, tolerance {self.tolerance:g}); {int((moved > limit).sum())} points are too far "
+                               "from the surface")
+        self.check_regular(p, size)
+        return self.wrap(p, size)
+
+    def check_regular(self, p, size):
+        """ValueError if grad F vanishes at the surface points ``p``: the second difference of F
+        across the surface, ``F(p + e n) + F(p - e n) - 2 F(p)`` (``e`` = REGULARITY_STEP length
+        scales), exceeds the first, ``e |grad F|`` (a smooth surface has a ratio of about e times its
+        curvature; F squared, whose gradient is zero on the surface, an unbounded one)."""
+        g = self._gradient(p, size)
+        xp = array_module(p)
+        norm = xp.sqrt(_dot(g, g))
+        e = REGULARITY_STEP * xp.broadcast_to(self.length_scale(size), norm.shape)
+        step = (e / norm)[..., None] * g
+        second = xp.abs(self.F(p + step, size) + self.F(p - step, size) - 2 * self.F(p, size))
+        bad = ~(second <= e * norm)
+        if bad.any():
+            first = np.asarray(xp.broadcast_to(p, g.shape)[bad][0].tolist())
+            raise ValueError(f"{self!r}: grad F vanishes on the surface at {int(bad.sum())} of {bad.size} points (first "
+                             f"near {first.tolist()}): F must cross zero with a nonzero gradient (not F^2)")
+
+    def distance_to_surface(self, x, size):
+        """``F / |grad F|``: the signed distance to first order."""
+        xp = array_module(x)
+        size = xp.asarray(size)
+        g = self._gradient(x, size)
+        return self.F(x, size) / xp.sqrt(_dot(g, g))
+
+    def triangle_area(self, a, b, c, size):
+        """Signed flat area of the triangles ``(a, b, c)`` (``b``, ``c`` nearest images of ``a``),
+        positive when counter-clockwise seen from the side the normal at ``a`` points to."""
+        b, c = self.unwrap(b, a, size), self.unwrap(c, a, size)
+        return flat.signed_area(0.5 * _cross(b - a, c - a), self.normal(a, size))
+
+    # ------------------------------------------------------------------ cells
+    def cell_centers(self, state):
+        """Each cell's vertex centroid (vertices unwrapped about its first) projected onto the
+        surface, ``(n_cells, 3)``."""
+        xp = state.device.xp
+        cv, sides = state.cell_vertices, state.cell_sides
+        valid = xp.arange(cv.shape[1])[None, :] < sides[:, None]
+        size = self.size(state, state.cell_replica)
+        x = state.positions[xp.where(valid, cv, cv[:, :1])]
+        x = self.unwrap(x, x[:, :1], size[:, None])
+        mean = xp.where(valid[..., None], x, 0.0).sum(axis=1) / sides[:, None]
+        return self.project_normal(mean, size)
+
+    def cell_plane_points(self, state):
+        """Each cell's edges as ``(start, stop)`` points ``(u, v, 1)`` (corners of cell 0 first, in
+        slot order; host arrays): the vertices, unwrapped about the cell's first, in an orthonormal
+        frame of the plane tangent at the cell's centre (:func:`spherevm.simplicity.self_crossings`
+        tests them for crossings as it tests the plane's)."""
+        to_np = state.device.to_numpy
+        cv, sides = to_np(state.cell_vertices), to_np(state.cell_sides)
+        col = np.arange(cv.shape[1])[None, :]
+        valid = col < sides[:, None]
+        n = to_np(self.cell_normals(state))
+        seed = np.eye(3)[np.argmin(np.abs(n), axis=1)]
+        e1 = seed - _dot(seed, n)[:, None] * n
+        e1 /= np.sqrt(_dot(e1, e1))[:, None]
+        e2 = _cross(n, e1)
+        x = to_np(state.positions)[np.where(valid, cv, cv[:, :1])]
+        x = self.unwrap(x, x[:, :1], to_np(self.size(state, state.cell_replica))[:, None])
+        r = x - x[:, :1]
+        uv = np.stack([_dot(r, e1[:, None]), _dot(r, e2[:, None]), np.ones(r.shape[:2])], axis=-1)
+        nxt = np.where(col + 1 < sides[:, None], col + 1, 0)
+        return uv[valid], np.take_along_axis(uv, nxt[..., None], axis=1)[valid]
+
+    def cell_normals(self, state):
+        """The surface normal at each cell's centre, ``(n_cells, 3)``."""
+        return self.normal(self.cell_centers(state), self.size(state, state.cell_replica))
+
+    def __repr__(self):
+        values = ", ".join(f"{n}={v:g}" for n, v in zip(self.size_names, getattr(self, "shape", ())))
+        return f"{type(self).__name__}({values})"

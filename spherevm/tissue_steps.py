@@ -341,7 +341,7 @@ class TissueSteps:
         st = TISSUE_STATE.pack(
             pos=state.positions, vn=state.vertex_neighbors, vc=state.vertex_cells, cell_vertices=state.cell_vertices,
             sides=state.cell_sides, vertex_start=vertex_start, cell_start=cell_start,
-            size=getattr(state, state.constraint.size_name), max_sides=state.max_sides,
+            size=state.size, max_sides=state.max_sides,
             active=sim.operations.integrator.active_on_device(), step_need=self.step_need)
         fa = np.array(tuple(s.packed() for s in forces), dtype=forces_dtype)[()]
         args = (st, fa, move.packed(), pas.packed() if pas is not None else self.no_pass)

@@ -4,6 +4,10 @@ from __future__ import annotations
 import numpy as np
 
 
+#: the size keys of :attr:`Constraint.size_key` and the size names each stands for
+SIZE_KEYS = {"radius": ("radius",), "box": ("Lx", "Ly")}
+
+
 class CellMeasures:
     """Base of what ``cell_geometry`` returns: ``center``, each cell's centre ``(n_cells, 3)``, is
     computed on first use from the callable a subclass keeps in ``_center`` (the forces do not
@@ -25,7 +29,8 @@ class Constraint:
     ``v`` tangent to the surface at ``x``; ``project_normal(x, radius)`` is P_N, the closest point
     of the surface. Forces need the metric: per-cell areas, perimeters and centroids
     (``cell_geometry``) and the surface gradient of any function of them (``shape_gradient``).
-    ``radius`` is the per-vertex (or per-replica) size parameter of the surface.
+    ``radius`` is the per-vertex (or per-replica) size parameter of the surface: each replica has
+    its own, ``State.size``, shaped by :attr:`size_shape` and named by :attr:`size_names`.
 
     A surface that does not implement some of these yet (a stub) says so before anything runs:
     operations list the methods they need in ``surface_needs`` and :meth:`require` refuses them at
@@ -33,22 +38,53 @@ class Constraint:
     """
 
     name = "constraint"
-    #: the State attribute holding each replica's surface size: ``"radius"`` (n_replicas,) or
-    #: ``"box"`` (n_replicas, 2); generic code passes ``size(state, index)`` where it passes a size
-    size_name = "radius"
+    #: the shape of one replica's size parameters: ``()`` for one number (a sphere's radius),
+    #: ``(2,)`` for two (a periodic box's Lx, Ly); ``State.size`` is ``(n_replicas, *size_shape)``
+    size_shape = ()
+    #: what each size parameter is, in order (one name per entry of ``size_shape``, one for ``()``)
+    size_names = ("radius",)
     #: V - E + F of every network on this surface (2 on a sphere, 0 on a torus or periodic plane)
     euler_characteristic = 2
     #: how far, relative to the surface's area, the cells' areas (``tiling_areas_np``) may add up
     #: from it in a tiling that covers the surface once (:mod:`spherevm.simplicity`)
     cover_tolerance = 1e-9
 
+    @property
+    def size_key(self) -> str:
+        """The name a replica's size goes by in files and as a State keyword: ``"radius"`` for a
+        size named ``("radius",)``, ``"box"`` for ``("Lx", "Ly")`` (the GSD chunks and keywords of
+        the sphere and the plane), else ``"size"``."""
+        return next((k for k, names in SIZE_KEYS.items() if names == tuple(self.size_names)), "size")
+
+    def check_size(self, size):
+        """Raise ValueError unless ``size`` (``(n_replicas, *size_shape)``, NumPy) is a valid size
+        of this surface: here every entry positive and finite."""
+        bad = ~(np.isfinite(size) & (size > 0))
+        if bad.any():
+            raise ValueError(f"{self.size_key} must be positive and finite, got {size[bad][0]}")
+
     def size(self, state, index):
         """The surface size of the given replicas (per vertex when ``index`` is vertex_replica)."""
-        return getattr(state, self.size_name)[index]
+        return state.size[index]
 
     def size_np(self, state):
-        """Every replica's surface size as a NumPy array (``(n_replicas,)`` or ``(n_replicas, 2)``)."""
-        return np.asarray(state.device.to_numpy(getattr(state, self.size_name)))
+        """Every replica's surface size as a NumPy array, ``(n_replicas, *size_shape)``."""
+        return state.size_np()
+
+    # ------------------------------------------------------------------ files and pictures
+    def display_extent(self, size) -> float:
+        """A length the cube box of a GSD frame must hold about the origin besides the vertices
+        (``size`` per replica, NumPy): the largest size parameter here (a sphere's radius)."""
+        return float(np.max(size))
+
+    def hoomd_box(self, size):
+        """``(dimensions, (6,) HOOMD box)`` of a GSD frame for ``size`` (NumPy, per replica), or
+        None for the default: a cube about the origin holding every vertex."""
+        return None
+
+    def particle_origin(self, size):
+        """Where the State's origin sits in a GSD file's particle coordinates, ``(3,)``."""
+        return np.zeros(3)
 
     def length_scale(self, size):
         """A length per entry of ``size`` (tolerances scale with it): the radius itself here."""

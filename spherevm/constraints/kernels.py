@@ -37,7 +37,7 @@ def surface_kernels(cu_file, state, defines=()):
     ``defines``) and the State's per-replica size array they take (``radius`` on the sphere, ``box``
     on the plane)."""
     surface = next(d for cls, d in SURFACE_DEFINES.items() if isinstance(state.constraint, cls))
-    return load_module(cu_file, surface + tuple(defines)), getattr(state, state.constraint.size_name)
+    return load_module(cu_file, surface + tuple(defines)), state.size
 
 
 def cell_measures(state):

@@ -40,7 +40,7 @@ class PlaneGeometry(CellMeasures):
 
 
 class PeriodicPlane(Constraint):
-    """A flat rectangular periodic box per replica (``State.box``, ``(n_replicas, 2)`` = (Lx, Ly)).
+    """A flat rectangular periodic box per replica (``State.size``, ``(n_replicas, 2)`` = (Lx, Ly)).
 
     Positions are stored wrapped into ``[0, Lx) x [0, Ly)`` with z = 0. Edges are minimum images, so
     a cell may straddle the boundary; perimeters are sums of Euclidean edge lengths and areas the
@@ -50,7 +50,8 @@ class PeriodicPlane(Constraint):
     """
 
     name = "periodic_plane"
-    size_name = "box"
+    size_shape = (2,)
+    size_names = ("Lx", "Ly")
     euler_characteristic = 0
 
     # ------------------------------------------------------------------ pointwise
@@ -85,6 +86,16 @@ class PeriodicPlane(Constraint):
         b = np.asarray(box, dtype=np.float64)
         return b[..., 0] * b[..., 1]
 
+    def hoomd_box(self, box):
+        """The largest replica's box in HOOMD's 2D convention (Lz = 0, centred on the origin)."""
+        lx, ly = np.asarray(box).max(axis=0)
+        return 2, np.array([lx, ly, 0.0, 0.0, 0.0, 0.0])
+
+    def particle_origin(self, box):
+        """Half the largest box: HOOMD's box is centred on the origin, the State's starts there."""
+        lx, ly = np.asarray(box).max(axis=0)
+        return np.array([lx / 2, ly / 2, 0.0])
+
     def length_scale(self, box):
         xp = array_module(box)
         return xp.sqrt(box[..., 0] * box[..., 1])
@@ -108,7 +119,7 @@ class PeriodicPlane(Constraint):
     def displacement(self, state, u, v):
         """Minimum-image in-plane vectors ``x[v] - x[u]``, (n, 2)."""
         pos = state.positions
-        return minimum_image(pos[v, :2] - pos[u, :2], state.box[state.vertex_replica[u]])
+        return minimum_image(pos[v, :2] - pos[u, :2], state.size[state.vertex_replica[u]])
 
     def edge_lengths(self, state, u, v):
         d = self.displacement(state, u, v)
@@ -124,7 +135,7 @@ class PeriodicPlane(Constraint):
         ``cells`` and ``cells_before`` (the cell before slot k, ``vertex_cells[v, k - 1]``) slot-major
         ``(3, V)``; ``slot`` ``(W, C)``: for slot j of cell c the corner ``k V + v`` (slot-major) owning
         the edge from vertex j to vertex j + 1, ``3 V`` (a zero edge) in padding; ``valid`` ``(C, W)``
-        the real slots; ``first`` ``(C, 1)`` the cells' first vertices. Rebuilt when ``state.box`` is
+        the real slots; ``first`` ``(C, 1)`` the cells' first vertices. Rebuilt when ``state.size`` is
         replaced (after editing it in place, call ``state.clear_cache()``)."""
         def build():
             xp = state.device.xp
@@ -132,15 +143,15 @@ class PeriodicPlane(Constraint):
             valid = xp.arange(cv.shape[1])[None, :] < sides[:, None]
             v = xp.where(valid, cv, 0)
             k = xp.argmax(vc[v] == xp.arange(state.n_cells)[:, None, None], axis=2)
-            one = bool((state.box == state.box[:1]).all())
-            box = state.box[0][:, None, None] if one else state.box[state.vertex_replica].T[:, None, :]
+            one = bool((state.size == state.size[:1]).all())
+            box = state.size[0][:, None, None] if one else state.size[state.vertex_replica].T[:, None, :]
             cells = xp.ascontiguousarray(vc.T)
             return dict(box=xp.ascontiguousarray(box), neighbors=xp.ascontiguousarray(state.vertex_neighbors.T),
                         cells=cells, cells_before=cells[[2, 0, 1]],
                         slot=xp.ascontiguousarray(xp.where(valid, k * nv + v, 3 * nv).T), valid=valid,
-                        first=cv[:, :1], source=state.box)
+                        first=cv[:, :1], source=state.size)
         tables = state.cached(("plane", "tables"), build, topology=True)
-        if tables["source"] is not state.box:
+        if tables["source"] is not state.size:
             state.clear_cache()
             tables = state.cached(("plane", "tables"), build, topology=True)
         return tables
@@ -198,7 +209,7 @@ class PeriodicPlane(Constraint):
             mean = (xp.where(t["valid"][..., None], r.transpose(2, 1, 0), 0.0).sum(axis=1)
                     / state.cell_sides[:, None].astype(xp.float64))
             out = xp.zeros((state.n_cells, 3))
-            out[:, :2] = _wrap(xp, state.positions[t["first"][:, 0], :2] + mean, state.box[state.cell_replica])
+            out[:, :2] = _wrap(xp, state.positions[t["first"][:, 0], :2] + mean, state.size[state.cell_replica])
             return out
 
         return PlaneGeometry(area=area, perimeter=perimeter, edge=edge, length=length, center=center)

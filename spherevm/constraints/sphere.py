@@ -50,7 +50,7 @@ def _dot(a, b):
 
 
 class Sphere(Constraint):
-    """Sphere of radius R (per replica, stored in ``State.radius``) centred at the origin.
+    """Sphere of radius R (per replica, stored in ``State.size``) centred at the origin.
 
     Perimeters are sums of geodesic arcs ``R theta``; areas are fans of signed spherical triangles
     about the cell's first vertex, with the triple product taken of differences so that small
@@ -180,8 +180,8 @@ class Sphere(Constraint):
             jobs = [job for pair in zip_longest(jobs, [(fan, rows) for rows in fan_rows(state)]) for job in pair if job]
         done = in_parallel(lambda job: job[0](job[1]), jobs, threads=len(index) > 1)
         parts = [part for (fn, _), part in zip(jobs, done) if fn is corners]
-        R = state.radius[state.cell_replica]
-        geometry = CellGeometry(area=None, perimeter=None, unit=u.T, radius=state.radius[state.vertex_replica],
+        R = state.size[state.cell_replica]
+        geometry = CellGeometry(area=None, perimeter=None, unit=u.T, radius=state.size[state.vertex_replica],
                                 corners=dict(index=index, parts=[p[0] for p in parts], u=u, rv=rv),
                                 center=lambda: self.cell_centers(state, u))
         if metric:
@@ -248,7 +248,7 @@ class Sphere(Constraint):
         """
         xp = state.device.xp
         g = geometry.corners
-        R = state.radius[state.cell_replica]
+        R = state.size[state.cell_replica]
         weights = None
         if d_area is not None or d_perimeter is not None:   # a missing one of the two: zero coefficients
             zero = xp.zeros(state.n_cells)
@@ -310,7 +310,7 @@ class Sphere(Constraint):
     def edge_lengths(self, state, u, v):
         """Geodesic lengths of the edges (u[i], v[i])."""
         pos = state.positions
-        return state.radius[state.vertex_replica[u]] * geo.geodesic_length(geo.normalize(pos[u]),
+        return state.size[state.vertex_replica[u]] * geo.geodesic_length(geo.normalize(pos[u]),
                                                                            geo.normalize(pos[v]))
 
 

@@ -110,8 +110,9 @@ def _height_points(surface, rng, n, size):
         g = surface.grad_F(lift(surface, xy, size), size)
         return np.sqrt((g * g).sum(axis=1)) / np.abs(g[:, 2])
 
-    bound = surface.area_density_bound(size) if hasattr(surface, "area_density_bound") else None
-    if bound is None:        # the largest area element on a fine grid, with a margin
+    if hasattr(surface, "area_density_bound"):
+        bound = surface.area_density_bound(size)
+    else:                    # the largest area element on a fine grid, with a margin
         grid = (np.stack(np.meshgrid(np.arange(256), np.arange(256)), axis=-1).reshape(-1, 2) + 0.5) / 256 * box
         bound = 1.1 * float(density(grid).max())
     return _rejection(rng, n, lambda g, m: g.random((m, 2)) * box, lambda xy: density(xy) / bound)
@@ -171,9 +172,7 @@ def surface_tiling(surface, n_cells: int, keys, size=None, sort: bool = True, de
                              f"{key}); use more cells")
         states.append(state)
     state = states[0] if len(states) == 1 else State.concatenate(states)
-    state = state.to(device) if device is not CPU else state
-    state.size = state.device.xp.asarray(sizes)
-    return state
+    return state.to(device) if device is not CPU else state
 
 
 def _state(surface, net, size, sort):
@@ -185,17 +184,8 @@ def _state(surface, net, size, sort):
             codes = (topology.morton_codes(pos), topology.morton_codes(points))
         pos, table, sides, vn, vc = topology.renumber(pos, table, sides, vn, vc, *(np.argsort(c, kind="stable")
                                                                                   for c in codes))
-    return make_state(surface, pos, table, sides, vn, vc, [0, len(pos)], [0, len(sides)], size)
-
-
-def make_state(surface, positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells, vertex_start,
-               cell_start, size, device=CPU) -> State:
-    """A State on ``surface`` with the per-replica parameters ``size``, unvalidated."""
-    state = State(positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells, vertex_start, cell_start,
-                  radius=1.0, constraint=surface, device=device, validate=False)
-    state.size = state.device.xp.asarray(np.broadcast_to(surface.check_size(size), (state.n_replicas,
-                                                                                     len(surface.size_names))).copy())
-    return state
+    return State(pos, table, sides, vn, vc, [0, len(pos)], [0, len(sides)], size=size, constraint=surface,
+                 validate=False)
 
 
 __all__ = ["MIN_PLANAR_CELLS", "surface_tiling"]

@@ -45,6 +45,7 @@ class Ellipsoid(ImplicitSurface):
 
     def __init__(self, a: float = 1.0, b: float = 1.0, c: float = 1.0):
         self.shape = tuple(self.check_size([a, b, c])[0])
+        self.a, self.b, self.c = self.shape
 
     def F(self, x, size):
         a, b, c = self.parameters(size)

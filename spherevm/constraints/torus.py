@@ -28,6 +28,7 @@ class Torus(ImplicitSurface):
 
     def __init__(self, major_radius: float = 3.0, minor_radius: float = 1.0):
         self.shape = tuple(self.check_size([major_radius, minor_radius])[0])
+        self.major_radius, self.minor_radius = self.shape
 
     def check_parameters(self, R, r):
         bad = ~(np.asarray(R) > np.asarray(r))

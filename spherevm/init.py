@@ -3,11 +3,11 @@ tilings, and from a GSD file."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import ConvexHull
 
 from . import gsdio, topology
 from .constraints import Sphere
 from .device import CPU, resolve
+from .init_surface import oriented_hull
 from .state import State
 from .validation import check_cell_size, check_tiling_memory, integer
 
@@ -51,17 +51,6 @@ def dual_of_triangulation(points, triangles, radius, vertices="centroid"):
         raise ValueError(f"vertices must be 'centroid' or 'circumcenter', got {vertices!r}")
     positions = radius * direction / np.linalg.norm(direction, axis=1)[:, None]
     return (positions,) + topology.dual_network(tri, len(pts))
-
-
-def _oriented_hull(points):
-    """Counter-clockwise hull triangles, and whether the origin lies strictly inside the hull."""
-    hull = ConvexHull(points)
-    tri = hull.simplices.copy()
-    p = points[tri]
-    # qhull's facet equations give the outward normals, also when the origin lies outside the hull
-    outward = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), hull.equations[:, :3]) > 0
-    tri[~outward] = tri[~outward][:, [0, 2, 1]]
-    return tri, bool(np.all(hull.equations[:, 3] < 0))
 
 
 def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, vertices="centroid",
@@ -148,7 +137,7 @@ def _draw_hull(n, key, attempt):
     rng = np.random.default_rng(list(key) + ([attempt] if attempt else []))
     pts = rng.normal(size=(n, 3))
     pts /= np.linalg.norm(pts, axis=1)[:, None]
-    tri, origin_inside = _oriented_hull(pts)
+    tri, origin_inside = oriented_hull(pts)
     return (pts, tri) if origin_inside else None
 
 

@@ -19,6 +19,7 @@ width), so the area scales as the factor squared.
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import ConvexHull
 
 from . import topology
 from .device import CPU
@@ -136,13 +137,23 @@ def _network(surface, rng, n, size):
             return None
         pos = surface.project_normal(_torus_map(net[0][:, :2], size), size)
         return (pos,) + net[1:] + (_torus_map(plane, size),)
-    from .init import _oriented_hull
     pts = _ellipsoid_points(rng, n, size)
-    tri, inside = _oriented_hull(pts / np.linalg.norm(pts, axis=1)[:, None])
+    tri, inside = oriented_hull(pts / np.linalg.norm(pts, axis=1)[:, None])
     if not inside:
         return None
     pos = surface.project_normal(pts[tri].mean(axis=1), size)
     return (pos,) + topology.dual_network(tri, n) + (pts,)
+
+
+def oriented_hull(points):
+    """Counter-clockwise hull triangles, and whether the origin lies strictly inside the hull."""
+    hull = ConvexHull(points)
+    tri = hull.simplices.copy()
+    p = points[tri]
+    # qhull's facet equations give the outward normals, also when the origin lies outside the hull
+    outward = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), hull.equations[:, :3]) > 0
+    tri[~outward] = tri[~outward][:, [0, 2, 1]]
+    return tri, bool(np.all(hull.equations[:, 3] < 0))
 
 
 def surface_tiling(surface, n_cells: int, keys, size=None, sort: bool = True, device=CPU) -> State:

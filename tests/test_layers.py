@@ -19,7 +19,7 @@ LAYERS = [
     ["constraints"],
     ["simplicity", "topology", "folding", "growth"],
     ["state"],
-    ["shapes", "gsdio", "init", "init_plane"],
+    ["shapes", "gsdio", "init", "init_plane", "init_surface"],
     ["plugins", "testing"],
     ["operations", "plan", "minimization", "tissue_steps", "graphs"],
     ["runs", "checkpoints", "simulation"],

@@ -151,6 +151,39 @@ class Constraint:
         exactly."""
         return self.cell_areas_np(state)
 
+    # ------------------------------------------------------------------ tiling checks (spherevm.simplicity)
+    def orientation_points(self, x, reference=None, size=None):
+        """Points ``x`` (..., 3) as 3-vectors whose triple products give orientations (``(a x b) . c``
+        the side of ``c`` from the arc or segment ``a b``), unwrapped to the images nearest
+        ``reference`` (with ``size`` per row) on a periodic surface where given. The crossing
+        tests of :mod:`spherevm.simplicity` and the fold rule run where a surface gives them."""
+        raise NotImplementedError(f"{type(self).__name__} does not yet provide orientation points")
+
+    def edge_points(self, state, sides):
+        """Each cell's edges as ``(start, stop)`` :meth:`orientation_points`, ``(corners, 3)`` each,
+        cell 0's corners first in slot order (``sides``: the cell sides, NumPy)."""
+        to_np = state.device.to_numpy
+        pos, cv = to_np(state.positions), to_np(state.cell_vertices)
+        col = np.arange(cv.shape[1])[None, :]
+        valid = col < sides[:, None]
+        nxt = np.where(col + 1 < sides[:, None], np.roll(cv, -1, axis=1), cv[:, :1])
+        unit = self.orientation_points(pos)
+        return unit[cv[valid]], unit[nxt[valid]]
+
+    def open_cells(self, state):
+        """Cells whose edges do not add up to zero and the slot of the edge that jumped (a periodic
+        surface's minimum image): ``(cells, slots)``, none on a surface without images."""
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+
+    def cover_error(self, state, areas, replica, total, surface) -> str:
+        """Why the cells' ``areas`` of ``replica`` add up to ``total``, not the surface's ``surface``."""
+        return (f"the cells cover an area {total:.12g}, but the surface's is {surface:.12g}; some cell is listed "
+                "clockwise, folded, overlaps another or is too large for the surface's metric")
+
+    def check_cell_areas(self, state, areas, surface):
+        """Raise ValueError naming a cell whose area this surface cannot measure (``surface``: each
+        replica's area); every cell passes here."""
+
     def missing(self, names) -> list:
         """Those of the method ``names`` this surface does not implement (still the base's)."""
         return [n for n in names if getattr(type(self), n) is getattr(Constraint, n)]

@@ -19,6 +19,10 @@ def minimum_image(d, box):
     return d - box * xp.rint(d / box)
 
 
+#: Relative size of a cell's closing sum (the sum of its minimum-image edges) that counts as open.
+OPEN_TOLERANCE = 1e-9
+
+
 class PlaneGeometry(CellMeasures):
     """Per-cell area and perimeter, and the per-corner edge vectors that the gradient reuses.
 
@@ -111,6 +115,35 @@ class PeriodicPlane(Constraint):
         u = minimum_image(b[..., :2] - a[..., :2], box)
         v = minimum_image(c[..., :2] - a[..., :2], box)
         return 0.5 * (u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0])
+
+    def orientation_points(self, x, reference=None, size=None):
+        """``(x, y, 1)``: ``(a x b) . c`` is twice the signed area of the triangle a, b, c."""
+        p = x if reference is None else self.unwrap(x, reference, size)
+        out = np.ones(p.shape[:-1] + (3,))
+        out[..., :2] = p[..., :2]
+        return out
+
+    def edge_points(self, state, sides):
+        """Each polygon unwrapped from its first vertex along its minimum-image edges."""
+        _, valid, e, r = self.unwrapped_cells(state)
+        valid, e, r = (state.device.to_numpy(a) for a in (valid, e, r))
+        return self.orientation_points(r[valid]), self.orientation_points(r[valid] + e[valid])
+
+    def open_cells(self, state):
+        """Cells whose minimum-image edges do not add up to zero: an edge of theirs reached half the
+        box, and its minimum image jumped to another image. For each the slot of its edge longest
+        along the box (relative to the box side), the one that jumped."""
+        _, valid, e, _ = self.unwrapped_cells(state)
+        e = state.device.to_numpy(e)
+        box = self.size_np(state)[state.cell_replica_np()]                          # (C, 2)
+        closing = np.abs(e.sum(axis=1)) / box                                         # (C, 2)
+        bad = np.flatnonzero((closing > OPEN_TOLERANCE).any(axis=1))
+        reach = (np.abs(e[bad]) / box[bad, None, :]).max(axis=2)                     # (bad, W)
+        return bad, np.argmax(reach, axis=1)
+
+    def cover_error(self, state, areas, replica, total, surface) -> str:
+        return (f"the cells cover an area {total:.12g}, but the box's is {surface:.12g}; some cell wraps around "
+                "the box or overlaps another")
 
     def outside_box(self, x, box):
         """Mask of the points not stored in ``[0, Lx) x [0, Ly)``."""

@@ -112,6 +112,30 @@ class Sphere(Constraint):
     def total_area_np(self, radius):
         return 4.0 * np.pi * np.asarray(radius, dtype=np.float64) ** 2
 
+    def orientation_points(self, x, reference=None, size=None):
+        """Unit vectors (a great circle's normal is ``a x b``)."""
+        return x / np.linalg.norm(x, axis=-1)[..., None]
+
+    def cover_error(self, state, areas, replica, total, surface) -> str:
+        cells = np.flatnonzero(state.cell_replica_np() == replica)
+        if abs(total + surface) <= 1e-9 * surface:
+            return (f"cell {int(cells[0])} and every other cell is listed clockwise seen from outside (their areas "
+                    "add up to -4 pi R^2); list cell vertices counter-clockwise")
+        c = int(cells[np.argmin(areas[cells])])
+        return (f"the cell areas add up to {total:.12g}, not the sphere's 4 pi R^2 = {surface:.12g}: cell {c} "
+                f"(measured {areas[c]:.6g}) is larger than a hemisphere, which spherevm cannot measure (areas are "
+                "fans of spherical triangles: such a cell gets A - 4 pi R^2), or cells overlap; use more cells, so "
+                "that every cell is smaller than a hemisphere")
+
+    def check_cell_areas(self, state, areas, surface):
+        """A cell over a hemisphere is refused: its fan area would be A - 4 pi R^2."""
+        crep = state.cell_replica_np()
+        big = np.flatnonzero(areas > 0.5 * surface[crep])
+        if len(big):
+            c = int(big[0])
+            raise ValueError(f"cell {c} covers {areas[c] / surface[crep[c]]:.3g} of its sphere, more than a "
+                             "hemisphere: spherevm measures cells smaller than a hemisphere only; use more cells")
+
     # -------------------------------------------------------------- per-corner metric
     # Corner tables and vertex blocks: spherevm.constraints.corners.
 

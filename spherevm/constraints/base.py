@@ -83,6 +83,22 @@ class Constraint:
         """Where the State's origin sits in a GSD file's particle coordinates, ``(3,)``."""
         return np.zeros(3)
 
+    #: how :mod:`spherevm.render` draws a replica: "mesh" (its cells as 3D polygons), "ball" (the
+    #: hemisphere facing the camera of a sphere about the origin) or "box" (a periodic box in 2D)
+    drawing = "mesh"
+
+    def draw_points(self, points, size):
+        """Points of a picture or mesh (cell edges cut into pieces, fan triangles) put on the
+        surface for drawing (``size`` per point): :meth:`project_normal` here; a periodic surface
+        keeps them unwrapped."""
+        return self.project_normal(points, size)
+
+    def replica_spacing(self, size, cell_width) -> float:
+        """The distance along x between replicas drawn side by side (export), given each replica's
+        ``size`` (NumPy) and the widest cell's extent along x: 2.5 of the largest size here
+        (a sphere's radius: half a diameter between spheres)."""
+        return 2.5 * float(np.max(size))
+
     def length_scale(self, size):
         """A length per entry of ``size`` (tolerances scale with it): the radius itself here."""
         return size
@@ -141,6 +157,12 @@ class Constraint:
 
     def edge_lengths(self, state, u, v):
         raise NotImplementedError(f"{type(self).__name__} does not yet provide geodesic lengths (only Sphere does)")
+
+    def cell_centroids(self, state, method: str):
+        """Each cell's position on the surface, ``(n_cells, 3)`` (device array): the centre of its
+        area (``method="area"``) or of its vertices (``"vertex"``), see
+        :func:`spherevm.shapes.cell_centroids`."""
+        raise NotImplementedError(f"{type(self).__name__} does not yet provide cell centroids")
 
     def cell_areas_np(self, state):
         return state.device.to_numpy(self.cell_geometry(state).area)

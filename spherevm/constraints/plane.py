@@ -56,6 +56,7 @@ class PeriodicPlane(Constraint):
     name = "periodic_plane"
     size_shape = (2,)
     size_names = ("Lx", "Ly")
+    drawing = "box"
     euler_characteristic = 0
 
     # ------------------------------------------------------------------ pointwise
@@ -89,6 +90,15 @@ class PeriodicPlane(Constraint):
     def total_area_np(self, box):
         b = np.asarray(box, dtype=np.float64)
         return b[..., 0] * b[..., 1]
+
+    def draw_points(self, points, box):
+        """The points as they are: unwrapped about their cell, in the plane."""
+        return points
+
+    def replica_spacing(self, box, cell_width) -> float:
+        """1.1 of the widest box plus twice the widest cell: cells unwrapped across the box edge
+        reach out of it by up to a cell."""
+        return 1.1 * np.asarray(box)[:, 0].max() + 2 * cell_width
 
     def hoomd_box(self, box):
         """The largest replica's box in HOOMD's 2D convention (Lz = 0, centred on the origin)."""
@@ -238,7 +248,7 @@ class PeriodicPlane(Constraint):
         length = xp.sqrt(edge[0] * edge[0] + edge[1] * edge[1])
         perimeter = xp.concatenate([length.reshape(-1), xp.zeros(1)])[t["slot"]].sum(axis=0)
 
-        def center():       # the expression of shapes.planar_cell_centroids(method="vertex"), bit for bit
+        def center():       # the expression of cell_centroids(method="vertex"), bit for bit
             mean = (xp.where(t["valid"][..., None], r.transpose(2, 1, 0), 0.0).sum(axis=1)
                     / state.cell_sides[:, None].astype(xp.float64))
             out = xp.zeros((state.n_cells, 3))
@@ -250,6 +260,30 @@ class PeriodicPlane(Constraint):
     def cell_centers(self, state):
         """Vertex centroid of each cell (unwrapped, then wrapped into the box), ``(n_cells, 3)``."""
         return self.cell_geometry(state).center
+
+    def cell_centroids(self, state, method: str):
+        """Each polygon unwrapped edge by edge from its first vertex (vertex j at ``sum_{i<j} e_i``,
+        ``e_i`` the minimum-image edges, as for its area), so a cell straddling the boundary is whole.
+        ``method="area"``: the centroid of the polygon's area, ``sum_i (r_i + r_{i+1}) (r_i x r_{i+1}) / 6A``;
+        a cell of non-positive area falls back to the vertex centroid. ``"vertex"``: the mean of the
+        unwrapped vertices. The point is then wrapped back into ``[0, Lx) x [0, Ly)``, z = 0."""
+        xp = state.device.xp
+        pos, sides = state.positions[:, :2], state.cell_sides
+        box = state.size[state.cell_replica]
+        first, valid, e, r = self.unwrapped_cells(state)
+        mean = xp.where(valid[..., None], r, 0.0).sum(axis=1) / sides[:, None].astype(xp.float64)
+        centre = mean
+        if method == "area":
+            r1 = r + e                                                      # vertex j + 1
+            cross = r[..., 0] * r1[..., 1] - r[..., 1] * r1[..., 0]         # padding rows do not count
+            cross = xp.where(valid, cross, 0.0)
+            area = 0.5 * cross.sum(axis=1)
+            ok = area > 0
+            c = ((r + r1) * cross[..., None]).sum(axis=1) / (6.0 * xp.where(ok, area, 1.0))[:, None]
+            centre = xp.where(ok[:, None], c, mean)
+        out = xp.zeros((state.n_cells, 3))
+        out[:, :2] = _wrap(xp, pos[first[:, 0]] + centre, box)
+        return out
 
     def cell_normals(self, state):
         """``(0, 0, 1)`` for every cell."""

@@ -66,6 +66,7 @@ class Sphere(Constraint):
 
     name = "sphere"
     metric = "geodesic"
+    drawing = "ball"
 
     def __new__(cls, *args, metric=None, **kwargs):
         if metric is not None and metric not in METRICS:
@@ -233,6 +234,36 @@ class Sphere(Constraint):
         corner_unit = xp.repeat(unit, 3, axis=1)
         summed = xp.stack([weighted_bincount(cells, weights=c, minlength=state.n_cells) for c in corner_unit])
         return (summed / xp.sqrt(_dot(summed, summed))).T
+
+    def cell_centroids(self, state, method: str):
+        """``method="area"``: the centre of mass of the spherical polygon, pushed radially onto the
+        sphere: ``integral of n dA = (R^2 / 2) sum_edges theta_e (a_e x b_e) / |a_e x b_e|`` over the
+        edges ``a_e -> b_e`` taken counter-clockwise (exact), normalised; a folded cell (area <= 0)
+        falls back to the vertex centroid. ``"vertex"``: ``R`` times :meth:`cell_centers`."""
+        xp = state.device.xp
+        pos = state.positions
+        unit = pos / xp.sqrt((pos * pos).sum(axis=1))[:, None]
+        cells = state.vertex_cells.reshape(-1)            # corner k of vertex v lies in cell vertex_cells[v, k]
+        n = state.n_cells
+
+        def per_cell(w):                                  # w: (V, 3 corners, 3 components)
+            return xp.stack([weighted_bincount(cells, weights=w[..., i].reshape(-1), minlength=n) for i in range(3)],
+                            axis=1)
+
+        vertex_centroid = self.cell_centers(state)
+        direction = vertex_centroid
+        if method == "area":
+            a = unit[:, None, :]
+            b = unit[state.vertex_neighbors]               # edge v -> vertex_neighbors[v, k] runs CCW in that cell
+            cr = xp.cross(a, b)
+            s = xp.sqrt((cr * cr).sum(axis=-1))
+            theta = xp.arctan2(s, (a * b).sum(axis=-1))
+            factor = xp.where(s > 0, theta / xp.where(s > 0, s, 1.0), 1.0)
+            area_vec = per_cell(cr * factor[..., None])    # = 2 * integral of n over the cell (unit sphere)
+            ok = (area_vec * vertex_centroid).sum(axis=1) > 0
+            direction = xp.where(ok[:, None], area_vec, vertex_centroid)
+        direction = direction / xp.sqrt((direction * direction).sum(axis=1))[:, None]
+        return state.size[state.cell_replica][:, None] * direction
 
     def cell_normals(self, state):
         """The cell centres: unit vectors, so their own normals."""

@@ -103,6 +103,20 @@ class Constraint:
         """A length per entry of ``size`` (tolerances scale with it): the radius itself here."""
         return size
 
+    # ------------------------------------------------------------------ trajectories (spherevm.analysis)
+    #: the surface's rigid motions, which move a whole tissue without deforming it (noise makes it
+    #: diffuse along them): "rotations" (about the origin, removed by Kabsch) or "translations"
+    rigid_motions = ()
+
+    def unwrap_path(self, centroids, size):
+        """Points ``(T, n, 3)`` over time made continuous across a periodic boundary (``size`` per
+        point, ``(n, *size_shape)``): the points themselves on a surface without images."""
+        return centroids
+
+    def geodesic_distance(self, a, b, size):
+        """The distance along the surface between points ``a`` and ``b`` (``size`` per point)."""
+        raise NotImplementedError(f"{type(self).__name__} does not yet provide geodesic distances")
+
     def unwrap(self, x, reference, size):
         """The image of ``x`` nearest ``reference`` (periodic surfaces); ``x`` itself otherwise."""
         return x

@@ -57,6 +57,7 @@ class PeriodicPlane(Constraint):
     size_shape = (2,)
     size_names = ("Lx", "Ly")
     drawing = "box"
+    rigid_motions = ("translations",)
     euler_characteristic = 0
 
     # ------------------------------------------------------------------ pointwise
@@ -119,6 +120,19 @@ class PeriodicPlane(Constraint):
         out[..., :2] = reference[..., :2] + minimum_image(x[..., :2] - reference[..., :2], box)
         out[..., 2] = x[..., 2]
         return out
+
+    def unwrap_path(self, centroids, box):
+        """Frame 0 as stored, then the cumulative sum of the minimum images of the frame-to-frame
+        displacements (``box`` per point, ``(n, 2)``)."""
+        out = np.array(centroids, dtype=np.float64, copy=True)
+        if len(out) > 1:
+            step = minimum_image(np.diff(out[..., :2], axis=0), box)
+            out[1:, :, :2] = out[0, :, :2] + np.cumsum(step, axis=0)
+        return out
+
+    def geodesic_distance(self, a, b, box):
+        """The straight distance ``|b - a|`` (of unwrapped points)."""
+        return np.linalg.norm(b - a, axis=-1)
 
     def triangle_area(self, a, b, c, box):
         """Half the z-component of ``(b - a) x (c - a)``, with ``b`` and ``c`` the images nearest ``a``."""

@@ -67,6 +67,7 @@ class Sphere(Constraint):
     name = "sphere"
     metric = "geodesic"
     drawing = "ball"
+    rigid_motions = ("rotations",)
 
     def __new__(cls, *args, metric=None, **kwargs):
         if metric is not None and metric not in METRICS:
@@ -116,6 +117,12 @@ class Sphere(Constraint):
     def orientation_points(self, x, reference=None, size=None):
         """Unit vectors (a great circle's normal is ``a x b``)."""
         return x / np.linalg.norm(x, axis=-1)[..., None]
+
+    def geodesic_distance(self, a, b, radius):
+        """``R`` times the angle between ``a`` and ``b`` (``2 atan2(|a^ - b^|, |a^ + b^|)``)."""
+        a = a / np.linalg.norm(a, axis=-1)[..., None]
+        b = b / np.linalg.norm(b, axis=-1)[..., None]
+        return radius * 2.0 * np.arctan2(np.linalg.norm(a - b, axis=-1), np.linalg.norm(a + b, axis=-1))
 
     def cover_error(self, state, areas, replica, total, surface) -> str:
         cells = np.flatnonzero(state.cell_replica_np() == replica)

@@ -100,11 +100,6 @@ class Trajectory:
 
     # ------------------------------------------------------------------ surface
     @property
-    def planar(self) -> bool:
-        """True for a trajectory on the periodic plane (it has a box, no radius)."""
-        return self.box is not None
-
-    @property
     def positions(self) -> np.ndarray:
         """(T, n_cells, 3) positions to measure displacements with: the centroids, unwrapped across
         the boundary of a periodic surface (continuous in time)."""

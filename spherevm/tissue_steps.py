@@ -37,8 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .constraints import Sphere
-from .constraints.kernels import SURFACE_DEFINES
+from .constraints.kernels import SURFACE_DEFINES, keeps_directions
 from .device import BLOCK, load_source
 from .kernel_struct import KernelStruct
 from .plan import Plan
@@ -141,7 +140,7 @@ def shared_bytes(state, cluster: int, minimizing: bool, stages) -> int:
     """Shared memory of a block of the largest tissue (:data:`STEP_LAYOUT` or :data:`MINIMIZE_LAYOUT`)."""
     forces, move, _ = stages
     nv, nc = state.vertices_per_replica, state.cells_per_replica
-    kept = nv if isinstance(state.constraint, Sphere) else 0   # Surface::directions
+    kept = nv if keeps_directions(state.constraint) else 0   # Surface::directions
     cd = sum(s.cell_doubles for s in forces)
     if minimizing:
         return int(np.max(MINIMIZE_LAYOUT.bytes(nv=nv, nc=nc, kept=kept, n_warps=(nv + 62) // 32, cd=cd,

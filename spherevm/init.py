@@ -79,7 +79,7 @@ def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, v
         that neighbours are close in memory (the GPU kernels gather several times faster).
     device : Device or str
     surface : ImplicitSurface, optional
-        Tile this surface instead (the torus, the ellipsoid, a periodic height field:
+        Tile this surface instead of the sphere (the torus, the ellipsoid, a periodic height field:
         :mod:`spherevm.init_surface`); ``radius`` and ``vertices`` do not apply.
     size : array (k,) or (replicas, k), optional
         With ``surface``: its parameters per replica; default its own, scaled so that <A> = 1.
@@ -87,12 +87,12 @@ def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, v
     Returns
     -------
     State"""
-    if surface is not None and not isinstance(surface, Sphere):
-        from .constraints import ImplicitSurface
-        if not isinstance(surface, ImplicitSurface) or radius is not None:
-            raise ValueError(f"surface must be a Sphere or an ImplicitSurface (with size, not radius), got {surface!r}"
-                             f"{'' if radius is None else ' and radius'}; for the periodic plane use "
-                             "random_planar_tiling")
+    if surface is not None:
+        if surface.missing(["tiling_points"]) or radius is not None:
+            raise ValueError(f"surface must be one with random tilings (an ImplicitSurface: the torus, the ellipsoid, "
+                             f"a periodic height field) and its parameters go in size, not radius; got {surface!r}"
+                             f"{'' if radius is None else ' and radius'} (leave surface out for the sphere, use "
+                             "random_planar_tiling for the plane)")
         from .init_surface import surface_tiling
         n = integer("n_cells", n_cells, minimum=4)
         keys = [(integer("seed", seed), r) for r in range(integer("replicas", replicas, minimum=1))]

@@ -23,16 +23,10 @@ from scipy.spatial import ConvexHull
 
 from . import topology
 from .device import CPU
-from .init_plane import MIN_PLANAR_CELLS, periodic_voronoi
+from .init_plane import periodic_voronoi
 from .state import State
 
 MAX_ATTEMPTS = 200
-#: the fewest cells of a tiling of an implicit surface (smaller cells are not measured well by flat
-#: facets, and small periodic networks are rarely simple)
-MIN_SURFACE_CELLS = 16
-#: the torus's tube must be at least this many cell sides around: (2 pi r)^2 / <A> >= 9, so
-#: n_cells >= 9 R / r (measured: 20 tilings each at R/r = 3 all simple from 28 cells on)
-MIN_CELLS_AROUND_TUBE = 3.0
 
 
 def scaled_sizes(surface, n_cells, replicas, size=None) -> np.ndarray:
@@ -48,101 +42,19 @@ def scaled_sizes(surface, n_cells, replicas, size=None) -> np.ndarray:
     return np.tile(scale * shape, (replicas, 1))
 
 
-def minimum_cells(surface, size) -> int:
-    """The fewest cells this tiling builds on ``surface`` of parameters ``size`` (k,)."""
-    if surface.name == "torus":
-        return max(MIN_SURFACE_CELLS, int(np.ceil(MIN_CELLS_AROUND_TUBE ** 2 * size[0] / size[1])))
-    return MIN_SURFACE_CELLS
-
-
-def _rejection(rng, n, draw, density):
-    """``n`` draws of ``draw(rng, m)`` accepted with probability ``density(sample)`` (<= 1)."""
-    kept, count = [], 0
-    while count < n:
-        sample = draw(rng, 2 * n)
-        sample = sample[rng.random(len(sample)) < density(sample)]
-        kept.append(sample)
-        count += len(sample)
-    return np.concatenate(kept)[:n]
-
-
-def _torus_points(rng, n, size):
-    R, r = size
-    angles = _rejection(rng, n, lambda g, m: g.random((m, 2)) * 2 * np.pi,
-                        lambda a: (R + r * np.cos(a[:, 1])) / (R + r))
-    return angles * np.array([R, r])            # (R phi, r theta)
-
-
-def _torus_map(plane, size):
-    R, r = size
-    phi, theta = plane[:, 0] / R, plane[:, 1] / r
-    rho = R + r * np.cos(theta)
-    return np.stack([rho * np.cos(phi), rho * np.sin(phi), r * np.sin(theta)], axis=1)
-
-
-def _ellipsoid_points(rng, n, size):
-    from .constraints.ellipsoid import area_element
-    a, b, c = size
-    bound = max(a * b, c * max(a, b))
-    uphi = _rejection(rng, n, lambda g, m: np.stack([2 * g.random(m) - 1, 2 * np.pi * g.random(m)], axis=1),
-                      lambda s: area_element(s[:, 0], s[:, 1], a, b, c) / bound)
-    u, phi = uphi.T
-    s = np.sqrt(1 - u * u)
-    return np.stack([a * s * np.cos(phi), b * s * np.sin(phi), c * u], axis=1)
-
-
-def lift(surface, xy, size):
-    """Points of a periodic height field above ``xy`` (n, 2): Newton steps in z alone from z = 0."""
-    x = np.zeros((len(xy), 3))
-    x[:, :2] = xy
-    for _ in range(surface.max_iterations):
-        f = surface.F(x, size)
-        step = f / surface.grad_F(x, size)[:, 2]
-        x[:, 2] -= step
-        if np.all(np.abs(step) <= surface.tolerance * surface.length_scale(size)):
-            return x
-    raise RuntimeError(f"{surface!r}: lifting points onto the height field did not converge")
-
-
-def _height_points(surface, rng, n, size):
-    box = size[:2]
-
-    def density(xy):
-        g = surface.grad_F(lift(surface, xy, size), size)
-        return np.sqrt((g * g).sum(axis=1)) / np.abs(g[:, 2])
-
-    if hasattr(surface, "area_density_bound"):
-        bound = surface.area_density_bound(size)
-    else:                    # the largest area element on a fine grid, with a margin
-        grid = (np.stack(np.meshgrid(np.arange(256), np.arange(256)), axis=-1).reshape(-1, 2) + 0.5) / 256 * box
-        bound = 1.1 * float(density(grid).max())
-    return _rejection(rng, n, lambda g, m: g.random((m, 2)) * box, lambda xy: density(xy) / bound)
-
-
 def _network(surface, rng, n, size):
     """One draw: ``(positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells, points)``,
-    or None if the network is not simple."""
-    if surface.periodic:
-        xy = _height_points(surface, rng, n, size)
-        net = periodic_voronoi(xy, size[:2])
-        if net is None:
-            return None
-        pos = lift(surface, net[0][:, :2], size)
-        return (pos,) + net[1:] + (lift(surface, xy, size),)
-    if surface.euler_characteristic == 0:          # the torus
-        box = 2 * np.pi * np.asarray(size)
-        plane = _torus_points(rng, n, size)
+    or None if the network is not simple (or the hull does not hold the origin)."""
+    points, plane, box = surface.tiling_points(rng, n, size)
+    if plane is not None:
         net = periodic_voronoi(plane, box)
         if net is None:
             return None
-        pos = surface.project_normal(_torus_map(net[0][:, :2], size), size)
-        return (pos,) + net[1:] + (_torus_map(plane, size),)
-    pts = _ellipsoid_points(rng, n, size)
-    tri, inside = oriented_hull(pts / np.linalg.norm(pts, axis=1)[:, None])
+        return (surface.project_normal(surface.from_plane(net[0][:, :2], size), size),) + net[1:] + (points,)
+    tri, inside = oriented_hull(points / np.linalg.norm(points, axis=1)[:, None])
     if not inside:
         return None
-    pos = surface.project_normal(pts[tri].mean(axis=1), size)
-    return (pos,) + topology.dual_network(tri, n) + (pts,)
+    return (surface.project_normal(points[tri].mean(axis=1), size),) + topology.dual_network(tri, n) + (points,)
 
 
 def oriented_hull(points):
@@ -163,7 +75,7 @@ def surface_tiling(surface, n_cells: int, keys, size=None, sort: bool = True, de
     sizes = scaled_sizes(surface, n_cells, len(keys), size)
     states = []
     for key, s in zip(keys, sizes):
-        least = minimum_cells(surface, s)
+        least = surface.minimum_cells(s)
         if n_cells < least:
             raise ValueError(f"n_cells must be at least {least} to tile {surface!r} with parameters "
                              f"{dict(zip(surface.size_names, s.round(6).tolist()))}, got {n_cells}")
@@ -189,14 +101,11 @@ def surface_tiling(surface, n_cells: int, keys, size=None, sort: bool = True, de
 def _state(surface, net, size, sort):
     pos, table, sides, vn, vc, points = net
     if sort:
-        if surface.periodic:
-            codes = (topology.morton_codes_2d(pos, size[:2]), topology.morton_codes_2d(points, size[:2]))
-        else:
-            codes = (topology.morton_codes(pos), topology.morton_codes(points))
+        codes = (topology.morton_codes(pos - pos.mean(axis=0)), topology.morton_codes(points - points.mean(axis=0)))
         pos, table, sides, vn, vc = topology.renumber(pos, table, sides, vn, vc, *(np.argsort(c, kind="stable")
                                                                                   for c in codes))
     return State(pos, table, sides, vn, vc, [0, len(pos)], [0, len(sides)], size=size, constraint=surface,
                  validate=False)
 
 
-__all__ = ["MIN_PLANAR_CELLS", "surface_tiling"]
+__all__ = ["oriented_hull", "scaled_sizes", "surface_tiling"]

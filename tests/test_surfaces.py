@@ -328,9 +328,9 @@ def test_newton_iterations_that_do_not_converge_are_refused():
     assert abs(e.F(e.project_normal(x, np.array([1.0, 2.0, 3.0])), np.array([1.0, 2.0, 3.0]))).max() < 1e-15
 
 
-def test_tiling_a_sphere_through_the_surface_argument_is_the_sphere_tiling():
-    a = svm.init.random_tiling(30, seed=2, surface=Sphere())
-    b = svm.init.random_tiling(30, seed=2)
-    assert np.array_equal(a.positions, b.positions) and np.array_equal(a.cell_vertices, b.cell_vertices)
-    with pytest.raises(ValueError, match="surface must be a Sphere or an ImplicitSurface"):
-        svm.init.random_tiling(30, surface=svm.constraints.PeriodicPlane())
+def test_surfaces_without_random_tilings_are_refused():
+    for con in (Sphere(), svm.constraints.PeriodicPlane()):
+        with pytest.raises(ValueError, match=rf"surface must be one with random tilings .*got {type(con).__name__}"):
+            svm.init.random_tiling(30, surface=con)
+    with pytest.raises(ValueError, match=r"parameters go in size, not radius; got Torus\(.*\) and radius"):
+        svm.init.random_tiling(30, surface=Torus(), radius=2.0)

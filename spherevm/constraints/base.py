@@ -184,6 +184,12 @@ class Constraint:
         :func:`spherevm.shapes.cell_centroids`."""
         raise NotImplementedError(f"{type(self).__name__} does not yet provide cell centroids")
 
+    def tiling_points(self, rng, n, size):
+        """Points uniform by area for a random tiling (:mod:`spherevm.init_surface`), see
+        :meth:`spherevm.constraints.ImplicitSurface.tiling_points`."""
+        raise NotImplementedError(f"{type(self).__name__} does not provide random tilings through "
+                                  "init.random_tiling(surface=...)")
+
     def cell_areas_np(self, state):
         return state.device.to_numpy(self.cell_geometry(state).area)
 

@@ -5,7 +5,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .implicit import ImplicitSurface
+from .implicit import ImplicitSurface, rejection
 
 #: Gauss-Legendre nodes in cos(theta) and equal steps in phi of the area quadrature (the integrand is
 #: smooth, and periodic in phi: both converge spectrally; 1e-15 relative at axis ratios up to 10)
@@ -53,6 +53,17 @@ class Ellipsoid(ImplicitSurface):
 
     def grad_F(self, x, size):
         return 2.0 * x / size ** 2
+
+    def tiling_points(self, rng, n, size):
+        """``(u, phi)`` = (cos theta, phi) uniform, kept with probability :func:`area_element` over its
+        largest value ``max(a b, c max(a, b))``: uniform by area. No plane (the hull of the points'
+        directions is triangulated)."""
+        a, b, c = size
+        bound = max(a * b, c * max(a, b))
+        u, phi = rejection(rng, n, lambda m: np.stack([2 * rng.random(m) - 1, 2 * np.pi * rng.random(m)], axis=1),
+                           lambda s: area_element(s[:, 0], s[:, 1], a, b, c) / bound).T
+        s = np.sqrt(1 - u * u)
+        return np.stack([a * s * np.cos(phi), b * s * np.sin(phi), c * u], axis=1), None, None
 
     def total_area_np(self, size):
         """The area per row of ``size`` (:func:`ellipsoid_area`)."""

@@ -24,12 +24,27 @@ from .flat import FlatFacets
 #: the step, in units of the length scale, of the second difference that tells a smooth surface from
 #: one whose gradient vanishes on it (:meth:`ImplicitSurface.check_regular`)
 REGULARITY_STEP = 1e-4
+#: the fewest cells of a random tiling of an implicit surface (flat facets measure larger cells
+#: poorly, and small periodic networks are rarely simple)
+MIN_TILING_CELLS = 16
 #: cheap foot-point steps before the points still moving switch to Newton steps with the Hessian
 #: (a step from a distance d shrinks the error by about d times the curvature: points a step off the
 #: surface settle in two or three)
 FOOT_POINT_STEPS = 6
 #: the central-difference step of the Hessian, in length scales
 HESSIAN_STEP = 1e-5
+
+
+def rejection(rng, n, draw, accept):
+    """``n`` samples of ``draw(m)`` (m at a time) kept with probability ``accept(samples)`` (<= 1),
+    in the order drawn."""
+    kept, count = [], 0
+    while count < n:
+        sample = draw(2 * n)
+        sample = sample[rng.random(len(sample)) < accept(sample)]
+        kept.append(sample)
+        count += len(sample)
+    return np.concatenate(kept)[:n]
 
 
 class ImplicitSurface(FlatFacets, Constraint):
@@ -236,42 +251,160 @@ class ImplicitSurface(FlatFacets, Constraint):
         return flat.signed_area(0.5 * _cross(b - a, c - a), self.normal(a, size))
 
     # ------------------------------------------------------------------ cells
-    def cell_centers(self, state):
-        """Each cell's vertex centroid (vertices unwrapped about its first) projected onto the
-        surface, ``(n_cells, 3)``."""
+    def _unwrapped_rows(self, state):
+        """``(x, valid, size)``: each cell's vertices ``(C, W, 3)`` unwrapped about its first (padding
+        repeats it), the real slots ``(C, W)`` and the cells' parameters ``(C, k)``."""
         xp = state.device.xp
         cv, sides = state.cell_vertices, state.cell_sides
         valid = xp.arange(cv.shape[1])[None, :] < sides[:, None]
         size = self.size(state, state.cell_replica)
         x = state.positions[xp.where(valid, cv, cv[:, :1])]
-        x = self.unwrap(x, x[:, :1], size[:, None])
-        mean = xp.where(valid[..., None], x, 0.0).sum(axis=1) / sides[:, None]
-        return self.project_normal(mean, size)
+        return self.unwrap(x, x[:, :1], size[:, None]), valid, size
 
-    def cell_plane_points(self, state):
+    def cell_centroids(self, state, method: str):
+        """Each cell's centre projected onto the surface, ``(n_cells, 3)``: of its vertices
+        (``method="vertex"``; unwrapped about its first) or of its flat area (``"area"``: the fan of
+        triangles about the first vertex, each at its centroid weighted by its area signed as the
+        cell's; the vertex centre where that area is not positive)."""
+        xp = state.device.xp
+        x, valid, size = self._unwrapped_rows(state)
+        centre = xp.where(valid[..., None], x, 0.0).sum(axis=1) / state.cell_sides[:, None]
+        if method == "area":
+            r = x - x[:, :1]
+            nxt = xp.roll(r, -1, axis=1)
+            fan = xp.where(valid[..., None], 0.5 * _cross(r, xp.where(valid[..., None], nxt, 0.0)), 0.0)
+            normal = self.normal(centre, size)
+            w = _dot(fan, normal[:, None])
+            total = w.sum(axis=1)
+            moment = (w[..., None] * (r + nxt) / 3).sum(axis=1)
+            good = total > 0
+            centre = xp.where(good[:, None], x[:, 0] + moment / xp.where(good, total, 1.0)[:, None], centre)
+        return self.project_normal(centre, size)
+
+    def cell_centers(self, state):
+        """Each cell's vertex centroid (vertices unwrapped about its first) projected onto the
+        surface, ``(n_cells, 3)``."""
+        return self.cell_centroids(state, "vertex")
+
+    def orientation_points(self, x, reference=None, size=None):
+        """``(u, v, 1)``: the points unwrapped to ``reference`` and drawn in an orthonormal frame of
+        the plane tangent at ``reference`` (:meth:`tangent_frame`), so that ``(a x b) . c`` is twice
+        the signed area of the triangle a, b, c there; a point without reference is its own
+        frame's origin, ``(0, 0, 1)``."""
+        out = np.ones(x.shape[:-1] + (3,))
+        if reference is None:
+            out[..., :2] = 0.0
+            return out
+        e1, e2 = self.tangent_frame(self.normal(reference, size))
+        r = self.unwrap(x, reference, size) - reference
+        out[..., 0], out[..., 1] = _dot(r, e1), _dot(r, e2)
+        return out
+
+    @staticmethod
+    def tangent_frame(n):
+        """Two unit vectors ``(e1, e2)`` completing the unit normals ``n`` (..., 3) to right-handed
+        orthonormal frames (``e1`` from the coordinate axis least aligned with ``n``)."""
+        seed = np.eye(3)[np.argmin(np.abs(n), axis=-1)]
+        e1 = seed - _dot(seed, n)[..., None] * n
+        e1 /= np.sqrt(_dot(e1, e1))[..., None]
+        return e1, _cross(n, e1)
+
+    def edge_points(self, state, sides):
         """Each cell's edges as ``(start, stop)`` points ``(u, v, 1)`` (corners of cell 0 first, in
-        slot order; host arrays): the vertices, unwrapped about the cell's first, in an orthonormal
-        frame of the plane tangent at the cell's centre (:func:`spherevm.simplicity.self_crossings`
-        tests them for crossings as it tests the plane's)."""
+        slot order; host arrays): the vertices, unwrapped about the cell's first, in the frame of the
+        plane tangent at the cell's centre (the crossing tests of :mod:`spherevm.simplicity`)."""
         to_np = state.device.to_numpy
-        cv, sides = to_np(state.cell_vertices), to_np(state.cell_sides)
-        col = np.arange(cv.shape[1])[None, :]
-        valid = col < sides[:, None]
-        n = to_np(self.cell_normals(state))
-        seed = np.eye(3)[np.argmin(np.abs(n), axis=1)]
-        e1 = seed - _dot(seed, n)[:, None] * n
-        e1 /= np.sqrt(_dot(e1, e1))[:, None]
-        e2 = _cross(n, e1)
-        x = to_np(state.positions)[np.where(valid, cv, cv[:, :1])]
-        x = self.unwrap(x, x[:, :1], to_np(self.size(state, state.cell_replica))[:, None])
+        x, valid, _ = (to_np(a) for a in self._unwrapped_rows(state))
+        e1, e2 = self.tangent_frame(to_np(self.cell_normals(state)))
         r = x - x[:, :1]
         uv = np.stack([_dot(r, e1[:, None]), _dot(r, e2[:, None]), np.ones(r.shape[:2])], axis=-1)
+        col = np.arange(uv.shape[1])[None, :]
         nxt = np.where(col + 1 < sides[:, None], col + 1, 0)
         return uv[valid], np.take_along_axis(uv, nxt[..., None], axis=1)[valid]
+
+    def open_cells(self, state):
+        """On a periodic surface the cells whose minimum-image edges do not add up to zero (an edge
+        reached half the box), with the slot of the edge longest along the box; else none."""
+        empty = np.zeros(0, dtype=np.int64)
+        if not self.periodic:
+            return empty, empty
+        to_np = state.device.to_numpy
+        x, valid = to_np(state.positions)[to_np(state.cell_vertices)], to_np(state.cell_vertices) >= 0
+        sides = to_np(state.cell_sides)
+        col = np.arange(x.shape[1])[None, :]
+        following = np.take_along_axis(x, np.where(col + 1 < sides[:, None], col + 1, 0)[..., None], axis=1)
+        box = self.size_np(state)[state.cell_replica_np(), None, :2]
+        e = np.where(valid[..., None], self.unwrap(following, x, box) - x, 0.0)[..., :2]
+        bad = np.flatnonzero((np.abs(e.sum(axis=1)) / box[:, 0] > 1e-9).any(axis=1))
+        return bad, np.argmax((np.abs(e[bad]) / box[bad]).max(axis=2), axis=1)
 
     def cell_normals(self, state):
         """The surface normal at each cell's centre, ``(n_cells, 3)``."""
         return self.normal(self.cell_centers(state), self.size(state, state.cell_replica))
+
+    # ------------------------------------------------------------------ pictures and trajectories
+    def draw_points(self, points, size):
+        """Points put on the surface for drawing, kept near their unwrapped places (periodic)."""
+        return self.unwrap(self.project_normal(points, size), points, size)
+
+    def unwrap_path(self, centroids, size):
+        """On a periodic surface frame 0 as stored, then the cumulative minimum images of the
+        frame-to-frame displacements in x and y (z as stored); else the points themselves."""
+        out = np.array(centroids, dtype=np.float64, copy=True)
+        if self.periodic and len(out) > 1:
+            box = np.asarray(size)[..., :2]
+            step = np.diff(out[..., :2], axis=0)
+            step -= box * np.rint(step / box)
+            out[1:, :, :2] = out[0, :, :2] + np.cumsum(step, axis=0)
+        return out
+
+    def geodesic_distance(self, a, b, size):
+        """The straight distance ``|b - a|`` in the embedding space (of unwrapped points): MSD and
+        F_s on an implicit surface measure displacements as chords, not along the surface."""
+        return np.linalg.norm(b - a, axis=-1)
+
+    # ------------------------------------------------------------------ random tilings (spherevm.init_surface)
+    def minimum_cells(self, size) -> int:
+        """The fewest cells a random tiling of this surface (parameters ``size``, (k,)) may have."""
+        return MIN_TILING_CELLS
+
+    def tiling_points(self, rng, n, size):
+        """``(points, plane, box)``: ``n`` points uniform by area on the surface of parameters
+        ``size`` (k,) drawn from ``rng``; and, on a surface tiled through a periodic plane, the points'
+        coordinates there ``(n, 2)`` and that plane's box (else None, None: the convex hull of the
+        points' directions is triangulated, as on the sphere). Here the periodic height field's:
+        (x, y) uniform in the box, kept with probability ``|grad F| / |dF/dz|`` over
+        :meth:`area_density_bound`."""
+        if not self.periodic:
+            raise NotImplementedError(f"{type(self).__name__} does not provide random tilings (tiling_points)")
+        box = np.asarray(size[:2])
+
+        def density(xy):
+            g = self.grad_F(self.from_plane(xy, size), size)
+            return np.sqrt(_dot(g, g)) / np.abs(g[:, 2])
+        bound = self.area_density_bound(size)
+        xy = rejection(rng, n, lambda m: rng.random((m, 2)) * box, lambda xy: density(xy) / bound)
+        return self.from_plane(xy, size), xy, box
+
+    def area_density_bound(self, size) -> float:
+        """An upper bound of the area element of a periodic height field per unit of box area,
+        ``|grad F| / |dF/dz|`` (random tilings draw by it): here 1.1 times its largest value on a
+        256 x 256 grid (a subclass that knows a bound gives it)."""
+        grid = (np.stack(np.meshgrid(np.arange(256), np.arange(256)), axis=-1).reshape(-1, 2) + 0.5) / 256
+        g = self.grad_F(self.from_plane(grid * np.asarray(size[:2]), size), size)
+        return 1.1 * float((np.sqrt(_dot(g, g)) / np.abs(g[:, 2])).max())
+
+    def from_plane(self, xy, size):
+        """The points of the surface at the plane coordinates ``xy`` (n, 2) of :meth:`tiling_points`:
+        here the height field's points above them (Newton steps in z from z = 0)."""
+        x = np.zeros((len(xy), 3))
+        x[:, :2] = xy
+        for _ in range(self.max_iterations):
+            step = self.F(x, size) / self.grad_F(x, size)[:, 2]
+            x[:, 2] -= step
+            if np.all(np.abs(step) <= self.tolerance * self.length_scale(size)):
+                return x
+        raise RuntimeError(f"{self!r}: lifting {len(xy)} points onto the height field did not converge")
 
     def __repr__(self):
         values = ", ".join(f"{n}={v:g}" for n, v in zip(self.size_names, getattr(self, "shape", ())))

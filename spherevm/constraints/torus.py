@@ -4,7 +4,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..device import array_module
-from .implicit import ImplicitSurface
+from .implicit import MIN_TILING_CELLS, ImplicitSurface, rejection
+
+#: random tilings: the tube must be at least this many cell sides around, (2 pi r)^2 / <A> >= 9, so
+#: n_cells >= 9 R / r
+MIN_CELLS_AROUND_TUBE = 3.0
 
 
 class Torus(ImplicitSurface):
@@ -70,6 +74,32 @@ class Torus(ImplicitSurface):
     def length_scale(self, size):
         """The minor radius r."""
         return size[..., 1]
+
+    def replica_spacing(self, size, cell_width) -> float:
+        """2.5 times the largest outer radius R + r (tori drawn side by side do not touch)."""
+        s = np.asarray(size).reshape(-1, 2)
+        return 2.5 * float((s[:, 0] + s[:, 1]).max())
+
+    def minimum_cells(self, size) -> int:
+        """``9 R / r`` (the tube three cells around), at least 16."""
+        return max(MIN_TILING_CELLS, int(np.ceil(MIN_CELLS_AROUND_TUBE ** 2 * size[0] / size[1])))
+
+    def tiling_points(self, rng, n, size):
+        """Angles (phi, theta) about the axis and the tube, theta kept with probability ``(R + r cos
+        theta) / (R + r)`` (uniform by area), in the plane ``(R phi, r theta)`` of box ``2 pi (R, r)``."""
+        R, r = size
+        angles = rejection(rng, n, lambda m: rng.random((m, 2)) * 2 * np.pi,
+                           lambda a: (R + r * np.cos(a[:, 1])) / (R + r))
+        plane = angles * np.array([R, r])
+        return self.from_plane(plane, size), plane, 2 * np.pi * np.asarray(size)
+
+    def from_plane(self, xy, size):
+        """The torus's points at ``(R phi, r theta)``: ``((R + r cos theta) cos phi, (R + r cos theta)
+        sin phi, r sin theta)`` (counter-clockwise in the plane is counter-clockwise from outside)."""
+        R, r = size
+        phi, theta = xy[:, 0] / R, xy[:, 1] / r
+        rho = R + r * np.cos(theta)
+        return np.stack([rho * np.cos(phi), rho * np.sin(phi), r * np.sin(theta)], axis=1)
 
     def total_area_np(self, size):
         """4 pi^2 R r per row of ``size``."""

@@ -338,6 +338,11 @@ class ImplicitSurface(FlatFacets, Constraint):
         bad = np.flatnonzero((np.abs(e.sum(axis=1)) / box[:, 0] > 1e-9).any(axis=1))
         return bad, np.argmax((np.abs(e[bad]) / box[bad]).max(axis=2), axis=1)
 
+    def displacement(self, state, u, v):
+        """``x[v] - x[u]`` (n, 3), the nearest image on a periodic surface (T1's short-edge test)."""
+        x = state.positions
+        return self.unwrap(x[v], x[u], self.size(state, state.vertex_replica[u])) - x[u]
+
     def cell_normals(self, state):
         """The surface normal at each cell's centre, ``(n_cells, 3)``."""
         return self.normal(self.cell_centers(state), self.size(state, state.cell_replica))

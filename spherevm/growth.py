@@ -35,7 +35,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import topology
-from .geometry import sphere as geo
 
 DIVISION_REASONS = ("through_vertex", "crossings", "neighbours")
 EXTRUSION_REASONS = ("not_triangle", "neighbours", "fold")
@@ -238,12 +237,7 @@ class Editor:
 
     def signed_area(self, c, verts):
         """Signed area of the polygon ``verts`` (a row of cell ``c``'s replica)."""
-        q = self._unwrapped(c, verts)
-        if getattr(self.constraint, "euler_characteristic", 2) == 0:     # the periodic plane
-            x, y = q[:, 0], q[:, 1]
-            return 0.5 * float((x * np.roll(y, -1) - np.roll(x, -1) * y).sum())
-        r = float(self._size(c))
-        return float(geo.polygon_area(geo.normalize(q), r))
+        return float(self.constraint.polygon_area(self._unwrapped(c, verts), self._size(c)))
 
     # ------------------------------------------------------------------ the new arrays
     def finish(self):

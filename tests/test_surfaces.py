@@ -334,3 +334,23 @@ def test_surfaces_without_random_tilings_are_refused():
             svm.init.random_tiling(30, surface=con)
     with pytest.raises(ValueError, match=r"parameters go in size, not radius; got Torus\(.*\) and radius"):
         svm.init.random_tiling(30, surface=Torus(), radius=2.0)
+
+
+@pytest.mark.parametrize("name", ["torus", "ellipsoid", "bump"])
+def test_division_on_implicit_surfaces(name):
+    """Daughters measured with the surface's own polygon areas: the network stays a valid tiling of
+    the surface's Euler characteristic, every vertex on it."""
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_tiling(80, seed=1, surface=SURFACES[name]())
+    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
+    sim.operations.updaters.append(T1())
+    sim.operations.integrator = FIRE(dt=0.02)
+    sim.minimize(force_tol=1e-3, max_steps=300)
+    sim.operations.updaters.insert(0, svm.plugins.updaters.Division(rule="rate", rate=200.0, dt=0.001))
+    sim.operations.integrator = Brownian(dt=1e-6, T=0.0)
+    sim.run(1)
+    s = sim.state
+    assert s.n_cells >= 88
+    assert s.n_vertices - 3 * s.n_vertices // 2 + s.n_cells == s.constraint.euler_characteristic
+    assert _distance(s).max() < 1e-12
+    s.validate()

@@ -184,6 +184,12 @@ class Constraint:
         :func:`spherevm.shapes.cell_centroids`."""
         raise NotImplementedError(f"{type(self).__name__} does not yet provide cell centroids")
 
+    def polygon_area(self, points, size) -> float:
+        """The signed area of one polygon ``points`` (n, 3), unwrapped about its first vertex, as this
+        surface measures a cell (``size``: its replica's parameters): division's and extrusion's
+        daughters (:mod:`spherevm.growth`)."""
+        raise NotImplementedError(f"{type(self).__name__} does not yet provide polygon areas")
+
     def tiling_points(self, rng, n, size):
         """Points uniform by area for a random tiling (:mod:`spherevm.init_surface`), see
         :meth:`spherevm.constraints.ImplicitSurface.tiling_points`."""

@@ -338,6 +338,10 @@ class ImplicitSurface(FlatFacets, Constraint):
         bad = np.flatnonzero((np.abs(e.sum(axis=1)) / box[:, 0] > 1e-9).any(axis=1))
         return bad, np.argmax((np.abs(e[bad]) / box[bad]).max(axis=2), axis=1)
 
+    def polygon_area(self, points, size) -> float:
+        """The flat signed area of one polygon (unwrapped), as :meth:`cell_geometry` measures cells."""
+        return float(flat.signed_area(flat.vector_area(points), self.normal(points, size).sum(axis=0)))
+
     def displacement(self, state, u, v):
         """``x[v] - x[u]`` (n, 3), the nearest image on a periodic surface (T1's short-edge test)."""
         x = state.positions

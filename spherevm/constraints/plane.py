@@ -169,6 +169,11 @@ class PeriodicPlane(Constraint):
         return (f"the cells cover an area {total:.12g}, but the box's is {surface:.12g}; some cell wraps around "
                 "the box or overlaps another")
 
+    def polygon_area(self, points, box) -> float:
+        """The shoelace area of the unwrapped polygon (x, y)."""
+        x, y = points[:, 0], points[:, 1]
+        return 0.5 * float((x * np.roll(y, -1) - np.roll(x, -1) * y).sum())
+
     def outside_box(self, x, box):
         """Mask of the points not stored in ``[0, Lx) x [0, Ly)``."""
         return ((x[..., :2] < 0) | (x[..., :2] >= box)).any(axis=-1)

@@ -102,6 +102,10 @@ class Sphere(Constraint):
         xp = array_module(radius)
         return xp.asarray(radius) ** 2 * geo.solid_angle(geo.normalize(a), geo.normalize(b), geo.normalize(c))
 
+    def polygon_area(self, points, radius) -> float:
+        """The spherical polygon's area (:func:`spherevm.geometry.sphere.polygon_area`)."""
+        return float(geo.polygon_area(geo.normalize(points), float(radius)))
+
     def chord_length(self, length, radius):
         """``2 R sin(L / 2R)`` (capped at the diameter)."""
         xp = array_module(length, radius)

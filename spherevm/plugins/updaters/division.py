@@ -135,7 +135,7 @@ class Division(Updater):
     narrowable = True
     in_minimize = False
     gpu_surfaces = None           # the surgery runs on the host for every surface
-    surface_needs = ("normal", "project_normal", "cell_geometry", "total_area_np")
+    surface_needs = ("normal", "project_normal", "cell_geometry", "total_area_np", "polygon_area")
     per_cell = ("lineage",)
     per_replica = ("last_divisions", "total_divisions", "refusals")
     checkpoint_fields = ("lineage",) + per_replica

@@ -38,7 +38,7 @@ class Extrusion(Updater):
     narrowable = True
     in_minimize = False
     gpu_surfaces = None
-    surface_needs = ("normal", "project_normal", "cell_geometry", "total_area_np")
+    surface_needs = ("normal", "project_normal", "cell_geometry", "total_area_np", "polygon_area")
     per_replica = ("last_extrusions", "total_extrusions", "refusals")
     checkpoint_fields = per_replica
 

@@ -106,6 +106,36 @@ def random_tiling(n_cells: int, replicas: int = 1, seed: int = 0, radius=None, v
     return _tilings(n, [(seed, r) for r in range(replicas)], R, vertices, sort, device)
 
 
+def check_surface_spec(surface: str) -> str:
+    """``surface`` if it names a surface with random tilings: "sphere", "plane", or an implicit
+    surface's spec such as ``"torus:R=3,r=1"`` (:func:`spherevm.constraints.registry.surface`);
+    else ValueError naming it."""
+    if surface not in ("sphere", "plane"):
+        from .constraints.registry import surface as named
+        if named(surface).missing(["tiling_points"]):
+            raise ValueError(f"surface {surface!r} has no random tilings; use sphere, plane or an implicit surface")
+    return surface
+
+
+def tilings_on(surface: str, n_cells: int, keys, device=CPU) -> State:
+    """Random tilings (<A> = 1) of the random streams ``keys`` (``(seed, replica)`` pairs, one per
+    replica) on the surface ``surface`` names (:func:`check_surface_spec`): the tilings of
+    :func:`random_tiling` on "sphere", of :func:`random_planar_tiling` on "plane", of
+    :mod:`spherevm.init_surface` on an implicit surface (the command line's ``--surface``)."""
+    n = integer("n_cells", n_cells, minimum=4)
+    check_tiling_memory(f"tilings of {n} cells on the {surface} ({len(keys)} replicas)", n, len(keys),
+                        gpu=resolve(device).is_gpu)
+    if surface == "sphere":
+        return _tilings(n, keys, _check_radius(None, n), "centroid", True, device)
+    if surface == "plane":
+        from .init_plane import _planar_tilings, check_box
+        return _planar_tilings(integer("n_cells", n, minimum=MIN_PLANAR_CELLS), keys, check_box(None, n), True,
+                               device)
+    from .constraints.registry import surface as named
+    from .init_surface import surface_tiling
+    return surface_tiling(named(check_surface_spec(surface)), n, keys, device=device)
+
+
 def random_tilings(n_cells: int, seeds, radius=None, vertices="centroid", sort: bool = True, device=CPU) -> State:
     """One random tiling per seed, as an ensemble: replica ``i`` equals
     ``random_tiling(n_cells, seed=seeds[i])``, built with one convex hull per tiling and one

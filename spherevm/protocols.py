@@ -84,8 +84,7 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
     several sizes joined with :meth:`State.concatenate`: one ensemble steps them all at once, which on
     a GPU costs about what the largest alone costs (small tissues leave the chip idle).
     """
-    if surface not in ("sphere", "plane"):
-        raise ValueError(f"surface must be 'sphere' or 'plane', got {surface!r}")
+    init.check_surface_spec(surface)
     if steps < 1 or int(steps) != steps:
         raise ValueError(f"steps must be a positive integer, got {steps!r}")
     equilibrate_steps = steps // 10 if equilibrate_steps is None else int(equilibrate_steps)
@@ -100,8 +99,7 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
         n_cells, replicas = integer("n_cells", n_cells, minimum=4), integer("replicas", replicas, minimum=1)
         check_run_memory(f"dynamics of {replicas} replica(s) of {n_cells} cells", n_cells * replicas, n_cells,
                          gpu=sim.device.is_gpu)
-        tiling = init.random_planar_tiling if surface == "plane" else init.random_tiling
-        sim.state = tiling(n_cells, replicas=replicas, seed=seed)
+        sim.state = init.tilings_on(surface, n_cells, [(seed, r) for r in range(replicas)])
     else:
         sim.create_state_from_gsd(restart)
         relax_steps = equilibrate_steps = 0

@@ -114,8 +114,9 @@ def planar_pentagon_perimeter() -> float:
 
 def surface_pentagon_perimeter(n_cells, surface: str = "sphere"):
     """The unit-area regular pentagon's perimeter on ``surface`` with N cells: the spherical one
-    (:func:`pentagon_perimeter`) or, on ``"plane"``, the flat one (the same for every N)."""
-    if surface == "plane":
+    (:func:`pentagon_perimeter`) or, on any other (the plane; an implicit surface's spec, measured
+    with flat facets), the flat one (the same for every N)."""
+    if surface != "sphere":
         n = np.asarray(n_cells)
         value = planar_pentagon_perimeter()
         return value if n.ndim == 0 else np.full(n.shape, value)

@@ -141,7 +141,7 @@ def test_gpu_without_gpu_is_a_clean_error(capsys):
 def test_library_errors_at_setup_are_status_2(monkeypatch, capsys):
     def bad(*args, **kwargs):
         raise ValueError("n_cells is wrong\nand this is a second line")
-    monkeypatch.setattr(svm.init, "random_tiling", bad)
+    monkeypatch.setattr(svm.init, "tilings_on", bad)
     rc = cli.main(["minimize", "-N", "8"])
     captured = capsys.readouterr()
     _assert_one_line_error(captured, rc, 2)

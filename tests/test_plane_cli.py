@@ -48,7 +48,7 @@ def test_plane_refuses_small_n_and_unknown_surfaces_cleanly(capsys):
     rc = cli.main(["minimize", "--surface", "plane", "--cells", "6"])
     err = capsys.readouterr().err
     assert rc == 2 and "n_cells" in err and "Traceback" not in err
-    rc = cli.main(["minimize", "--surface", "torus"])
+    rc = cli.main(["minimize", "--surface", "klein"])
     assert rc == 2 and "--surface" in capsys.readouterr().err
 
 
@@ -73,7 +73,7 @@ def test_glassy_dynamics_surface_plane_matches_a_hand_made_run():
     assert res.msd[0] == 0 and res.msd[-1] > 0 and res.self_overlap[0] == 1.0
     assert res.msd_per_replica.shape[1] == 2
     with pytest.raises(ValueError, match="surface"):
-        glassy_dynamics(16, 3.9, 1.0, 0.05, steps=10, surface="torus")
+        glassy_dynamics(16, 3.9, 1.0, 0.05, steps=10, surface="klein")
 
 
 # ------------------------------------------------------------------------------------ sweeps
@@ -111,8 +111,8 @@ def test_planar_sweep_runs_resumes_and_refuses_another_surface(tmp_path):
     assert sorted(os.listdir(out / "chunks")) == listing
     with pytest.raises(ValueError, match=">= 8 on the periodic plane"):
         sweeps.RigiditySweep(**{**PLANE, "cells": [6]})
-    with pytest.raises(ValueError, match="surface must be one of"):
-        sweeps.RigiditySweep(**{**PLANE, "surface": "torus"})
+    with pytest.raises(ValueError, match="unknown surface 'klein'"):
+        sweeps.RigiditySweep(**{**PLANE, "surface": "klein"})
 
 
 def test_old_sweep_folder_without_surface_resumes_as_sphere(tmp_path):

@@ -2,6 +2,7 @@
 a user's sinusoid (tests/plugin_example). Projections, tilings (Euler characteristic, areas, <A> = 1,
 reproducibility), exact forces, symmetries, FIRE + T1 on each, and the refusals of bad input."""
 import pathlib
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -354,3 +355,21 @@ def test_division_on_implicit_surfaces(name):
     assert s.n_vertices - 3 * s.n_vertices // 2 + s.n_cells == s.constraint.euler_characteristic
     assert _distance(s).max() < 1e-12
     s.validate()
+
+
+def test_command_line_surfaces(capsys):
+    """``--surface torus:R=3,r=1`` and the like: the library's tilings of that surface; a bad spec
+    is a one-line usage error."""
+    from spherevm import cli
+    from spherevm.init import tilings_on
+    rc = cli.main(["minimize", "--surface", "torus:R=3,r=1", "--cells", "40", "--replicas", "2", "--max-steps", "20",
+                   "--device", "cpu", "--quiet"])
+    assert rc == 0
+    s = tilings_on("torus:R=3,r=1", 40, [(0, 0), (0, 1)])
+    assert np.array_equal(s.positions, svm.init.random_tiling(40, replicas=2, seed=0, surface=Torus(3, 1)).positions)
+    for spec, message in (("torus:R=1,r=3", "major_radius must be larger than minor_radius"),
+                          ("ellipsoid:a=1,b=-1,c=1", "b must be positive"), ("bump:height=1,width=5,box=10",
+                                                                            "the box.s Lx must be at least 8 width = 40")):
+        rc = cli.main(["minimize", "--surface", spec, "--device", "cpu"])
+        err = capsys.readouterr().err
+        assert rc == 2 and re.search(f"argument --surface: {message}", err) and "Traceback" not in err

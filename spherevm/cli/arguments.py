@@ -131,19 +131,30 @@ def add_frame_arguments(parser, replica_default, replica_help):
 
 
 # ---------------------------------------------------------------------------------------- surface
-SURFACES = ("sphere", "plane")
+def surface_spec(text: str) -> str:
+    """An argparse type: a ``--surface`` spec (:func:`spherevm.init.check_surface_spec`)."""
+    from ..init import check_surface_spec
+    try:
+        return check_surface_spec(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 #: the ``--surface`` of a file's constraint (by its ``name``), for ``--restart``
 SURFACE_OF_CONSTRAINT = {"sphere": "sphere", "periodic_plane": "plane"}
 
 
 def add_surface(group, what="tilings", restart=False):
-    """``--surface {sphere,plane}``: random tilings of the sphere (radius sqrt(N/4 pi)) or of the
-    periodic plane (square box of side sqrt(N)); <A> = 1 on both. ``restart``: the command has
-    ``--restart``, whose file decides (the default is then None, see :func:`settle_restart`)."""
+    """``--surface SPEC``: random tilings of the sphere (radius sqrt(N/4 pi)), of the periodic plane
+    (square box of side sqrt(N)) or of an implicit surface (``torus:R=3,r=1``, ``ellipsoid:a=1,b=1,c=2``,
+    ``bump:height=1,width=1,box=10`` or a registered one, its shape scaled); <A> = 1 on all.
+    ``restart``: the command has ``--restart``, whose file decides (the default is then None, see
+    :func:`settle_restart`)."""
     default = "sphere; with --restart, the file's" if restart else "sphere"
-    group.add_argument("--surface", choices=SURFACES, default=None if restart else "sphere",
-                       help=f"{what} on the sphere (radius sqrt(N/4 pi)) or the periodic plane (square box of side "
-                            f"sqrt(N), N >= 8) (default: {default})")
+    group.add_argument("--surface", type=surface_spec, default=None if restart else "sphere", metavar="SURFACE",
+                       help=f"{what} on the sphere (radius sqrt(N/4 pi)), the periodic plane (square box of side "
+                            "sqrt(N), N >= 8) or an implicit surface scaled to <A> = 1: torus:R=3,r=1, "
+                            f"ellipsoid:a=1,b=1.5,c=2, bump:height=1,width=1,box=10 (default: {default})")
 
 
 # ---------------------------------------------------------------------------------------- restart

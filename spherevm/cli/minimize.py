@@ -98,8 +98,8 @@ def run(args) -> int:
         if args.restart is None:
             svm.validation.check_run_memory(f"minimize --cells {args.cells} --replicas {args.replicas}",
                                             args.cells * args.replicas, args.cells, gpu=device.is_gpu)
-            tiling = svm.init.random_planar_tiling if args.surface == "plane" else svm.init.random_tiling
-            sim.state = tiling(args.cells, replicas=args.replicas, seed=args.seed)
+            sim.state = svm.init.tilings_on(args.surface, args.cells, [(args.seed, r) for r in range(args.replicas)],
+                                            device=device)
         else:
             sim.create_state_from_gsd(args.restart)
         sim.operations.forces.append(svm.plugins.forces.VertexModel.dimensionless(kr=args.kr, p0=args.p0))

@@ -42,8 +42,8 @@ def chunk_seeds(sweep: RigiditySweep, chunk: Chunk):
 
 def build_tilings(surface: str, n_cells: int, seeds):
     """The random tilings of ``seeds`` on ``surface`` as one State."""
-    from ..init import random_planar_tilings, random_tilings
-    return (random_planar_tilings if surface == "plane" else random_tilings)(n_cells, seeds)
+    from ..init import tilings_on
+    return tilings_on(surface, n_cells, [(int(s), 0) for s in seeds])
 
 
 def _tiling_arrays(surface: str, n_cells: int, seeds):

@@ -78,8 +78,8 @@ class RigiditySweep:
         if len(set(cells)) != len(cells):
             raise ValueError(f"cells must not repeat a size, got {list(self.cells)}")
         set_(self, "cells", tuple(sorted(cells)))
-        if self.surface not in SURFACES:
-            raise ValueError(f"surface must be one of {SURFACES}, got {self.surface!r}")
+        from ..init import check_surface_spec
+        check_surface_spec(self.surface)
         if self.surface == "plane" and cells and min(cells) < MIN_PLANAR_CELLS:
             raise ValueError(f"cells must be >= {MIN_PLANAR_CELLS} on the periodic plane (a simple random tiling of "
                              f"the torus needs them), got {min(cells)}")
@@ -155,10 +155,6 @@ class RigiditySweep:
     def unit(self, u: int):
         """``(p0_index, replica)`` of unit ``u`` (p0-major order)."""
         return divmod(int(u), self.replicas)
-
-
-#: the surfaces a sweep can run on
-SURFACES = ("sphere", "plane")
 
 
 def _check_forces(forces) -> tuple:

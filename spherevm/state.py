@@ -36,7 +36,7 @@ class State:
         Each vertex's three neighbours and three cells, counter-clockwise.
     vertex_start, cell_start : array (R + 1,)
         Where each replica's vertices and cells start.
-    size : array (R, *constraint.size_shape), optional
+    size : array, ``(R,) + constraint.size_shape``, optional
         Each replica's surface size (:attr:`~spherevm.constraints.Constraint.size_names`), or one
         size for all replicas.
     constraint : Constraint, optional

@@ -36,7 +36,7 @@ class State:
         Each vertex's three neighbours and three cells, counter-clockwise.
     vertex_start, cell_start : array (R + 1,)
         Where each replica's vertices and cells start.
-    size : array (R, *constraint.size_shape), optional
+    size : array, ``(R,) + constraint.size_shape``, optional
         Each replica's surface size (:attr:`~spherevm.constraints.Constraint.size_names`), or one
         size for all replicas.
     constraint : Constraint, optional
@@ -140,40 +140,27 @@ class State:
             self._size_host = np.asarray(self.device.to_numpy(self._size))
         return self._size_host.copy()
 
-    def _named(self, key):
-        return self.constraint.size_key == key
+    def _views(key, what):        # called in the class body: builds two members
+        """``state.<key>`` and ``state.<key>_np()``: :attr:`size` (and :meth:`size_np`) where the
+        constraint's ``size_key`` is ``key``, else None."""
+        def get(self):
+            return self._size if self.constraint.size_key == key else None
 
-    @property
-    def radius(self):
-        """:attr:`size` where it is a radius per replica (a sphere), else None."""
-        return self._size if self._named("radius") else None
+        def put(self, value):
+            if self.constraint.size_key != key:
+                raise ValueError(f"{self.constraint!r} has no {key}: its size is {self.constraint.size_key} "
+                                 f"({', '.join(self.constraint.size_names)}); assign state.size")
+            self.size = value
 
-    @radius.setter
-    def radius(self, value):
-        self._set_named("radius", value)
+        def host(self):
+            return self.size_np() if self.constraint.size_key == key else None
 
-    @property
-    def box(self):
-        """:attr:`size` where it is a box (Lx, Ly) per replica (a periodic plane), else None."""
-        return self._size if self._named("box") else None
+        host.__doc__ = f":meth:`size_np` where the size is {what}, else None."
+        return property(get, put, doc=f":attr:`size` where it is {what}, else None (assigning sets :attr:`size`)."), host
 
-    @box.setter
-    def box(self, value):
-        self._set_named("box", value)
-
-    def _set_named(self, key, value):
-        if not self._named(key):
-            raise ValueError(f"{self.constraint!r} has no {key}: its size is {self.constraint.size_key} "
-                             f"({', '.join(self.constraint.size_names)}); assign state.size")
-        self.size = value
-
-    def radius_np(self):
-        """:meth:`size_np` where the size is a radius per replica, else None."""
-        return self.size_np() if self._named("radius") else None
-
-    def box_np(self):
-        """``(n_replicas, 2)`` (Lx, Ly) of a periodic plane; None on other surfaces."""
-        return self.size_np() if self._named("box") else None
+    radius, radius_np = _views("radius", "a radius per replica (a sphere)")
+    box, box_np = _views("box", "a box (Lx, Ly) per replica (a periodic plane)")
+    del _views
 
     @property
     def n_vertices(self) -> int:

@@ -16,6 +16,9 @@ import pathlib
 from spherevm.constraints import Constraint
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent / "spherevm"
+#: modules allowed to branch for now, and why (each entry must still branch, or leave the list)
+ALLOWED = {"analysis/curvature.py": "gaussian_curvature's formula per surface, to become a method of each "
+                                    "constraint once the Torus and GaussianBump stubs are real surfaces"}
 
 
 def _subclasses(cls):
@@ -66,8 +69,11 @@ def branches(source: str):
 def test_no_module_outside_constraints_branches_on_the_surface():
     inside = ROOT / "constraints"
     found = [f"{path.relative_to(ROOT.parent)}:{line}: {expr}" for path in sorted(ROOT.rglob("*.py"))
-             if inside not in path.parents for line, expr in branches(path.read_text())]
+             if inside not in path.parents and path.relative_to(ROOT).as_posix() not in ALLOWED
+             for line, expr in branches(path.read_text())]
     assert not found, "surface branches outside spherevm/constraints/ (ask the constraint instead):\n" + "\n".join(found)
+    stale = [name for name in ALLOWED if (ROOT / name).exists() and not branches((ROOT / name).read_text())]
+    assert not stale, f"allowed to branch but no longer does: {stale}; take it off ALLOWED"
 
 
 def test_the_check_sees_a_branch():

@@ -41,7 +41,7 @@ class Trajectory:
         Periodic box (Lx, Ly) of each replica (a :class:`~spherevm.constraints.PeriodicPlane`).
     constraint : Constraint, optional
         The surface, with ``size``; or the surface whose size ``radius`` or ``box`` is.
-    size : numpy.ndarray (n_replicas, *constraint.size_shape), optional
+    size : numpy.ndarray, ``(n_replicas,) + constraint.size_shape``, optional
         Each replica's surface size (``State.size``), instead of ``radius`` or ``box``."""
     times: np.ndarray
     centroids: np.ndarray

@@ -373,3 +373,16 @@ def test_command_line_surfaces(capsys):
         rc = cli.main(["minimize", "--surface", spec, "--device", "cpu"])
         err = capsys.readouterr().err
         assert rc == 2 and re.search(f"argument --surface: {message}", err) and "Traceback" not in err
+
+
+@pytest.mark.parametrize("name", ["torus", "ellipsoid", "bump"])
+def test_gsd_round_trip(name, tmp_path):
+    from spherevm import gsdio
+    s = svm.init.random_tiling(40, replicas=2, seed=1, surface=SURFACES[name]())
+    sim = svm.Simulation(device="cpu")
+    sim.state = s
+    with svm.plugins.writers.GSD(filename=tmp_path / "s.gsd") as writer:
+        writer.write(sim, 0)
+    back = gsdio.read_state(tmp_path / "s.gsd")
+    assert type(back.constraint) is type(s.constraint) and repr(back.constraint) == repr(s.constraint)
+    assert np.array_equal(back.positions, s.positions) and np.array_equal(back.size_np(), s.size_np())

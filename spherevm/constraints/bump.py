@@ -68,16 +68,16 @@ class GaussianBump(ImplicitSurface):
         Positive (a dimple is the bump seen from below).
     width : float
         Positive.
-    box : float or (Lx, Ly)
-        The periodic box, at least ``8 width`` in each direction."""
+    box : float or (Lx, Ly), optional
+        The periodic box, at least ``8 width`` in each direction (default ``10 width``)."""
 
     name = "gaussian_bump"
     size_names = ("Lx", "Ly", "height", "width")
     periodic = True
     euler_characteristic = 0
 
-    def __init__(self, height: float = 1.0, width: float = 1.0, box=10.0):
-        b = np.broadcast_to(np.asarray(box, dtype=np.float64).reshape(-1), (2,))
+    def __init__(self, height: float = 1.0, width: float = 1.0, box=None):
+        b = np.broadcast_to(np.asarray(10.0 * float(width) if box is None else box, dtype=np.float64).reshape(-1), (2,))
         self.height, self.width = float(height), float(width)
         self.shape = tuple(self.check_size([b[0], b[1], height, width])[0])
 

@@ -386,3 +386,24 @@ def test_gsd_round_trip(name, tmp_path):
     back = gsdio.read_state(tmp_path / "s.gsd")
     assert type(back.constraint) is type(s.constraint) and repr(back.constraint) == repr(s.constraint)
     assert np.array_equal(back.positions, s.positions) and np.array_equal(back.size_np(), s.size_np())
+
+
+def test_t1_fuzzing_keeps_the_network_valid(surface):
+    """Random tangent kicks and T1 passes with a large threshold (edges flip all the time): the
+    network stays a valid tiling of the surface's Euler characteristic (State.validate without the
+    orientation test: force-free kicks may fold a cell by themselves), every vertex on the surface."""
+    rng = np.random.default_rng(5)
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_tiling(60, replicas=2, seed=5, surface=surface)
+    sim.operations.updaters.append(T1(threshold=0.3, new_length=0.45, max_flip_backs=10 ** 9))
+    s, con = sim.state, sim.state.constraint
+    size = con.size(s, s.vertex_replica)
+    for k in range(1, 61):
+        noise = rng.normal(scale=0.03, size=s.positions.shape)
+        s.positions = con.project_normal(s.positions + con.project_tangent(s.positions, noise, size), size)
+        sim.state_changed()
+        sim.run_updaters()
+        if k % 10 == 0:
+            s.validate(orientation=False)
+            assert _distance(s).max() < 1e-12
+    assert sim.log("t1_total_flips").sum() > 50

@@ -407,3 +407,19 @@ def test_t1_fuzzing_keeps_the_network_valid(surface):
             s.validate(orientation=False)
             assert _distance(s).max() < 1e-12
     assert sim.log("t1_total_flips").sum() > 50
+
+
+def test_active_directors_stay_in_the_tangent_planes(device):
+    """Active cell directors live in the plane tangent at each cell's centre (normals from grad F)."""
+    _cpu_only(device)
+    sim = svm.Simulation(device=device, seed=4)
+    sim.state = svm.init.random_tiling(60, seed=2, surface=Ellipsoid(1.0, 1.5, 2.0))
+    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
+    active = svm.plugins.integrators.Active(dt=0.01, T=0.0, v0=0.1, Dr=0.5)
+    sim.operations.integrator = active
+    sim.run(20)
+    s = sim.state
+    normal = s.constraint.cell_normals(s)
+    assert np.abs((active.directors * normal).sum(axis=1)).max() < 1e-12
+    assert np.allclose(np.linalg.norm(active.directors, axis=1), 1.0, rtol=1e-12)
+    assert _distance(s).max() < 1e-12

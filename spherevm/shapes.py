@@ -139,7 +139,17 @@ def polygon_perimeter_at_curvature(n_sides: int, curvature, area=1.0):
 def pentagon_perimeter_at_curvature(curvature, area=1.0):
     """The pentagon bound at any Gaussian curvature K: perimeter of the regular pentagon of
     ``area`` on the surface of constant curvature K (:func:`polygon_perimeter_at_curvature`, n = 5);
-    3.81194 at K = 0 and unit area, lower where K > 0, higher where K < 0."""
+    3.81194 at K = 0 and unit area, lower where K > 0, higher where K < 0.
+
+    Parameters
+    ----------
+    curvature : float or array
+        K, with ``K * area`` in ``(-3 pi, 2 pi)``.
+    area : float or array
+
+    Returns
+    -------
+    float or numpy.ndarray"""
     return polygon_perimeter_at_curvature(5, curvature, area)
 
 

@@ -196,3 +196,28 @@ def test_binned_mean_refuses_bad_input():
         binned_mean(np.zeros(3), np.zeros(3), bins=[1.0, 0.0])
     with pytest.raises(ValueError, match="groups must have the shape of x"):
         binned_mean(np.zeros(3), np.zeros(3), groups=[0, 1])
+
+
+def test_the_example_writes_the_ranges(tmp_path):
+    """examples/pentagon_bound.py: the CSV's rows are the analytic ranges, and the figure is written."""
+    import csv
+    import pathlib
+    import runpy
+    pytest.importorskip("matplotlib")
+    example = runpy.run_path(str(pathlib.Path(__file__).resolve().parent.parent / "examples" / "pentagon_bound.py"))
+    example["main"](["--out", str(tmp_path), "--cells", "256"])
+    rows = {r["surface"]: r for r in csv.DictReader(open(tmp_path / "pentagon_bound.csv"))}
+    k_min, k_max = torus_curvature_range(2.0, 256)
+    assert float(rows["torus R/r = 2"]["K_min <A>"]) == pytest.approx(k_min, abs=1e-5)
+    assert float(rows["torus R/r = 2"]["p_penta(K_max)"]) == pytest.approx(pentagon_perimeter_at_curvature(k_max),
+                                                                           abs=1e-5)
+    assert float(rows["sphere"]["p_penta(K_min)"]) == pytest.approx(pentagon_perimeter(256), abs=1e-5)
+    # bump h/w = 1, w = 16 / 6.5: K on top is 1 / w^2, times <A>: the surface's area over the square / 256
+    w = 16 / 6.5
+
+    def stretch(y, x):
+        g2 = (x * x + y * y) / w ** 2 * np.exp(-(x * x + y * y) / w ** 2)     # |grad z|^2 with h = w
+        return np.sqrt(1 + g2)
+    mean_area = integrate.dblquad(stretch, -8, 8, -8, 8, epsabs=1e-9)[0] / 256
+    assert float(rows["bump h/w = 1"]["K_max <A>"]) == pytest.approx(mean_area / w ** 2, abs=1e-5)
+    assert (tmp_path / "pentagon_bound.png").stat().st_size > 10_000

@@ -79,9 +79,17 @@ def torus_curvature_range(aspect, n_cells, mean_area=1.0):
 
 @dataclass
 class Binned:
-    """Per-bin statistics of :func:`binned_mean`: bin ``edges`` (n_bins + 1), and per bin the mean
-    of the binning value ``x``, the ``mean`` of the quantity with its standard error ``sem`` (NaN with
-    fewer than two samples), and ``count`` (cells, or groups when grouped)."""
+    """Per-bin statistics of :func:`binned_mean` (arrays of n_bins, but ``edges``).
+
+    Parameters
+    ----------
+    edges : numpy.ndarray (n_bins + 1,)
+    x : numpy.ndarray
+        Mean of the binning value in each bin.
+    mean, sem : numpy.ndarray
+        Mean of the quantity and its standard error (NaN with fewer than two samples).
+    count : numpy.ndarray
+        Cells in the bin, or groups when grouped."""
     edges: np.ndarray
     x: np.ndarray
     mean: np.ndarray

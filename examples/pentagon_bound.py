@@ -111,7 +111,8 @@ def main(argv=None):
         out = csv.writer(f)
         out.writerow(head)
         for name, n, length, k0, k1 in rows:
-            out.writerow((name, n, f"{length:.4f}", f"{k0:.5f}", f"{k1:.5f}", f"{pentagon_perimeter_at_curvature(k0):.5f}",
+            out.writerow((name, n, f"{length:.4f}", f"{k0:.5f}", f"{k1:.5f}",
+                          f"{pentagon_perimeter_at_curvature(k0):.5f}",
                           f"{pentagon_perimeter_at_curvature(k1):.5f}"))
     print("| " + " | ".join(head) + " |\n|" + " --- |" * len(head))
     for name, n, length, k0, k1 in rows:

@@ -66,7 +66,8 @@ def test_flat_values_and_continuity_through_zero():
     for k in (1e-300, 1e-12, -1e-12, -1e-300):
         assert abs(pentagon_perimeter_at_curvature(k) - flat) <= 1e-12
     # area scaling: P(K, A) = sqrt(A) P(K A, 1)
-    assert pentagon_perimeter_at_curvature(0.3, 4.0) == pytest.approx(2 * pentagon_perimeter_at_curvature(1.2), rel=1e-14)
+    doubled = 2 * pentagon_perimeter_at_curvature(1.2)
+    assert pentagon_perimeter_at_curvature(0.3, 4.0) == pytest.approx(doubled, rel=1e-14)
 
 
 @pytest.mark.parametrize("n", [5, 6])
@@ -159,6 +160,8 @@ def test_sphere_and_plane_curvature():
         gaussian_curvature(PeriodicPlane(), x[:, :2])
     with pytest.raises(ValueError, match="aspect must be above 1"):
         torus_curvature_range(1.0, 256)
+    with pytest.raises(ValueError, match="constraint must be a Sphere, PeriodicPlane, Torus or GaussianBump, got str"):
+        gaussian_curvature("sphere", x)
 
 
 # ----------------------------------------------------------------------------- binned means

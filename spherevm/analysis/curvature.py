@@ -52,7 +52,8 @@ def gaussian_curvature(constraint, x, radius=None):
         rho2 = (xy * xy).sum(axis=-1)
         e = np.exp(-rho2 / (2 * w * w))
         return h * h * e * e * (1 - rho2 / (w * w)) / (w ** 4 * (1 + h * h * rho2 * e * e / w ** 4) ** 2)
-    raise ValueError(f"constraint must be a Sphere, PeriodicPlane, Torus or GaussianBump, got {type(constraint).__name__}")
+    raise ValueError("constraint must be a Sphere, PeriodicPlane, Torus or GaussianBump, "
+                     f"got {type(constraint).__name__}")
 
 
 def torus_curvature_range(aspect, n_cells, mean_area=1.0):

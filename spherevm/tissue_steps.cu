@@ -62,11 +62,12 @@ __device__ __forceinline__ void to_others(double* const* bases, int rank, long o
 
 // The forces' cell parts (Forces::cell: the vertex model's vm_cell_terms, ...) of `count` cells,
 // cell(0) .. cell(count - 1), by the calling block, from each cell's area and perimeter, the
-// vertices' directions from norm (Surface::directions), and the cell's vertices; the coefficients go
-// to the stages' regions of `data` (the tissue's coefficient area: nc cells from c0); sent(c) after each. On a surface that splits a cell's corners (the sphere: Surface::split_corners), a cell takes
-// `lanes` neighbouring threads (a power of two, at most 8): each lane computes every lanes-th
-// corner's arc and fan factor (Surface::cell_corner), and every lane adds them in the cell's order
-// (Surface::add_corner), so the chain of a cell's atan2s is shortened and the bits are
+// vertices' directions from norm (Surface::directions), and the cell's vertices; the coefficients
+// go to the stages' regions of `data` (the tissue's coefficient area: nc cells from c0); sent(c)
+// after each. On a surface that splits a cell's corners (the sphere: Surface::split_corners), a
+// cell takes `lanes` neighbouring threads (a power of two, at most 8): each lane computes every
+// lanes-th corner's arc and fan factor (Surface::cell_corner), and every lane adds them in the
+// cell's order (Surface::add_corner), so the chain of a cell's atan2s is shortened and the bits are
 // cell_measures' whatever the lanes. Every thread of the block calls it, with S = Surface.
 template <class S, class Forces, class Cell, class Sent>
 __device__ __forceinline__ void tissue_cells(const double* P, KeptNorm norm, const int* cell_vertices,
@@ -186,11 +187,12 @@ __device__ __forceinline__ void tissue_neighbours(const Forces& forces, const Ti
 
 // The steps of run (Plan.device_cycle: update, integrate). At most TISSUE_THREADS threads a block
 // (tissue_steps.layout's bound). Shared memory of each block: TissueStepLayout (tissue_steps.py's
-// STEP_LAYOUT, its one definition): two copies of the positions (3 nv each: the step's, and the next,
-// which the move writes while other blocks still read the step's), the forces' cell coefficients
-// (Forces::cell_doubles a cell) and neighbour parts (Forces::neighbour_doubles a cell), on the sphere two copies of the kept 1 / |x| (nv each, as the
-// positions), the forces of the block's vertices (3 ceil(nv / TISSUE_CLUSTER)), then the pass's
-// claims (nc ints) and flips (ceil(nc / 4) ints).
+// STEP_LAYOUT, its one definition): two copies of the positions (3 nv each: the step's, and the
+// next, which the move writes while other blocks still read the step's), the forces' cell
+// coefficients (Forces::cell_doubles a cell) and neighbour parts (Forces::neighbour_doubles a
+// cell), on the sphere two copies of the kept 1 / |x| (nv each, as the positions), the forces of
+// the block's vertices (3 ceil(nv / TISSUE_CLUSTER)), then the pass's claims (nc ints) and flips
+// (ceil(nc / 4) ints).
 //
 // A step: every block lists the short edges of its vertices and computes its cells' coefficients on
 // the step's positions (a barrier); if any edge is short, the first block checks and flips them and

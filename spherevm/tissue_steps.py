@@ -16,9 +16,10 @@ stages (a pair that ``Force.combined`` computes together as one, through ``Force
 :func:`force_stages`), the integrator's (a run's move, or a minimiser's sums, control and move) and
 at most one updater's pass. A force's stage has a cell part (from each cell's area, perimeter and
 vertices), optionally a second per-cell part that reads its neighbours' coefficients (after every
-cell's first part and T1's flips, a barrier between: the bending force's), and a vertex part. It is compiled once per combination of stages, surface and cluster size. Nothing
-here names an operation: an operation without a stage (None) keeps the steps on CUDA graphs of
-the general kernels, and :func:`why_not` says which. Each stage calls the same device functions as
+cell's first part and T1's flips, a barrier between: the bending force's), and a vertex part. The
+kernel is compiled once per combination of stages, surface and cluster size. Nothing here names an
+operation: an operation without a stage (None) keeps the steps on CUDA graphs of the general
+kernels, and :func:`why_not` says which. Each stage calls the same device functions as
 its operation's general kernels with the same global indices, so the trajectory is the general
 kernels' bit for bit: the same Philox draws, the same flips (lowest edge index wins), the same
 arithmetic, the forces summed in the operations' order (``tests/test_tissue_steps.py``).
@@ -247,7 +248,7 @@ def force_stages(plan):
             return f"{type(host).__name__}'s fused stage is an extra, which only Force.fused_combined gives"
         out.append(stage)
         if joined is not None:
-            partner = force if host is not force else other
+            partner = other if host is force else force
             if not joined.extra or joined.role != "force":
                 return f"{type(partner).__name__}.fused_combined gave a stage that is no force's extra"
             if not stage.takes_extra:
@@ -355,7 +356,8 @@ def _forces_aggregate(forces):
         if s.measures:
             cells.append(f"        s{k}.cell(A, P, c, s, {coef}, pos, row, n);")
         if s.neighbour_doubles:
-            neighbours.append(f"        s{k}.neighbours(pos, vc, cell_vertices, sides, max_sides, c, s, {coef}, {extra});")
+            neighbours.append(f"        s{k}.neighbours(pos, vc, cell_vertices, sides, max_sides, c, s, {coef}, "
+                              f"{extra});")
             more_copies.append(_copy(s.neighbour_doubles, more_at))
         if s.cell_doubles:
             copies.append(_copy(s.cell_doubles, at))
@@ -363,7 +365,8 @@ def _forces_aggregate(forces):
             continue
         args = coef + (f", {extra}" if s.neighbour_doubles else "") + ", norm"
         if rest and rest[0].extra:
-            args += f", StageExtra<{rest[0].struct}>{{s{k + 1}, data + {regions[k + 1][0]}, more + {regions[k + 1][1]}}}"
+            joined_at, joined_more_at = regions[k + 1]
+            args += f", StageExtra<{rest[0].struct}>{{s{k + 1}, data + {joined_at}, more + {joined_more_at}}}"
         term = f"s{k}.vertex(pos, vn, vc, v, s, {args})"
         vertex.append(f"        f = add3_rn(f, {term});" if vertex else f"        vec3 f = {term};")
     measures = "true" if any(s.measures for s in forces) else "false"
@@ -377,11 +380,13 @@ def _forces_aggregate(forces):
                 + ", ".join(f"s{k}{{a.s{k}}}" for k in range(len(forces))) + " {}",
                 "    __device__ __forceinline__ void cell(double A, double P, long c, Surface::Size s, double* data,",
                 "        long nc, long c0, const double* pos, const int* row, int n) const {", *cells, "    }",
-                "    __device__ __forceinline__ void neighbours(const double* pos, const int* vc, const int* cell_vertices,",
-                "        const int* sides, int max_sides, long c, Surface::Size s, const double* data, double* more,",
+                "    __device__ __forceinline__ void neighbours(const double* pos, const int* vc,",
+                "        const int* cell_vertices, const int* sides, int max_sides, long c, Surface::Size s,",
+                "        const double* data, double* more,"
                 "        long nc, long c0) const {", *neighbours, "    }",
                 "    __device__ __forceinline__ vec3 vertex(const double* pos, const int* vn, const int* vc, long v,",
-                "        Surface::Size s, const double* data, const double* more, long nc, long c0, KeptNorm norm) const {",
+                "        Surface::Size s, const double* data, const double* more, long nc, long c0,",
+                "        KeptNorm norm) const {",
                 *vertex, "        return f;", "    }",
                 "    __device__ static __forceinline__ void copy_cell(long c, const double* from, double* to, long nc,",
                 "        long c0) {", *copies, "    }",

@@ -155,15 +155,14 @@ struct NoPass {
 };
 
 // A force stage joined into another's vertex force (FusedStage.extra, Force.fused_combined): the
-// Extra (plugins/forces/vertex_model.cuh) through which the other stage's vertex force adds the
-// joined stage's gradient before its projection, as the pair's general kernels do.
+// Extra's add_gradient (plugins/forces/vertex_model.cuh; Surface::vertex_force) through which the
+// other stage's vertex force adds the joined stage's gradient before its projection, as the pair's
+// general kernels do.
 template <class Stage>
 struct StageExtra {
-    static constexpr bool sums_energy = false;
     const Stage& stage;
     const double* coef;   // the joined stage's regions
     const double* more;
-    __device__ __forceinline__ void cell(const double*, const int*, int, long) const {}
     __device__ __forceinline__ void add_gradient(vec3& g, const double* pos, const int* vn, const int* vc, long v,
                                                  vec3 x) const
     {
@@ -176,7 +175,7 @@ struct StageExtra {
 // after each.
 template <class Forces, class Sent>
 __device__ __forceinline__ void tissue_neighbours(const Forces& forces, const TissueState& st, const double* P,
-                                                  typename Surface::Size s, int cb0, int cb1, const double* data,
+                                                  Surface::Size s, int cb0, int cb1, const double* data,
                                                   double* more, long nc, long c0, Sent sent)
 {
     for (int c = cb0 + threadIdx.x; c < cb1; c += blockDim.x) {

@@ -66,7 +66,8 @@ def tables_digest(folder):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
+                                 allow_abbrev=False)
     ap.add_argument("--gpus", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--cells", type=int, nargs="+", default=list(PAPER_CELLS))
     ap.add_argument("--p0", default="3.60:3.95:0.01")

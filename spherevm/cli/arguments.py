@@ -150,12 +150,13 @@ SYSTEM_DEFAULTS = {"cells": 64, "replicas": 4, "seed": 0, "surface": "sphere"}
 SEED_WARNING = r".*the checkpoint was written by a Simulation with seed"
 
 
-def add_system_arguments(group, replicas_help, seed_help):
+def add_system_arguments(group, replicas_help, seed_help, many=False):
     """``--cells``, ``--replicas`` and ``--seed`` of a command with ``--restart``: None unless given
-    (:func:`settle_restart` fills them in from :data:`SYSTEM_DEFAULTS` or the file)."""
+    (:func:`settle_restart` fills them in from :data:`SYSTEM_DEFAULTS` or the file). ``many``:
+    ``--cells`` takes one or more sizes (a list)."""
     def default(name):
         return f"(default: {SYSTEM_DEFAULTS[name]}; with --restart, the file's)"
-    group.add_argument("--cells", "-N", type=integer(4), default=None, metavar="N",
+    group.add_argument("--cells", "-N", type=integer(4), default=None, metavar="N", nargs="+" if many else None,
                        help=f"cells per replica, >= 4 {default('cells')}")
     group.add_argument("--replicas", "-R", type=integer(1), default=None, metavar="R",
                        help=f"{replicas_help} {default('replicas')}")
@@ -224,12 +225,13 @@ def force_spec(text):
     return name, params
 
 
-def add_force_arguments(group):
-    """``--force NAME:k=v,...`` (repeatable) and ``--bending B``: forces added to the vertex model."""
+def add_force_arguments(group, many=False):
+    """``--force NAME:k=v,...`` (repeatable) and ``--bending B``: forces added to the vertex model.
+    ``many``: ``--bending`` takes one or more values (a list)."""
     group.add_argument("--force", dest="forces", type=force_spec, action="append", default=[],
                        metavar="NAME:K=V,...", help="add the registered force NAME (see 'spherevm plugins') "
                        "with these constructor parameters; repeatable")
-    group.add_argument("--bending", type=real(), default=None, metavar="B",
+    group.add_argument("--bending", type=real(), default=None, metavar="B", nargs="+" if many else None,
                        help="bending between neighbouring cells, B in units of kP <A> (same as --force bending:B=B)")
 
 

@@ -142,3 +142,63 @@ def test_one_worker_per_gpu_gives_the_one_gpu_tables(tmp_path):
     with sweeps.cluster.client(gpus=n) as client:
         many = sweeps.run_sweep(sweep, tmp_path / "many", executor=client, device="gpu", batch_cells=2000, workers=2)
     same(many.records, one.records)
+
+
+# dynamics: 2 temperatures x 3 tissues of N = 16, four chunks (tests/test_dynamics_sweep.py)
+DYNAMICS = dict(cells=[16], T=[0.1, 0.2], p0=[3.9], replicas=3, chunk_replicas=2, steps=600, relax_steps=200,
+                dt=0.02, seed=1)
+DYNAMICS_ARGS = ["dynamics", "--cells", "16", "--T", "0.1", "0.2", "--p0", "3.9", "--replicas", "3", "--chunk-replicas",
+                 "2", "--steps", "600", "--relax", "200", "--dt", "0.02", "--seed", "1", "--device", "cpu", "--quiet"]
+
+
+@pytest.fixture(scope="module")
+def dynamics_reference(tmp_path_factory):
+    out = tmp_path_factory.mktemp("dyn") / "sweep"
+    result = sweeps.run_sweep(sweeps.DynamicsSweep(**DYNAMICS), out, executor=sweeps.InProcessExecutor(), device="cpu")
+    sweeps.write_dynamics_tables(out, result.records)
+    return out
+
+
+def same_tables(out, reference):
+    for name in ("tau_alpha.csv", "curves.csv"):
+        assert (out / name).read_bytes() == (reference / name).read_bytes(), name
+
+
+def test_a_dynamics_sweep_on_a_local_cluster_gives_the_in_process_tables(tmp_path, dynamics_reference, capsys):
+    out = tmp_path / "sweep"
+    rc = cli.main(DYNAMICS_ARGS + ["--scheduler", "local", "--workers", "2", "--out", str(out)])
+    assert rc == 0, capsys.readouterr().err
+    same_tables(out, dynamics_reference)
+
+
+def test_a_worker_killed_mid_dynamics_chunk_has_its_chunk_redone(tmp_path, dynamics_reference):
+    client = sweeps.cluster.client(scheduler="local", workers=2)
+    try:
+        pids = client.run(os.getpid)
+        out = tmp_path / "sweep"
+        box = {}
+
+        def run():
+            box["result"] = sweeps.run_sweep(sweeps.DynamicsSweep(**DYNAMICS), out, executor=client, device="cpu")
+
+        worker = threading.Thread(target=run)
+        worker.start()
+        chunks = out / "chunks"
+        deadline = time.time() + 120
+        while time.time() < deadline and not (chunks.exists() and any(chunks.iterdir())):
+            time.sleep(0.02)
+        assert chunks.exists() and any(chunks.iterdir()), "no chunk finished in time"
+        finished_before = {p.name: p.read_bytes() for p in chunks.iterdir()}
+        busy = [address for address, keys in client.processing().items() if keys]
+        assert busy, "no chunk running"
+        os.kill(pids[busy[0]], signal.SIGKILL)                  # a worker dies in the middle of a chunk
+        worker.join(timeout=300)
+        assert not worker.is_alive()
+        result = box["result"]
+    finally:
+        client.close()
+    assert len(finished_before) < 4 and len(result.computed) == 4
+    sweeps.write_dynamics_tables(out, result.records)
+    same_tables(out, dynamics_reference)
+    for name, data in finished_before.items():
+        assert (chunks / name).read_bytes() == data

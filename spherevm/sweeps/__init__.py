@@ -34,20 +34,20 @@ Modules: :mod:`.spec` (the parameters, seeds and chunks), :mod:`.store` (the fol
 ``spherevm dynamics`` with several values or ``--gpus`` (:mod:`spherevm.cli.dynamics`) a dynamics sweep.
 """
 from . import cluster
-from .dynamics import CURVE_DIR, DYNAMICS_COLUMNS, DynamicsSweep, read_curves, run_dynamics_chunk
+from .dynamics import DynamicsSweep, run_dynamics_chunk
 from .execution import (CPU_BATCH_CELLS, GPU_BATCH_CELLS, InProcessExecutor, SweepProgress, SweepResult,
                         TextProgress, build_chunk_state, default_executor, run_chunk, run_sweep)
 from .spec import Chunk, RigiditySweep, Sweep, parse_p0_grid, plan_chunks, tiling_seed
-from .store import (CHUNK_DIR, FORMAT, FORMAT_VERSION, MANIFEST, RECORD_COLUMNS, open_sweep_folder, read_records,
-                    scan_chunks, write_columns)
+from .store import (CHUNK_DIR, CURVE_DIR, DYNAMICS_COLUMNS, FORMAT, FORMAT_VERSION, MANIFEST, RECORD_COLUMNS,
+                    open_sweep_folder, read_curves, read_records, scan_chunks, write_columns)
 from .states import STATE_DIR, load_state
 from .tables import (format_p0star_table, format_tau_table, summarize_dynamics, summarize_records,
                      write_dynamics_tables, write_tables)
 
-__all__ = ["CHUNK_DIR", "CPU_BATCH_CELLS", "CURVE_DIR", "Chunk", "DYNAMICS_COLUMNS", "DynamicsSweep", "FORMAT", "FORMAT_VERSION", "GPU_BATCH_CELLS",
-           "InProcessExecutor", "MANIFEST", "RECORD_COLUMNS", "RigiditySweep", "STATE_DIR", "Sweep", "SweepProgress", "SweepResult",
-           "TextProgress", "build_chunk_state", "default_executor", "format_p0star_table",
-           "format_tau_table", "load_state", "open_sweep_folder",
-           "parse_p0_grid", "plan_chunks", "read_curves", "read_records", "run_chunk", "run_dynamics_chunk", "run_sweep",
-           "scan_chunks", "summarize_dynamics", "summarize_records", "tiling_seed", "write_columns",
+__all__ = ["CHUNK_DIR", "CPU_BATCH_CELLS", "CURVE_DIR", "Chunk", "DYNAMICS_COLUMNS", "DynamicsSweep", "FORMAT",
+           "FORMAT_VERSION", "GPU_BATCH_CELLS", "InProcessExecutor", "MANIFEST", "RECORD_COLUMNS", "RigiditySweep",
+           "STATE_DIR", "Sweep", "SweepProgress", "SweepResult", "TextProgress", "build_chunk_state",
+           "default_executor", "format_p0star_table", "format_tau_table", "load_state", "open_sweep_folder",
+           "parse_p0_grid", "plan_chunks", "read_curves", "read_records", "run_chunk", "run_dynamics_chunk",
+           "run_sweep", "scan_chunks", "summarize_dynamics", "summarize_records", "tiling_seed", "write_columns",
            "write_dynamics_tables", "write_tables"]

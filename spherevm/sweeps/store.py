@@ -39,6 +39,16 @@ class Columns:
 #: the rigidity sweep's records, one row per minimised tiling
 RIGIDITY_COLUMNS = Columns(RECORD_COLUMNS, frozenset(_INT_COLUMNS), frozenset(_STR_COLUMNS),
                            ("n_cells", "p0_index", "replica"))
+#: the dynamics sweep's records, one row per tissue (tau_alpha NaN: Q_s stayed above 1/e)
+DYNAMICS_COLUMNS = Columns(
+    ("n_cells", "point", "T", "p0", "B", "replica", "tiling_seed", "noise_seed", "tau_alpha", "msd_end",
+     "overlap_end", "t1_flips", "chunk", "chunk_seconds"),
+    frozenset({"n_cells", "point", "replica", "tiling_seed", "noise_seed", "t1_flips"}), frozenset({"chunk"}),
+    ("n_cells", "point", "replica"))
+#: a dynamics chunk's MSD and Q_s, averaged over its ``tissues``, one row per lag
+CURVE_COLUMNS = ("n_cells", "point", "tissues", "time", "msd", "self_overlap")
+#: where a dynamics sweep keeps each chunk's averaged curves
+CURVE_DIR = "curves"
 
 
 def _format(value):
@@ -230,3 +240,42 @@ def scan_chunks(sweep, path: str, clean: bool = False):
         done[n][u] = True
         records.append(rec)
     return done, records, bad
+
+
+def read_curves(out, records: dict) -> dict:
+    """The MSD and Q_s of every point, averaged over its tissues (each chunk's curve weighed by its
+    tissues, chunks in the order of their first tissue): columns ``n_cells, point, T, p0, B, time,
+    msd, self_overlap``, sorted by (N, point, time)."""
+    folder = os.path.join(os.fspath(out), CURVE_DIR)
+    chunks = {}
+    for i, c in enumerate(records["chunk"]):
+        chunks.setdefault(c, i)
+    points = {}
+    for cid in sorted(chunks, key=lambda c: (int(records["n_cells"][chunks[c]]), int(records["point"][chunks[c]]),
+                                             int(records["replica"][chunks[c]]))):
+        path = os.path.join(folder, cid + ".csv")
+        try:
+            with open(path, newline="") as fh:
+                rows = list(csv.reader(fh))
+        except OSError:
+            raise ValueError(f"{path} is missing: the chunk's curves were lost; remove chunks/{cid}.csv "
+                             "and rerun the sweep to recompute it") from None
+        cols = {c: np.array([float(r[j]) for r in rows[1:]]) for j, c in enumerate(rows[0])}
+        i = chunks[cid]
+        key = (int(records["n_cells"][i]), int(records["point"][i]))
+        w = cols["tissues"][0]
+        total = points.setdefault(key, [i, cols["time"], np.zeros(len(cols["time"])), np.zeros(len(cols["time"])), 0.0])
+        total[2] = total[2] + w * cols["msd"]
+        total[3] = total[3] + w * cols["self_overlap"]
+        total[4] += w
+    out_cols = {c: [] for c in ("n_cells", "point", "T", "p0", "B", "time", "msd", "self_overlap")}
+    for (n, k), (i, lag, msd, overlap, w) in sorted(points.items()):
+        m = len(lag)
+        for c in ("T", "p0", "B"):
+            out_cols[c].extend([float(records[c][i])] * m)
+        out_cols["n_cells"].extend([n] * m)
+        out_cols["point"].extend([k] * m)
+        out_cols["time"].extend(lag.tolist())
+        out_cols["msd"].extend((msd / w).tolist())
+        out_cols["self_overlap"].extend((overlap / w).tolist())
+    return out_cols

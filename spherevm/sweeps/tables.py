@@ -9,8 +9,7 @@ import os
 import numpy as np
 
 from ..analysis import rigidity
-from .dynamics import DYNAMICS_COLUMNS, read_curves
-from .store import MANIFEST, RECORD_COLUMNS, sorted_records, write_columns
+from .store import DYNAMICS_COLUMNS, MANIFEST, RECORD_COLUMNS, read_curves, sorted_records, write_columns
 
 
 def summarize_records(records: dict, zero_tol=None, sigma=None, resamples: int = 400, surface: str = "sphere"):

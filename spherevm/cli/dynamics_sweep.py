@@ -75,8 +75,8 @@ def run(args) -> int:
         if not args.quiet:
             where = (f"{args.gpus} GPU worker(s)" if args.gpus else f"Dask cluster {args.scheduler}") if client \
                 else f"device {args.device}"
-            err.write(f"spherevm: dynamics sweep on the {sweep.surface} of N = {list(sweep.cells)}, T = {list(sweep.T)}, "
-                      f"p0 = {list(sweep.p0)}, B = {list(sweep.B)}, {sweep.replicas} tissues per point, "
+            err.write(f"spherevm: dynamics sweep on the {sweep.surface} of N = {list(sweep.cells)}, "
+                      f"T = {list(sweep.T)}, p0 = {list(sweep.p0)}, B = {list(sweep.B)}, {sweep.replicas} tissues per point, "
                       f"{sweep.steps} steps: {sweep.total_units} tissues on {where}, writing {args.out}\n")
             err.flush()
         bar = TextProgress(err, label="dynamics", enabled=None, units="tissues") if not args.quiet else None

@@ -27,11 +27,12 @@ independently. See docs/rigidity.md.
 executors (:func:`run_sweep` takes either); :func:`write_dynamics_tables` then writes tau_alpha per
 point and the averaged MSD and Q_s curves. See docs/dynamics.md.
 
-Modules: :mod:`.spec` (the parameters, seeds and chunks), :mod:`.store` (the folder on disk),
-:mod:`.execution` (running chunks and sweeps), :mod:`.dynamics` (the dynamics sweep), :mod:`.states` (the inherent states, kept with
-``save_states=True``), :mod:`.tables` (summaries and plots). The command
-``spherevm rigidity`` (:mod:`spherevm.cli.rigidity`) runs a rigidity sweep from the shell, and
-``spherevm dynamics`` with several values or ``--gpus`` (:mod:`spherevm.cli.dynamics`) a dynamics sweep.
+Modules: :mod:`.spec` (the parameters, seeds and chunks; :class:`Sweep`, what a sweep kind
+provides), :mod:`.store` (the folder on disk), :mod:`.execution` (running chunks and sweeps),
+:mod:`.dynamics` (the dynamics sweep), :mod:`.states` (the inherent states, kept with
+``save_states=True``), :mod:`.tables` (summaries and plots). The command ``spherevm rigidity``
+(:mod:`spherevm.cli.rigidity`) runs a rigidity sweep from the shell, and ``spherevm dynamics`` with
+several values or ``--gpus`` (:mod:`spherevm.cli.dynamics_sweep`) a dynamics sweep.
 """
 from . import cluster
 from .dynamics import DynamicsSweep, run_dynamics_chunk

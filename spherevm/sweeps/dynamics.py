@@ -47,15 +47,17 @@ def _bits(x: float) -> int:
     return int(np.float64(x).view(np.uint64))
 
 
-def run_dynamics_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu") -> dict:
+def run_dynamics_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu", timing=False) -> dict:
     """Run one chunk of a :class:`DynamicsSweep` as one batched ``glassy_dynamics`` call; returns its
     per-tissue records (:data:`DYNAMICS_COLUMNS`) and, under ``"curves"``, the chunk's MSD and Q_s
-    averaged over its tissues (:data:`CURVE_COLUMNS`). Plain arguments, for any executor."""
+    averaged over its tissues (:data:`CURVE_COLUMNS`); with ``timing``, under ``"timing"``, when its
+    stages ended as :func:`~spherevm.sweeps.execution.run_chunk` gives them (``minimized``: the end of
+    the protocol). Plain arguments, for any executor."""
     from ..plugins import build_force
     from ..protocols import glassy_dynamics
     from .execution import build_tilings
 
-    t0 = time.perf_counter()
+    t0, started = time.perf_counter(), time.time()
     sweep = DynamicsSweep.from_parameters(parameters)
     chunk = Chunk(int(n_cells), int(start), int(stop))
     k, first = divmod(chunk.start, sweep.replicas)
@@ -65,22 +67,27 @@ def run_dynamics_chunk(parameters: dict, n_cells: int, start: int, stop: int, de
     forces = [build_force(name, dict(params)) for name, params in sweep.forces]
     if B > 0:
         forces.append(build_force("bending", {"B": B}))
+    state = build_tilings(sweep.surface, chunk.n_cells, tilings)
+    built = time.time()
     res = glassy_dynamics(None, p0, sweep.kr, T, dt=sweep.dt, steps=sweep.steps, seed=noise, device=device,
                           relax_steps=sweep.relax_steps, equilibrate_steps=sweep.equilibrate_steps, b=sweep.b,
                           points_per_decade=sweep.points_per_decade, extra_forces=forces,
-                          initial_state=build_tilings(sweep.surface, chunk.n_cells, tilings))
+                          initial_state=state)
     flips = np.asarray(res.simulation.log("t1_total_flips"))
+    elapsed, ran = time.perf_counter() - t0, time.time()
     n, lags = chunk.size, len(res.lag)
     curves = {"n_cells": [chunk.n_cells] * lags, "point": [k] * lags, "tissues": [n] * lags,
               "time": [float(x) for x in res.lag], "msd": [float(x) for x in res.msd],
               "self_overlap": [float(x) for x in res.self_overlap]}
-    return {"curves": curves, "n_cells": [chunk.n_cells] * n, "point": [k] * n, "T": [T] * n, "p0": [p0] * n,
+    extra = {"timing": {"pid": os.getpid(), "started": started, "built": built, "minimized": ran,
+                        "ended": time.time()}} if timing else {}
+    return {**extra, "curves": curves, "n_cells": [chunk.n_cells] * n, "point": [k] * n, "T": [T] * n, "p0": [p0] * n,
             "B": [B] * n, "replica": replicas, "tiling_seed": tilings, "noise_seed": [noise] * n,
             "tau_alpha": [float(x) for x in res.tau_alpha_per_replica],
             "msd_end": [float(x) for x in res.msd_per_replica[-1]],
             "overlap_end": [float(x) for x in res.self_overlap_per_replica[-1]],
             "t1_flips": [int(f) for f in flips], "chunk": [chunk.id] * n,
-            "chunk_seconds": [round(time.perf_counter() - t0, 4)] * n}
+            "chunk_seconds": [round(elapsed, 4)] * n}
 
 
 

@@ -103,10 +103,12 @@ class TilingPrefetch:
 
 
 def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu", state=None,
-              save_states=False) -> dict:
+              save_states=False, timing=False) -> dict:
     """Minimise one chunk; returns its per-replica records (a dict of lists, :data:`RECORD_COLUMNS`),
     with ``save_states`` also its minimised State as the bytes of a GSD file (key ``"state_gsd"``,
-    :func:`spherevm.sweeps.states.chunk_state_gsd`).
+    :func:`spherevm.sweeps.states.chunk_state_gsd`), with ``timing`` also when its stages ended
+    (key ``"timing"``: ``started``, ``built`` (tilings), ``minimized`` and ``ended`` as ``time.time()``,
+    and the worker's ``pid``).
 
     A plain module-level function of plain arguments, so any executor (process pool, Dask) can run
     it (``state``: the chunk's tilings when built elsewhere). The vertex model is given per cell:
@@ -118,10 +120,11 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     from ..plugins.updaters import T1
     from ..simulation import Simulation
 
-    t0 = time.perf_counter()
+    t0, started = time.perf_counter(), time.time()
     sweep = RigiditySweep.from_parameters(parameters)
     chunk = Chunk(int(n_cells), int(start), int(stop))
     state, p0, p0_index, replica, seeds = build_chunk_state(sweep, chunk, state)
+    built = time.time()
     mean_area = state.mean_cell_area                     # per replica (1 at the default radius)
     cell_rep = state.cell_replica_np()
     area = mean_area[cell_rep]
@@ -137,9 +140,12 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     res = sim.minimize(force_tol=sweep.force_tol, energy_tol=sweep.energy_tol, max_steps=sweep.max_steps,
                        check_every=sweep.check_every)
     flips = np.asarray(sim.log("t1_total_flips"))          # the loggable syncs the GPU counters
-    elapsed = time.perf_counter() - t0
+    elapsed, minimized = time.perf_counter() - t0, time.time()
     n = chunk.size
     extra = {"state_gsd": chunk_state_gsd(sim, p0, p0_index, replica)} if save_states else {}
+    if timing:
+        extra["timing"] = {"pid": os.getpid(), "started": started, "built": built, "minimized": minimized,
+                           "ended": time.time()}
     return {**extra, "n_cells": [chunk.n_cells] * n, "p0": p0.tolist(), "p0_index": list(p0_index), "replica": list(replica),
             "tiling_seed": list(seeds), "energy_per_cell": [float(e) for e in res.energy_per_cell],
             "max_force": [float(f) for f in res.max_force],
@@ -290,6 +296,13 @@ class SweepResult:
     recomputed_bad: list = field(default_factory=list)  # unreadable chunk files that were recomputed
     elapsed: float = 0.0
     executor: str = ""
+    #: with ``timeline=True``, one dict per computed chunk: its ``chunk`` id, ``n_cells``, ``size`` and
+    #: when (``time.time()``) the sweep began waiting for its tilings (``asked``), had them and submitted
+    #: it (``submitted``), the worker started, built, minimised and ended it (:func:`run_chunk`'s
+    #: ``timing``, with the worker's ``pid``), and the sweep had its result (``received``) and wrote it
+    #: (``written``); ``started`` is when the sweep began
+    timeline: list = field(default_factory=list)
+    started: float = 0.0
 
     def summarize(self, zero_tol=None, **kwargs):
         """``(fractions, p0star, density)`` tables, see :func:`spherevm.analysis.rigidity.summarize`."""
@@ -312,7 +325,7 @@ def _drop_chunks_without_states(sweep, path, done, parts):
 
 
 def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, batch_cells=None,
-              progress=None, save_states=False, prefetch=None) -> SweepResult:
+              progress=None, save_states=False, prefetch=None, timeline=False) -> SweepResult:
     """Run (or resume) a sweep, writing each chunk to ``<out>/chunks/`` as it finishes.
 
     Everything is validated before the folder is created; a folder holding a sweep with other
@@ -345,6 +358,9 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
         Build the tilings in a process pool on this machine ahead of the workers
         (:class:`TilingPrefetch`); the results are the same. None: for GPU sweeps of at least
         :data:`PREFETCH_MIN_CELLS` cells on a machine of three or more cores.
+    timeline : bool
+        Record when each chunk's stages began and ended (:attr:`SweepResult.timeline`;
+        ``benchmarks/sweep_timeline.py`` draws it).
 
     Returns
     -------
@@ -404,7 +420,9 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
         if progress is not None:
             progress(state)
         params = sweep.parameters()
-        states = {"save_states": True} if save_states else {}     # the call stays the same without them
+        # the call stays the same without these options
+        options = {**({"save_states": True} if save_states else {}), **({"timing": True} if timeline else {})}
+        events, started = {}, time.time()
         in_process = isinstance(executor, InProcessExecutor)
         slots = executor_slots(executor)
         todo = sorted(chunks, key=lambda c: -c.n_cells * c.size)        # largest N first
@@ -424,9 +442,12 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
         while todo or pending:
             while todo and len(pending) < limit:
                 c = todo.pop(0)
+                asked = time.time()
                 built = () if prefetch is None else (prefetch.get(c),)
+                events[c.id] = {"chunk": c.id, "n_cells": c.n_cells, "size": c.size, "asked": asked,
+                                "submitted": time.time()}
                 pending[executor.submit(run, params, c.n_cells, c.start, c.stop, device_name, *built,
-                                        **states)] = c
+                                        **options)] = c
             finished, _ = cf.wait(list(pending), return_when=cf.FIRST_COMPLETED)
             for fut in finished:
                 c = pending.pop(fut)
@@ -438,10 +459,12 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
                                        f"{type(exc).__name__}: {exc}; finished chunks are kept in {folder}, "
                                        "rerun to resume") from exc
                 rec = fut.result()
+                events[c.id].update(rec.pop("timing", {}), received=time.time())
                 if save_states:                 # the state first: a chunk file then implies its state
                     save_chunk_state(path, c.id, rec.pop("state_gsd"))
                 sweep.write_extras(path, c, rec)
                 write_columns(os.path.join(folder, c.id + ".csv"), rec, sweep.columns.names)
+                events[c.id]["written"] = time.time()
                 parts.append(rec)
                 computed.append(c.id)
                 state.chunks_done += 1
@@ -462,6 +485,8 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
             prefetch.close()
         if owned:
             executor.shutdown(wait=True)
-    return SweepResult(sweep=sweep, out=path, records=sorted_records(merge_records(parts, sweep.columns), sweep.columns), computed=computed,
+    records = sorted_records(merge_records(parts, sweep.columns), sweep.columns)
+    return SweepResult(sweep=sweep, out=path, records=records, computed=computed,
                        reused=len(parts) - len(computed), recomputed_bad=[b for b, _ in bad],
-                       elapsed=time.perf_counter() - t0, executor=type(executor).__name__)
+                       elapsed=time.perf_counter() - t0, executor=type(executor).__name__,
+                       timeline=[events[c] for c in computed] if timeline else [], started=started)

@@ -63,7 +63,12 @@ def test_a_tissue_that_relaxed_has_its_overlap_below_one_over_e(reference):
 
 
 def test_a_point_does_not_depend_on_the_rest_of_the_grid(tmp_path, reference):
-    alone = run(tmp_path / "alone", T=[0.2]).records
+    result = sweeps.run_sweep(sweeps.DynamicsSweep(**{**SWEEP, "T": [0.2]}), tmp_path / "alone",
+                              executor=sweeps.InProcessExecutor(), device="cpu", timeline=True)
+    alone = result.records
+    assert [e["chunk"] for e in result.timeline] == result.computed and len(result.computed) == 2
+    assert all(e["submitted"] <= e["started"] <= e["built"] <= e["minimized"] <= e["ended"] <= e["written"]
+               for e in result.timeline)
     rec = reference[1].records
     hot = rec["T"] == 0.2
     for col in ("tiling_seed", "noise_seed", "tau_alpha", "msd_end", "overlap_end", "t1_flips"):

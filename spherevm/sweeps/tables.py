@@ -143,7 +143,17 @@ def write_dynamics_tables(out, records: dict) -> dict:
     """Write ``tissues.csv`` (every tissue's record), ``curves.csv`` (each point's MSD and Q_s,
     averaged over its tissues) and ``tau_alpha.csv`` (:func:`summarize_dynamics`) to the sweep folder.
 
-    Returns a dict with ``tau_alpha`` and ``curves`` (the tables) and the ``files`` written."""
+    Parameters
+    ----------
+    out : str or path
+        The sweep's folder (its ``curves/`` are read).
+    records : dict
+        The per-tissue records, such as :attr:`SweepResult.records` of a dynamics sweep.
+
+    Returns
+    -------
+    dict
+        ``tau_alpha`` and ``curves`` (the tables, dicts of columns) and the ``files`` written."""
     path = os.path.abspath(os.fspath(out))
     records = sorted_records(records, DYNAMICS_COLUMNS)
     curves = read_curves(path, records)

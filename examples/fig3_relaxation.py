@@ -40,10 +40,12 @@ def sweep_panel(args, sizes, temps, reps, steps, dt, t0):
     sweep = sweeps.DynamicsSweep(cells=sizes, T=temps, p0=[3.775], kr=0.0, replicas=reps, steps=steps, dt=dt,
                                  relax_steps=5000, equilibrate_steps=steps // 10)
     client = sweeps.cluster.client(scheduler=args.scheduler, gpus=args.gpus) if args.gpus or args.scheduler else None
+    bar = sweeps.TextProgress(label="fig3", units="tissues")
     try:
         result = sweeps.run_sweep(sweep, args.sweep, executor=client, device="gpu" if args.gpus else args.device,
-                                  progress=sweeps.TextProgress(label="fig3", units="tissues"))
+                                  progress=bar)
     finally:
+        bar.close()
         if client is not None:
             client.close()
     tau = sweeps.write_dynamics_tables(args.sweep, result.records)["tau_alpha"]

@@ -283,3 +283,37 @@ def resume_hint(command, path) -> str:
         return ""
     return (f"; {path} holds {frames} frame{'s' * (frames != 1)}, the last at step {step}: continue from it with "
             f"'spherevm {command} --restart {path}' and the other options as before")
+
+
+# ---------------------------------------------------------------------------------------- sweeps
+def run_sweep_command(args, sweep, what: str, label: str, units: str, **options):
+    """What the sweep commands (``rigidity``, ``dynamics`` as a sweep) share: the ``--out`` folder
+    checked before any work, the Dask client of ``--scheduler`` or ``--gpus``, a note of ``what``
+    runs where (unless ``--quiet``), the progress bar (``label``, counting ``units``) and
+    :func:`spherevm.sweeps.run_sweep` with ``options``.
+
+    Returns
+    -------
+    spherevm.sweeps.SweepResult"""
+    from ..sweeps import TextProgress, cluster, open_sweep_folder, run_sweep
+    err = sys.stderr
+    open_sweep_folder(sweep, args.out, create=False)        # a bad folder or a mismatch fails before any work
+    client = None
+    if args.scheduler or args.gpus:
+        client = cluster.client(scheduler=args.scheduler, gpus=args.gpus, workers=args.workers)
+    try:
+        if not args.quiet:
+            where = (f"{args.gpus} GPU worker(s)" if args.gpus else f"Dask cluster {args.scheduler}") if client \
+                else f"device {args.device}"
+            err.write(f"spherevm: {what} on {where}, writing {args.out}\n")
+            err.flush()
+        bar = TextProgress(err, label=label, enabled=None, units=units) if not args.quiet else None
+        try:
+            return run_sweep(sweep, args.out, executor=client, device="gpu" if args.gpus else args.device,
+                             workers=args.workers, progress=bar, **options)
+        finally:
+            if bar is not None:
+                bar.close()
+    finally:
+        if client is not None:
+            client.close()

@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 import sys
 
-from .arguments import SYSTEM_DEFAULTS, CLIError, extra_forces, integer
+from .arguments import SYSTEM_DEFAULTS, CLIError, extra_forces, integer, run_sweep_command
 
 #: the ``spherevm dynamics`` options that make it a sweep (besides a list of several values)
 SWEEP_OPTIONS = ("gpus", "scheduler", "workers", "chunk_replicas", "sweep")
@@ -64,35 +64,16 @@ def sweep_from_args(args):
 
 def run(args) -> int:
     """``spherevm dynamics`` as a sweep."""
-    from ..sweeps import TextProgress, cluster, format_tau_table, open_sweep_folder, run_sweep, write_dynamics_tables
-    err = sys.stderr
+    from ..sweeps import format_tau_table, write_dynamics_tables
     sweep = sweep_from_args(args)
-    open_sweep_folder(sweep, args.out, create=False)        # a bad folder or a mismatch fails before any work
-    client = None
-    if args.scheduler or args.gpus:
-        client = cluster.client(scheduler=args.scheduler, gpus=args.gpus, workers=args.workers)
-    try:
-        if not args.quiet:
-            where = (f"{args.gpus} GPU worker(s)" if args.gpus else f"Dask cluster {args.scheduler}") if client \
-                else f"device {args.device}"
-            err.write(f"spherevm: dynamics sweep on the {sweep.surface} of N = {list(sweep.cells)}, "
-                      f"T = {list(sweep.T)}, p0 = {list(sweep.p0)}, B = {list(sweep.B)}, {sweep.replicas} tissues per point, "
-                      f"{sweep.steps} steps: {sweep.total_units} tissues on {where}, writing {args.out}\n")
-            err.flush()
-        bar = TextProgress(err, label="dynamics", enabled=None, units="tissues") if not args.quiet else None
-        try:
-            result = run_sweep(sweep, args.out, executor=client, device="gpu" if args.gpus else args.device,
-                               workers=args.workers, progress=bar)
-        finally:
-            if bar is not None:
-                bar.close()
-    finally:
-        if client is not None:
-            client.close()
+    result = run_sweep_command(
+        args, sweep, f"dynamics sweep on the {sweep.surface} of N = {list(sweep.cells)}, T = {list(sweep.T)}, "
+                     f"p0 = {list(sweep.p0)}, B = {list(sweep.B)}, {sweep.replicas} tissues per point, {sweep.steps} "
+                     f"steps: {sweep.total_units} tissues", "dynamics", "tissues")
     tables = write_dynamics_tables(args.out, result.records)
     print(format_tau_table(tables["tau_alpha"]))
     if not args.quiet:
-        err.write(f"spherevm: {len(result.computed)} chunk(s) computed, {result.reused} found on disk, "
-                  f"{result.elapsed:.1f} s; wrote {', '.join(os.path.basename(f) for f in tables['files'])} "
-                  f"to {args.out}\n")
+        sys.stderr.write(f"spherevm: {len(result.computed)} chunk(s) computed, {result.reused} found on disk, "
+                         f"{result.elapsed:.1f} s; wrote {', '.join(os.path.basename(f) for f in tables['files'])} "
+                         f"to {args.out}\n")
     return 0

@@ -47,7 +47,7 @@ def test_chunks_are_fixed_runs_of_one_point_and_seeds_depend_on_the_point_only()
     assert sweep.seeds(16, 0, [0, 1])[0] != tilings
 
 
-def test_a_tissue_that_relaxed_has_its_overlap_below_one_over_e(reference):
+def test_tables_agree_with_the_tissue_records(reference):
     out, result = reference
     rec = result.records
     assert list(rec["replica"]) == [0, 1, 2, 0, 1, 2] and list(rec["T"]) == [0.1, 0.1, 0.1, 0.2, 0.2, 0.2]
@@ -57,9 +57,14 @@ def test_a_tissue_that_relaxed_has_its_overlap_below_one_over_e(reference):
     tau = sweeps.read_records(out / "tau_alpha.csv", sweeps.store.Columns(
         sweeps.tables.TAU_COLUMNS, frozenset({"n_cells", "tissues", "relaxed"}), frozenset(), ("n_cells",)))
     assert tau["tissues"] == [3, 3] and tau["relaxed"] == [int(relaxed[:3].sum()), int(relaxed[3:].sum())]
+    curves = sweeps.read_curves(out, rec)
     for i, mine in enumerate((slice(0, 3), slice(3, 6))):
         taus = rec["tau_alpha"][mine]
         assert (np.isnan(tau["tau_alpha"][i]) if np.isnan(taus).any() else tau["tau_alpha"][i] == np.mean(taus))
+        # a point's curve is the mean over its tissues (chunks of 2 and 1 weighed by their tissues)
+        last = np.flatnonzero(np.asarray(curves["point"]) == i)[-1]
+        assert curves["msd"][last] == pytest.approx(np.mean(rec["msd_end"][mine]), rel=1e-12)
+        assert curves["self_overlap"][last] == pytest.approx(np.mean(rec["overlap_end"][mine]), rel=1e-12)
 
 
 def test_a_point_does_not_depend_on_the_rest_of_the_grid(tmp_path, reference):

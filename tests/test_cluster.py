@@ -50,7 +50,8 @@ def kill_a_worker_mid_sweep(client, sweep, out, device, **run):
         time.sleep(0.05)
     assert chunks.exists() and any(chunks.iterdir()), "no chunk finished in time"
     finished_before = {p.name: p.read_bytes() for p in chunks.iterdir()}
-    os.kill(sorted(pids.values())[0], signal.SIGKILL)        # a worker dies while chunks are still running
+    busy = [address for address, keys in client.processing().items() if keys] or sorted(pids)
+    os.kill(pids[busy[0]], signal.SIGKILL)                   # a worker dies in the middle of a chunk
     worker.join(timeout=300)
     assert not worker.is_alive()
     for name, data in finished_before.items():               # nothing finished before the kill was redone
@@ -159,3 +160,53 @@ def test_a_gpu_worker_killed_mid_sweep_loses_no_chunk(tmp_path):
         result = kill_a_worker_mid_sweep(client, sweep, tmp_path / "two", "gpu", batch_cells=2000, prefetch=False)
     same(result.records, one.records)
     assert sorted(result.computed) == sorted(one.computed)
+
+
+# dynamics: 2 temperatures x 3 tissues of N = 16, four chunks (tests/test_dynamics_sweep.py)
+DYNAMICS = dict(cells=[16], T=[0.1, 0.2], p0=[3.9], replicas=3, chunk_replicas=2, steps=600, relax_steps=200,
+                dt=0.02, seed=1)
+DYNAMICS_ARGS = ["dynamics", "--cells", "16", "--T", "0.1", "0.2", "--p0", "3.9", "--replicas", "3",
+                 "--chunk-replicas", "2", "--steps", "600", "--relax", "200", "--dt", "0.02", "--seed", "1",
+                 "--device", "cpu", "--quiet"]
+
+
+@pytest.fixture(scope="module")
+def dynamics_reference(tmp_path_factory):
+    out = tmp_path_factory.mktemp("dyn") / "sweep"
+    result = sweeps.run_sweep(sweeps.DynamicsSweep(**DYNAMICS), out, executor=sweeps.InProcessExecutor(), device="cpu")
+    sweeps.write_dynamics_tables(out, result.records)
+    return out
+
+
+def same_tables(out, reference):
+    for name in ("tau_alpha.csv", "curves.csv"):
+        assert (out / name).read_bytes() == (reference / name).read_bytes(), name
+
+
+def test_a_dynamics_sweep_on_a_local_cluster_gives_the_in_process_tables(tmp_path, dynamics_reference, capsys):
+    out = tmp_path / "sweep"
+    rc = cli.main(DYNAMICS_ARGS + ["--scheduler", "local", "--workers", "2", "--out", str(out)])
+    assert rc == 0, capsys.readouterr().err
+    same_tables(out, dynamics_reference)
+
+
+def test_a_worker_killed_mid_dynamics_chunk_has_its_chunk_redone(tmp_path, dynamics_reference):
+    out = tmp_path / "sweep"
+    with sweeps.cluster.client(scheduler="local", workers=2) as client:
+        result = kill_a_worker_mid_sweep(client, sweeps.DynamicsSweep(**DYNAMICS), out, "cpu")
+    assert len(result.computed) == 4
+    sweeps.write_dynamics_tables(out, result.records)
+    same_tables(out, dynamics_reference)
+
+
+@pytest.mark.gpu
+def test_a_dynamics_sweep_on_two_gpus_gives_the_one_gpu_tables(tmp_path):
+    """``spherevm dynamics ... --gpus 2``: tau_alpha and the curves byte for byte as on one GPU."""
+    pytest.importorskip("dask_cuda")
+    cupy = pytest.importorskip("cupy")
+    if cupy.cuda.runtime.getDeviceCount() < 2:
+        pytest.skip("needs two GPUs")
+    argv = [a for a in DYNAMICS_ARGS if a not in ("--device", "cpu")]
+    assert cli.main(argv + ["--device", "gpu", "--out", str(tmp_path / "one")]) == 0
+    assert cli.main(argv + ["--gpus", "2", "--out", str(tmp_path / "two")]) == 0
+    same_tables(tmp_path / "two", tmp_path / "one")

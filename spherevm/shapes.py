@@ -8,10 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .constraints import PeriodicPlane, Sphere
 from .constraints.kernels import KERNEL_SURFACES, cell_measures
-from .constraints.plane import _wrap
-from .device import weighted_bincount
 
 CENTROID_METHODS = ("area", "vertex")
 
@@ -188,22 +185,22 @@ def surface_pentagon_perimeter(n_cells, surface: str = "sphere"):
 
 # ======================================================================================== centroids
 def cell_centroids(state, method: str = "area"):
-    """Cell positions, ``(n_cells, 3)`` NumPy float64: on the sphere each at distance R from the
-    centre; on a :class:`~spherevm.constraints.PeriodicPlane` wrapped into the box, ``z = 0`` (each
-    polygon unwrapped from its first vertex, :func:`planar_cell_centroids`).
+    """Cell positions on the surface, ``(n_cells, 3)`` NumPy float64
+    (:meth:`~spherevm.constraints.Constraint.cell_centroids`): on the sphere each at distance R from
+    the centre; on a periodic plane wrapped into the box, ``z = 0`` (each polygon unwrapped from its
+    first vertex).
 
-    ``method="area"`` (default): the centre of mass of the spherical polygon, pushed radially onto
-    the sphere: ``integral of n dA = (R^2 / 2) sum_edges theta_e (a_e x b_e) / |a_e x b_e|`` over the
-    edges ``a_e -> b_e`` taken counter-clockwise (exact), normalised. It is continuous through a T1,
-    while the vertex centroid jumps by about ``|r_edge - r_cell| / n`` (0.08 sqrt(<A>) for a
-    hexagon) at every T1, which an MSD's cage plateau would feel. A folded cell (non-positive area,
-    allowed at kA = 0) falls back to the vertex centroid. ``method="vertex"``: ``R`` times the
-    normalised mean of the unit vertex directions (:meth:`spherevm.constraints.Sphere.cell_centers`).
+    ``method="area"`` (default): the centre of mass of the cell's area, on the sphere pushed
+    radially onto it. It is continuous through a T1, while the vertex centroid jumps by about
+    ``|r_edge - r_cell| / n`` (0.08 sqrt(<A>) for a hexagon) at every T1, which an MSD's cage
+    plateau would feel. A folded cell (non-positive area, allowed at kA = 0) falls back to the
+    vertex centroid. ``method="vertex"``: the mean of the vertices (on the sphere ``R`` times the
+    normalised mean of the unit vertex directions).
 
     Parameters
     ----------
     state : State
-        Sphere or PeriodicPlane, either device.
+        Any surface that gives cell centroids (Sphere, PeriodicPlane), either device.
     method : {"area", "vertex"}
 
     Returns
@@ -211,62 +208,4 @@ def cell_centroids(state, method: str = "area"):
     numpy.ndarray (n_cells, 3)"""
     if method not in CENTROID_METHODS:
         raise ValueError(f"method must be one of {CENTROID_METHODS}, got {method!r}")
-    if isinstance(state.constraint, PeriodicPlane):
-        return planar_cell_centroids(state, method)
-    if not isinstance(state.constraint, Sphere):
-        raise NotImplementedError(f"cell_centroids supports the Sphere and PeriodicPlane constraints only, got "
-                                  f"{type(state.constraint).__name__}")
-    xp = state.device.xp
-    pos = state.positions
-    unit = pos / xp.sqrt((pos * pos).sum(axis=1))[:, None]
-    cells = state.vertex_cells.reshape(-1)            # corner k of vertex v lies in cell vertex_cells[v, k]
-    n = state.n_cells
-
-    def per_cell(w):                                  # w: (V, 3 corners, 3 components)
-        return xp.stack([weighted_bincount(cells, weights=w[..., i].reshape(-1), minlength=n) for i in range(3)],
-                        axis=1)
-
-    vertex_centroid = state.constraint.cell_centers(state)
-    direction = vertex_centroid
-    if method == "area":
-        a = unit[:, None, :]
-        b = unit[state.vertex_neighbors]               # edge v -> vertex_neighbors[v, k] runs CCW in that cell
-        cr = xp.cross(a, b)
-        s = xp.sqrt((cr * cr).sum(axis=-1))
-        theta = xp.arctan2(s, (a * b).sum(axis=-1))
-        factor = xp.where(s > 0, theta / xp.where(s > 0, s, 1.0), 1.0)
-        area_vec = per_cell(cr * factor[..., None])    # = 2 * integral of n over the cell (unit sphere)
-        ok = (area_vec * vertex_centroid).sum(axis=1) > 0
-        direction = xp.where(ok[:, None], area_vec, vertex_centroid)
-    direction = direction / xp.sqrt((direction * direction).sum(axis=1))[:, None]
-    out = state.radius[state.cell_replica][:, None] * direction
-    return np.asarray(state.device.to_numpy(out), dtype=np.float64)
-
-
-def planar_cell_centroids(state, method: str = "area"):
-    """Cell centroids on the periodic plane, ``(n_cells, 3)`` NumPy float64, wrapped into the box, z = 0.
-
-    Each polygon is unwrapped edge by edge from its first vertex (vertex j at ``sum_{i<j} e_i``,
-    ``e_i`` the minimum-image edges, as for its area), so a cell straddling the boundary is whole.
-    ``method="area"``: the centroid of the polygon's area, ``sum_i (r_i + r_{i+1}) (r_i x r_{i+1}) / 6A``
-    (continuous through a T1, see :func:`cell_centroids`); a cell of non-positive area falls back to
-    the vertex centroid. ``method="vertex"``: the mean of the unwrapped vertices. The point is then
-    wrapped back into ``[0, Lx) x [0, Ly)``.
-    """
-    xp = state.device.xp
-    pos, sides = state.positions[:, :2], state.cell_sides
-    box = state.box[state.cell_replica]
-    first, valid, e, r = state.constraint.unwrapped_cells(state)
-    mean = xp.where(valid[..., None], r, 0.0).sum(axis=1) / sides[:, None].astype(xp.float64)
-    centre = mean
-    if method == "area":
-        r1 = r + e                                                      # vertex j + 1
-        cross = r[..., 0] * r1[..., 1] - r[..., 1] * r1[..., 0]         # padding rows do not count
-        cross = xp.where(valid, cross, 0.0)
-        area = 0.5 * cross.sum(axis=1)
-        ok = area > 0
-        c = ((r + r1) * cross[..., None]).sum(axis=1) / (6.0 * xp.where(ok, area, 1.0))[:, None]
-        centre = xp.where(ok[:, None], c, mean)
-    out = xp.zeros((state.n_cells, 3))
-    out[:, :2] = _wrap(xp, pos[first[:, 0]] + centre, box)
-    return np.asarray(state.device.to_numpy(out), dtype=np.float64)
+    return np.asarray(state.device.to_numpy(state.constraint.cell_centroids(state, method)), dtype=np.float64)

@@ -42,8 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .constraints import Sphere
-from .constraints.kernels import SURFACE_DEFINES
+from .constraints.kernels import SURFACE_DEFINES, keeps_directions
 from .device import BLOCK, load_source
 from .kernel_struct import KernelStruct
 from .plan import Plan
@@ -149,7 +148,7 @@ def shared_bytes(state, cluster: int, minimizing: bool, stages) -> int:
     """Shared memory of a block of the largest tissue (:data:`STEP_LAYOUT` or :data:`MINIMIZE_LAYOUT`)."""
     forces, move, _ = stages
     nv, nc = state.vertices_per_replica, state.cells_per_replica
-    kept = nv if isinstance(state.constraint, Sphere) else 0   # Surface::directions
+    kept = nv if keeps_directions(state.constraint) else 0   # Surface::directions
     cd, md = sum(s.cell_doubles for s in forces), sum(s.neighbour_doubles for s in forces)
     if minimizing:
         return int(np.max(MINIMIZE_LAYOUT.bytes(nv=nv, nc=nc, kept=kept, n_warps=(nv + 62) // 32, cd=cd, md=md,
@@ -424,7 +423,7 @@ class TissueSteps:
         st = TISSUE_STATE.pack(
             pos=state.positions, vn=state.vertex_neighbors, vc=state.vertex_cells, cell_vertices=state.cell_vertices,
             sides=state.cell_sides, vertex_start=vertex_start, cell_start=cell_start,
-            size=getattr(state, state.constraint.size_name), max_sides=state.max_sides,
+            size=state.size, max_sides=state.max_sides,
             active=sim.operations.integrator.active_on_device(), step_need=self.step_need)
         fa = np.array(tuple(s.packed() for s in forces), dtype=forces_dtype)[()]
         args = (st, fa, move.packed(), pas.packed() if pas is not None else self.no_pass)

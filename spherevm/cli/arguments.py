@@ -132,6 +132,8 @@ def add_frame_arguments(parser, replica_default, replica_help):
 
 # ---------------------------------------------------------------------------------------- surface
 SURFACES = ("sphere", "plane")
+#: the ``--surface`` of a file's constraint (by its ``name``), for ``--restart``
+SURFACE_OF_CONSTRAINT = {"sphere": "sphere", "periodic_plane": "plane"}
 
 
 def add_surface(group, what="tilings", restart=False):
@@ -174,14 +176,12 @@ def settle_restart(args):
         for name, value in SYSTEM_DEFAULTS.items():
             setattr(args, name, value if given[name] is None else given[name])
         return
-    from ..constraints import PeriodicPlane, Sphere
     from ..gsdio import Reader
     with Reader(args.restart) as reader:
         state = reader.state(-1, validate=False)
         saved = reader.checkpoint(-1)["simulation"].get("seed")
     counts = np.unique(state.cells_per_replica)
-    surface = ("plane" if isinstance(state.constraint, PeriodicPlane) else "sphere"
-               if isinstance(state.constraint, Sphere) else repr(state.constraint))
+    surface = SURFACE_OF_CONSTRAINT.get(state.constraint.name, repr(state.constraint))
     found = {"cells": int(counts[0]) if len(counts) == 1 else counts.tolist(), "replicas": state.n_replicas,
              "surface": surface}
     what = {"cells": f"{found['cells']} cells per replica", "replicas": f"{found['replicas']} replica(s)",

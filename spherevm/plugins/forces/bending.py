@@ -289,12 +289,12 @@ class Bending(Force):
         coef, cell_energy, energy = cp.empty((nc, 2)), cp.empty(nc), cp.empty(state.n_replicas)
         normal, inv_area = cp.empty((nc, 3)), cp.empty(nc)
         launch(module.get_function("vm_bending_cell_geometry"), nc,
-               (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, state.radius,
+               (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, state.size,
                 np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, cell_energy, normal, inv_area))
         w = self._cell_terms_gpu(state, module, normal, inv_area, cell_energy, energy, "bending_cell_terms_add")
         forces = cp.empty_like(state.positions)
         launch(module.get_function("vm_bending_vertex_forces"), nv,
-               (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, state.radius,
+               (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, state.size,
                 np.int32(nv), coef, w, forces))
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
 

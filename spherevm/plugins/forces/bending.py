@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...constraints import Sphere
+from ...constraints.kernels import GeodesicSphere
 from ...constraints.cell_rows import cell_blocks, fold, row_table
 from ...constraints.corners import in_parallel
 from ...device import array_module, launch, load_module, segment_sums, weighted_bincount
@@ -159,7 +159,7 @@ class Bending(Force):
         Not used (forces are evaluated whenever the integrator needs them)."""
 
     narrowable = True
-    gpu_surfaces = (Sphere,)
+    gpu_surfaces = (GeodesicSphere,)
     surface_needs = ("cell_geometry", "shape_gradient")
 
     B = Parameter(_bending_stiffness)
@@ -237,7 +237,7 @@ class Bending(Force):
         return self._stage(simulation, extra=True) if type(other) is VertexModel else None
 
     def _stage(self, simulation, extra):
-        if not isinstance(simulation.state.constraint, Sphere) or \
+        if not isinstance(simulation.state.constraint, self.gpu_surfaces) or \
                 overrides(self, Bending, ("compute", "_compute_gpu", "combined", "_combined_gpu")):
             return None
         return FusedStage("force", "BendingStage", '#include "plugins/forces/bending_stage.cuh"', self.FUSED_ARGS,

@@ -3,11 +3,15 @@
     python examples/fig3_relaxation.py                 # small, minutes on a laptop CPU
     python examples/fig3_relaxation.py --full --device gpu
     python examples/fig3_relaxation.py --full --device gpu --sizes 1024 --prefix fig3_1024
+    python examples/fig3_relaxation.py --full --sweep fig3_sweep --gpus 2     # main panel as a sweep
 
 Main panel: one ensemble holds every size and temperature (Brownian takes one T per replica; tissues
 of different N sit side by side, so a GPU steps them all in about the time of the largest alone;
 ``--separate``: one ensemble per size), relaxed with FIRE + T1, equilibrated, then run with T1 exchanges; tau_alpha is where the
 self-overlap Q_s (b = 1/2, co-rotating frame) reaches 1/e, averaged over the replicas at each T.
+``--sweep FOLDER``: the main panel as a :class:`spherevm.sweeps.DynamicsSweep` instead, one chunk per
+(N, T), saved as it finishes (rerun to resume) and spread over ``--gpus N`` or a Dask ``--scheduler``;
+its tables (tau_alpha.csv, curves.csv) are in FOLDER.
 Inset: MSD at T = 5e-4, p0 = 3.75, kr = 1, averaged over 8192/N tissues (--full) or fewer.
 Writes fig3_relaxation.png and fig3_tau_alpha.csv / fig3_msd.csv.
 """
@@ -19,7 +23,7 @@ import time
 
 import numpy as np
 
-from spherevm import State, init
+from spherevm import State, init, sweeps
 from spherevm.protocols import glassy_dynamics
 
 
@@ -28,6 +32,28 @@ def tilings(sizes, counts, seed_of):
     each size ``n``, seeded ``seed_of(n)``."""
     counts = np.broadcast_to(counts, (len(sizes),))
     return State.concatenate([init.random_tiling(n, replicas=int(c), seed=seed_of(n)) for n, c in zip(sizes, counts)])
+
+
+def sweep_panel(args, sizes, temps, reps, steps, dt, t0):
+    """The main panel as a resumable DynamicsSweep in ``args.sweep`` (one chunk per (N, T)), on this
+    machine or over ``--gpus`` / ``--scheduler``: rows (N, T, tau_alpha, relaxed, tissues)."""
+    sweep = sweeps.DynamicsSweep(cells=sizes, T=temps, p0=[3.775], kr=0.0, replicas=reps, steps=steps, dt=dt,
+                                 relax_steps=5000, equilibrate_steps=steps // 10)
+    client = sweeps.cluster.client(scheduler=args.scheduler, gpus=args.gpus) if args.gpus or args.scheduler else None
+    bar = sweeps.TextProgress(label="fig3", units="tissues")
+    try:
+        result = sweeps.run_sweep(sweep, args.sweep, executor=client, device="gpu" if args.gpus else args.device,
+                                  progress=bar)
+    finally:
+        bar.close()
+        if client is not None:
+            client.close()
+    tau = sweeps.write_dynamics_tables(args.sweep, result.records)["tau_alpha"]
+    rows = list(zip(tau["n_cells"], tau["T"], tau["tau_alpha"], tau["relaxed"], tau["tissues"]))
+    for n, T, t, relaxed, tissues in rows:
+        print(f"N={n:5d}  T={T:<7g} tau_alpha={t:10.4g}  ({relaxed}/{tissues} replicas relaxed)  "
+              f"[{time.time() - t0:6.1f} s]", flush=True)
+    return rows
 
 
 def main(argv=None):
@@ -41,6 +67,9 @@ def main(argv=None):
                     "ensemble, which a GPU steps in about the time of the largest alone)")
     ap.add_argument("--step-by-step", action="store_true", help="no CUDA graphs on the GPU (the same numbers, "
                     "slower; to check that they are)")
+    ap.add_argument("--sweep", metavar="FOLDER", help="run the main panel as a resumable dynamics sweep in FOLDER")
+    ap.add_argument("--gpus", type=int, help="with --sweep: one Dask worker per GPU of this host")
+    ap.add_argument("--scheduler", help="with --sweep: a Dask scheduler address, or 'local'")
     args = ap.parse_args(argv)
     graphs = False if args.step_by_step else None
     if args.full:
@@ -54,22 +83,25 @@ def main(argv=None):
     rows, t0 = [], time.time()
     curves = {}
     groups = [[n] for n in sizes] if args.separate else [sizes]
+    if args.sweep:
+        rows = sweep_panel(args, sizes, temps, reps, steps, dt, t0)
     for group in groups:
         # main panel: every size and temperature of the group in one ensemble (tilings seeded by N)
-        T = np.tile(np.repeat(temps, reps), len(group))
-        res = glassy_dynamics(None, 3.775, 0.0, T=T, dt=dt, steps=steps, seed=group[0], device=args.device,
-                              relax_steps=5000, equilibrate_steps=steps // 10, graphs=graphs,
-                              initial_state=tilings(group, len(temps) * reps, seed_of=lambda n: n))
-        per_size = len(temps) * reps
-        for g, n in enumerate(group):
-            mine = slice(g * per_size, (g + 1) * per_size)
-            for Ti in temps:
-                taus = res.tau_alpha_per_replica[mine][T[mine] == Ti]
-                relaxed = np.isfinite(taus)
-                tau = float(np.mean(taus[relaxed])) if relaxed.all() else float("nan")
-                rows.append((n, Ti, tau, int(relaxed.sum()), len(taus)))
-                print(f"N={n:5d}  T={Ti:<7g} tau_alpha={tau:10.4g}  ({relaxed.sum()}/{len(taus)} replicas relaxed)  "
-                      f"[{time.time() - t0:6.1f} s]", flush=True)
+        if not args.sweep:
+            T = np.tile(np.repeat(temps, reps), len(group))
+            res = glassy_dynamics(None, 3.775, 0.0, T=T, dt=dt, steps=steps, seed=group[0], device=args.device,
+                                  relax_steps=5000, equilibrate_steps=steps // 10, graphs=graphs,
+                                  initial_state=tilings(group, len(temps) * reps, seed_of=lambda n: n))
+            per_size = len(temps) * reps
+            for g, n in enumerate(group):
+                mine = slice(g * per_size, (g + 1) * per_size)
+                for Ti in temps:
+                    taus = res.tau_alpha_per_replica[mine][T[mine] == Ti]
+                    relaxed = np.isfinite(taus)
+                    tau = float(np.mean(taus[relaxed])) if relaxed.all() else float("nan")
+                    rows.append((n, Ti, tau, int(relaxed.sum()), len(taus)))
+                    print(f"N={n:5d}  T={Ti:<7g} tau_alpha={tau:10.4g}  ({relaxed.sum()}/{len(taus)} replicas "
+                          f"relaxed)  [{time.time() - t0:6.1f} s]", flush=True)
         # inset: msd_total / N tissues of each size, one ensemble
         counts = [max(1, msd_total // n) for n in group]
         inset = glassy_dynamics(None, 3.75, 1.0, T=5e-4, dt=dt, steps=msd_steps, seed=group[0] + 1, device=args.device,

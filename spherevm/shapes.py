@@ -71,21 +71,83 @@ def mean_shape_index(state):
 
 
 def regular_polygon_perimeter(n_sides: int, area: float, radius: float) -> float:
-    """Perimeter of the regular spherical ``n_sides``-gon of the given area on a sphere of ``radius``.
-
-    Interior angle from the angle excess ``alpha = (A/R^2 + (n-2) pi)/n``; side from the right
-    triangle centre-vertex-midpoint, ``cos(s/2) = cos(pi/n) / sin(alpha/2)``.
-    """
-    n = int(n_sides)
-    if n < 3:
-        raise ValueError(f"n_sides must be >= 3, got {n_sides}")
+    """Perimeter of the regular spherical ``n_sides``-gon of the given area on a sphere of ``radius``
+    (:func:`polygon_perimeter_at_curvature` at ``K = 1 / radius^2``)."""
     if not radius > 0 or not area > 0:
         raise ValueError(f"area and radius must be positive, got area={area}, radius={radius}")
     if area >= 2 * np.pi * radius ** 2:
         raise ValueError(f"area must be below a hemisphere, 2 pi R^2 = {2 * np.pi * radius ** 2:g}, got {area}")
-    alpha = (area / radius ** 2 + (n - 2) * np.pi) / n
-    half_side = np.arccos(np.clip(np.cos(np.pi / n) / np.sin(alpha / 2), -1.0, 1.0))
-    return float(2 * n * half_side * radius)
+    return float(polygon_perimeter_at_curvature(n_sides, 1.0 / radius ** 2, area))
+
+
+#: Taylor coefficients of arcsin(sqrt(w)) / sqrt(w) = sum c_k w^k (also arcsinh(sqrt(-w)) / sqrt(-w))
+_ASIN_SERIES = np.array([1.0, 1 / 6, 3 / 40, 5 / 112, 35 / 1152, 63 / 2816, 231 / 13312])
+
+
+def _asin_ratio(w):
+    """``arcsin(sqrt(w)) / sqrt(w)`` for w > 0, ``arcsinh(sqrt(-w)) / sqrt(-w)`` for w < 0: one
+    analytic function of w, 1 at w = 0 (series for |w| < 1e-3, error below 1e-22)."""
+    small = np.abs(w) < 1e-3
+    safe = np.where(small, 1.0, w)
+    root = np.sqrt(np.abs(safe))
+    direct = np.where(safe > 0, np.arcsin(np.minimum(root, 1.0)), np.arcsinh(root)) / root
+    return np.where(small, np.polynomial.polynomial.polyval(w, _ASIN_SERIES), direct)
+
+
+def polygon_perimeter_at_curvature(n_sides: int, curvature, area=1.0):
+    """Perimeter of the regular geodesic ``n_sides``-gon of ``area`` on the surface of constant
+    Gaussian curvature ``K`` (sphere K > 0, plane K = 0, hyperbolic plane K < 0).
+
+    ``P = sqrt(4 n A g) f(w)`` with ``beta = pi/n``, ``delta = K A / (2n)``,
+    ``g = sin(beta - delta/2) sinc(delta/2) / cos(beta - delta)``, ``w = g delta / 2`` and
+    ``f(w) = arcsin(sqrt w)/sqrt w`` (``arcsinh(sqrt -w)/sqrt -w`` for w < 0): analytic through
+    K = 0, where it is ``sqrt(4 n A tan(pi/n))``. Derivation in docs/results.md ("Curvature gradients").
+
+    Parameters
+    ----------
+    n_sides : int
+        At least 3.
+    curvature : float or array
+        Gaussian curvature K; ``K * area`` must lie in ``(-(n - 2) pi, 2 pi)`` (ideal polygon to
+        hemisphere).
+    area : float or array
+        Positive; broadcast with ``curvature``.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        The broadcast shape of ``curvature`` and ``area``."""
+    n = int(n_sides)
+    if n < 3:
+        raise ValueError(f"n_sides must be >= 3, got {n_sides}")
+    k, a = np.broadcast_arrays(np.asarray(curvature, dtype=np.float64), np.asarray(area, dtype=np.float64))
+    if not np.all(np.isfinite(a) & (a > 0)):
+        raise ValueError(f"area must be positive and finite, got {area}")
+    ka = k * a
+    if not np.all((ka > -(n - 2) * np.pi) & (ka < 2 * np.pi)):
+        raise ValueError(f"curvature * area must lie in ({-(n - 2) * np.pi:.6g}, {2 * np.pi:.6g}) for a regular "
+                         f"{n}-gon (ideal polygon to hemisphere), got curvature={curvature}, area={area}")
+    beta, delta = np.pi / n, ka / (2 * n)
+    g = np.sin(beta - delta / 2) * np.sinc(delta / (2 * np.pi)) / np.cos(beta - delta)
+    p = np.sqrt(4 * n * a * g) * _asin_ratio(g * delta / 2)
+    return float(p) if p.ndim == 0 else p
+
+
+def pentagon_perimeter_at_curvature(curvature, area=1.0):
+    """The pentagon bound at any Gaussian curvature K: perimeter of the regular pentagon of
+    ``area`` on the surface of constant curvature K (:func:`polygon_perimeter_at_curvature`, n = 5);
+    3.81194 at K = 0 and unit area, lower where K > 0, higher where K < 0.
+
+    Parameters
+    ----------
+    curvature : float or array
+        K, with ``K * area`` in ``(-3 pi, 2 pi)``.
+    area : float or array
+
+    Returns
+    -------
+    float or numpy.ndarray"""
+    return polygon_perimeter_at_curvature(5, curvature, area)
 
 
 def pentagon_perimeter(n_cells) -> float:
@@ -102,8 +164,7 @@ def pentagon_perimeter(n_cells) -> float:
     n = np.asarray(n_cells)
     if np.any(n < 4):
         raise ValueError(f"n_cells must be >= 4, got {n_cells}")
-    values = [regular_polygon_perimeter(5, 1.0, np.sqrt(k / (4 * np.pi))) for k in np.atleast_1d(n)]
-    return values[0] if n.ndim == 0 else np.array(values)
+    return pentagon_perimeter_at_curvature(4 * np.pi / n)
 
 
 def planar_pentagon_perimeter() -> float:

@@ -40,7 +40,7 @@ def bump_range(n_cells, slope):
         return (np.sqrt(1 + (slope * rho / width * e) ** 2) - 1) * 2 * np.pi * rho
     mean_area = (box ** 2 + integrate.quad(ring, 0, box / 2)[0]) / n_cells
     rho = np.linspace(0.0, box / 2, 20001)
-    k = gaussian_curvature(bump, np.stack([rho, 0 * rho, 0 * rho], axis=1))
+    k = gaussian_curvature(bump, np.stack([box / 2 + rho, box / 2 + 0 * rho, 0 * rho], axis=1))   # about its top
     return width, k.min() * mean_area, k.max() * mean_area
 
 

@@ -147,16 +147,19 @@ def test_device_path_is_looked_up_once_and_gpu_surfaces_are_checked():
     # a state on the GPU (only its device and surface matter here) on a surface the kernels do not know
     fake = SimpleNamespace(device=Device("gpu", np), constraint=svm.constraints.Torus(3.0, 1.0))
     with pytest.raises(ValueError, match=r"VertexModel on the GPU supports GeodesicSphere, PeriodicPlane surfaces only, but the "
-                                         r"state is on Torus\(major_radius=3.0, minor_radius=1.0\)"):
+                                         r"state is on Torus\(major_radius=3, minor_radius=1\)"):
         vm.implementation("compute", fake)
     sphere = SimpleNamespace(device=Device("gpu", np), constraint=svm.constraints.Sphere())
     assert vm.implementation("compute", sphere) == vm._compute_gpu
 
 
-@pytest.mark.parametrize("stub", [svm.constraints.Torus(3.0, 1.0), svm.constraints.GaussianBump(0.5, 1.0, 10.0)])
-def test_a_stub_surface_is_refused_at_attach(stub):
+class Unmeasured(svm.constraints.Constraint):
+    """A surface that does not measure cells (no metric): the stub a new surface starts as."""
+
+
+def test_a_stub_surface_is_refused_at_attach():
     state = svm.init.random_tiling(16)
-    state.constraint = stub
+    state.constraint = Unmeasured()
     sim = svm.Simulation(device="cpu")
     sim.state = state
     with pytest.raises(NotImplementedError, match=r"VertexModel needs cell_geometry, shape_gradient"):
@@ -170,9 +173,26 @@ def _flat(state):
     return state
 
 
+def _sinusoid():
+    """The user's ImplicitSurface subclass of tests/plugin_example, loaded from its file."""
+    import importlib.util
+    import pathlib
+    path = pathlib.Path(__file__).parent / "plugin_example" / "spherevm_sinusoid.py"
+    spec = importlib.util.spec_from_file_location("spherevm_sinusoid", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.Sinusoid(amplitude=1.0)
+
+
+def _on(surface):
+    return lambda: svm.init.random_tiling(24, replicas=2, seed=5, surface=surface())
+
+
 SURFACES = {"Sphere": lambda: svm.init.random_tiling(24, replicas=2, seed=5, radius=1.7),
             "FlatSphere": lambda: _flat(svm.init.random_tiling(24, replicas=2, seed=5, radius=1.7)),
-            "PeriodicPlane": lambda: svm.init_plane.random_planar_tiling(24, replicas=2, seed=5)}
+            "PeriodicPlane": lambda: svm.init_plane.random_planar_tiling(24, replicas=2, seed=5),
+            "Torus": _on(lambda: svm.constraints.Torus(2.0, 1.0)), "Ellipsoid": _on(svm.constraints.Ellipsoid),
+            "GaussianBump": _on(svm.constraints.GaussianBump), "ImplicitSurface": _on(_sinusoid)}
 
 
 def test_every_surface_with_a_shape_gradient_is_checked_against_the_contract():

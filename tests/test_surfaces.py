@@ -271,9 +271,9 @@ def test_gpu_kernels_refuse_implicit_surfaces(operation, name, make):
     (lambda: Torus(3.0, -1.0), r"minor_radius must be positive and finite, got -1"),
     (lambda: Ellipsoid(1.0, 0.0, 1.0), r"b must be positive and finite, got 0"),
     (lambda: Ellipsoid(1.0, 1.0, np.inf), r"c must be positive and finite, got inf"),
-    (lambda: GaussianBump(1.0, 2.0, 10.0), r"the box's Lx must be at least 8 width = 16 for the bump to be flat "
-                                           r"at its edges, got Lx=10"),
-    (lambda: GaussianBump(1.0, 1.0, (10.0, 5.0)), r"the box's Ly must be at least 8 width = 8 .*got Ly=5"),
+    (lambda: GaussianBump(1.0, 2.0, 11.0), r"the box's Lx must be at least 6 width = 12 for the bump to be flat "
+                                           r"at its edges, got Lx=11"),
+    (lambda: GaussianBump(1.0, 1.0, (10.0, 5.0)), r"the box's Ly must be at least 6 width = 6 .*got Ly=5"),
     (lambda: parse_surface("torus:R=3,q=1"), r"surface 'torus:R=3,q=1': .*unexpected keyword argument 'q'"),
     (lambda: parse_surface("klein"), r"unknown surface 'klein' in 'klein'; known: .*torus"),
 ])
@@ -369,7 +369,7 @@ def test_command_line_surfaces(capsys):
     assert np.array_equal(s.positions, svm.init.random_tiling(40, replicas=2, seed=0, surface=Torus(3, 1)).positions)
     for spec, message in (("torus:R=1,r=3", "major_radius must be larger than minor_radius"),
                           ("ellipsoid:a=1,b=-1,c=1", "b must be positive"), ("bump:height=1,width=5,box=10",
-                                                                            "the box.s Lx must be at least 8 width = 40")):
+                                                                            "the box.s Lx must be at least 6 width = 30")):
         rc = cli.main(["minimize", "--surface", spec, "--device", "cpu"])
         err = capsys.readouterr().err
         assert rc == 2 and re.search(f"argument --surface: {message}", err) and "Traceback" not in err

@@ -10,18 +10,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constraints import GaussianBump, PeriodicPlane, Sphere, Torus
+from ..constraints import Constraint
 
 
-def gaussian_curvature(constraint, x, radius=None):
-    """Gaussian curvature K of ``constraint``'s surface at the points ``x``.
+def gaussian_curvature(constraint, x, radius=None, size=None):
+    """Gaussian curvature K of ``constraint``'s surface at the points ``x``
+    (:meth:`~spherevm.constraints.Constraint.gaussian_curvature`).
 
     Sphere: ``1 / R^2``. Periodic plane: 0. Torus (tube ``r`` around a circle ``R``):
     ``(rho - R) / (r^2 rho)`` with ``rho`` the distance from the axis, from ``1 / (r (R + r))`` outside
-    to ``-1 / (r (R - r))`` inside. Gaussian bump ``z = h exp(-rho^2 / 2 w^2)`` (centred at the
-    origin, ``x, y`` taken to their nearest image): ``h^2 e^2 (1 - rho^2/w^2) / (w^4 (1 + h^2 rho^2
-    e^2 / w^4)^2)`` with ``e = exp(-rho^2 / 2 w^2)``, ``h^2 / w^4`` on top and negative beyond
-    ``rho = w``. The points are taken as given (not projected onto the surface).
+    to ``-1 / (r (R - r))`` inside. An implicit surface ``F = 0`` (the Gaussian bump in the middle of
+    its box, the ellipsoid, a user's): ``-det([[H, g], [g^T, 0]]) / |g|^4`` with ``g = grad F`` and
+    ``H`` its Hessian; the bump's is ``h^2 / w^4`` on top and negative beyond ``rho = w``. The points
+    are taken as given (not projected onto the surface).
 
     Parameters
     ----------
@@ -29,6 +30,8 @@ def gaussian_curvature(constraint, x, radius=None):
     x : array (..., 3)
     radius : float or array (...), optional
         The sphere's radius (per point or one); needed on a sphere only.
+    size : array, optional
+        Another surface's parameters (per point or one; default the constraint's own).
 
     Returns
     -------
@@ -36,24 +39,9 @@ def gaussian_curvature(constraint, x, radius=None):
     x = np.asarray(x, dtype=np.float64)
     if x.shape[-1:] != (3,):
         raise ValueError(f"x must have shape (..., 3), got {x.shape}")
-    if isinstance(constraint, Sphere):
-        if radius is None or not np.all(np.asarray(radius) > 0):
-            raise ValueError(f"radius must be given and positive on a sphere, got {radius}")
-        return np.broadcast_to(1.0 / np.asarray(radius, dtype=np.float64) ** 2, x.shape[:-1]).copy()
-    if isinstance(constraint, PeriodicPlane):
-        return np.zeros(x.shape[:-1])
-    if isinstance(constraint, Torus):
-        big, r = constraint.major_radius, constraint.minor_radius
-        rho = np.hypot(x[..., 0], x[..., 1])
-        return (rho - big) / (r * r * rho)
-    if isinstance(constraint, GaussianBump):
-        h, w, box = constraint.height, constraint.width, constraint.box
-        xy = x[..., :2] - box * np.round(x[..., :2] / box)
-        rho2 = (xy * xy).sum(axis=-1)
-        e = np.exp(-rho2 / (2 * w * w))
-        return h * h * e * e * (1 - rho2 / (w * w)) / (w ** 4 * (1 + h * h * rho2 * e * e / w ** 4) ** 2)
-    raise ValueError("constraint must be a Sphere, PeriodicPlane, Torus or GaussianBump, "
-                     f"got {type(constraint).__name__}")
+    if not isinstance(constraint, Constraint):
+        raise ValueError(f"constraint must be a spherevm Constraint (a surface), got {type(constraint).__name__}")
+    return constraint.gaussian_curvature(x, radius if size is None else size)
 
 
 def torus_curvature_range(aspect, n_cells, mean_area=1.0):

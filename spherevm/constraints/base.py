@@ -184,6 +184,11 @@ class Constraint:
         :func:`spherevm.shapes.cell_centroids`."""
         raise NotImplementedError(f"{type(self).__name__} does not yet provide cell centroids")
 
+    def gaussian_curvature(self, x, size):
+        """The Gaussian curvature K at the points ``x`` (..., 3) of the surface (``size``: its
+        parameters, per point or one), NumPy; the points are taken as given."""
+        raise NotImplementedError(f"{type(self).__name__} does not yet provide its Gaussian curvature")
+
     def polygon_area(self, points, size) -> float:
         """The signed area of one polygon ``points`` (n, 3), unwrapped about its first vertex, as this
         surface measures a cell (``size``: its replica's parameters): division's and extrusion's

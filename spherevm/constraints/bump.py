@@ -8,30 +8,38 @@ import numpy as np
 from ..device import array_module
 from .implicit import ImplicitSurface
 
-#: the box's sides must be at least this many widths (the bump is flat to e^-8 at the box's edges)
-MIN_BOX_WIDTHS = 8.0
+#: the box's sides must be at least this many widths (the bump is flat to e^-4.5 = 1% of its height
+#: at the box's edges)
+MIN_BOX_WIDTHS = 6.0
 #: quadrature of the area: grid steps per width, and the half-window (in widths) outside which the
 #: surface is flat to rounding (e^-(12^2/2) = 5e-32)
 STEPS_PER_WIDTH, WINDOW_WIDTHS = 4, 12.0
 
 
-def _images(d, L, w):
-    """``sum_m exp(-(d - m L)^2 / 2 w^2)`` over m = -1, 0, 1 and its derivative in ``d`` (``d`` the
-    minimum image of the offset from the box's centre)."""
+def _images(d, L, w, second=False):
+    """``sum_m exp(-(d - m L)^2 / 2 w^2)`` over m = -1, 0, 1 and its first (and with ``second`` its
+    second) derivative in ``d`` (``d`` the minimum image of the offset from the box's centre)."""
     xp = array_module(d)
-    g, dg = 0.0, 0.0
+    g, dg, d2g = 0.0, 0.0, 0.0
     for m in (-1, 0, 1):
         s = d - m * L
         e = xp.exp(-s * s / (2 * w * w))
         g, dg = g + e, dg - s / (w * w) * e
-    return g, dg
+        if second:
+            d2g = d2g + (s * s / w ** 4 - 1 / (w * w)) * e
+    return (g, dg, d2g) if second else (g, dg)
+
+
+def _offsets(x, y, Lx, Ly):
+    """The minimum images of the offsets of (x, y) from the box's centre."""
+    xp = array_module(x)
+    dx, dy = x - 0.5 * Lx, y - 0.5 * Ly
+    return dx - Lx * xp.rint(dx / Lx), dy - Ly * xp.rint(dy / Ly)
 
 
 def _height(x, y, Lx, Ly, h, w):
     """The height and its two derivatives at (x, y)."""
-    xp = array_module(x)
-    dx, dy = x - 0.5 * Lx, y - 0.5 * Ly
-    dx, dy = dx - Lx * xp.rint(dx / Lx), dy - Ly * xp.rint(dy / Ly)
+    dx, dy = _offsets(x, y, Lx, Ly)
     gx, dgx = _images(dx, Lx, w)
     gy, dgy = _images(dy, Ly, w)
     return h * gx * gy, h * dgx * gy, h * gx * dgy
@@ -56,8 +64,8 @@ def bump_area(Lx: float, Ly: float, h: float, w: float) -> float:
 class GaussianBump(ImplicitSurface):
     """The height field ``z = height exp(-|(x, y) - centre|^2 / (2 width^2))`` over a periodic box
     (Lx, Ly), the bump in the box's middle, summed over the nearest periodic images (smooth across
-    the box's edges; it differs from the single Gaussian by less than ``height e^-8`` when the box
-    is ``8 width`` wide, the smallest allowed). ``F = z - height(x, y)``; closest points by Newton
+    the box's edges; it differs from the single Gaussian by less than ``height e^-4.5`` when the
+    box is ``6 width`` wide, the smallest allowed). ``F = z - height(x, y)``; closest points by Newton
     iterations, the area by quadrature (:func:`bump_area`), Euler characteristic 0. Positions are
     stored with x, y wrapped into the box; edges are minimum images. The parameters ``(Lx, Ly,
     height, width)`` are per replica (``size``); the instance's are the shape a tiling starts from.
@@ -69,7 +77,7 @@ class GaussianBump(ImplicitSurface):
     width : float
         Positive.
     box : float or (Lx, Ly), optional
-        The periodic box, at least ``8 width`` in each direction (default ``10 width``)."""
+        The periodic box, at least ``6 width`` in each direction (default ``10 width``)."""
 
     name = "gaussian_bump"
     size_names = ("Lx", "Ly", "height", "width")
@@ -96,6 +104,17 @@ class GaussianBump(ImplicitSurface):
         xp = array_module(x)
         _, zx, zy = _height(x[..., 0], x[..., 1], *self.parameters(size))
         return xp.stack([-zx, -zy, xp.ones_like(zx)], axis=-1)
+
+    def hessian_F(self, x, size):
+        """``-`` the height's second derivatives, in x and y (closed form)."""
+        Lx, Ly, h, w = self.parameters(size)
+        dx, dy = _offsets(x[..., 0], x[..., 1], Lx, Ly)
+        gx, dgx, d2gx = _images(dx, Lx, w, second=True)
+        gy, dgy, d2gy = _images(dy, Ly, w, second=True)
+        out = array_module(x).zeros(x.shape + (3,))
+        out[..., 0, 0], out[..., 1, 1] = -h * d2gx * gy, -h * gx * d2gy
+        out[..., 0, 1] = out[..., 1, 0] = -h * dgx * dgy
+        return out
 
     def area_density_bound(self, size):
         """An upper bound of the area per unit of box area, ``sqrt(1 + |grad z|^2)``: the steepest

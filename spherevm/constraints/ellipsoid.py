@@ -5,6 +5,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..device import array_module
 from .implicit import ImplicitSurface, rejection
 
 #: Gauss-Legendre nodes in cos(theta) and equal steps in phi of the area quadrature (the integrand is
@@ -64,6 +65,11 @@ class Ellipsoid(ImplicitSurface):
                            lambda s: area_element(s[:, 0], s[:, 1], a, b, c) / bound).T
         s = np.sqrt(1 - u * u)
         return np.stack([a * s * np.cos(phi), b * s * np.sin(phi), c * u], axis=1), None, None
+
+    def hessian_F(self, x, size):
+        """``diag(2/a^2, 2/b^2, 2/c^2)``."""
+        return array_module(x).broadcast_to(2.0 / size[..., None, :] ** 2 * array_module(x).eye(3),
+                                            x.shape + (3,))
 
     def total_area_np(self, size):
         """The area per row of ``size`` (:func:`ellipsoid_area`)."""

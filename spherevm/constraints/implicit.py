@@ -210,9 +210,7 @@ class ImplicitSurface(FlatFacets, Constraint):
         g = self._gradient(p, size)
         if start:
             lam = -_dot(x - p, g) / _dot(g, g)
-        e = HESSIAN_STEP * self.length_scale(size)[:, None]
-        hessian = xp.stack([(self.grad_F(p + e * unit, size) - self.grad_F(p - e * unit, size)) / (2 * e)
-                            for unit in xp.eye(3)], axis=-1)
+        hessian = self.hessian_F(p, size)
         jac = xp.zeros((len(p), 4, 4))
         jac[:, :3, :3] = xp.eye(3) + lam[:, None, None] * hessian
         jac[:, :3, 3] = jac[:, 3, :3] = g
@@ -337,6 +335,26 @@ class ImplicitSurface(FlatFacets, Constraint):
         e = np.where(valid[..., None], self.unwrap(following, x, box) - x, 0.0)[..., :2]
         bad = np.flatnonzero((np.abs(e.sum(axis=1)) / box[:, 0] > 1e-9).any(axis=1))
         return bad, np.argmax((np.abs(e[bad]) / box[bad]).max(axis=2), axis=1)
+
+    def hessian_F(self, x, size):
+        """The Hessian of F (..., 3, 3) at ``x``: here by central differences of grad F (steps of
+        HESSIAN_STEP length scales; a subclass with a closed form gives it)."""
+        xp = array_module(x)
+        e = HESSIAN_STEP * self.length_scale(size)[..., None]
+        return xp.stack([(self.grad_F(x + e * unit, size) - self.grad_F(x - e * unit, size)) / (2 * e)
+                         for unit in xp.eye(3)], axis=-1)
+
+    def gaussian_curvature(self, x, size=None):
+        """``K = -det([[H, g], [g^T, 0]]) / |g|^4`` (g = grad F, H its Hessian) at the points ``x``;
+        ``size`` per point or one (default: the instance's own parameters, ``shape``)."""
+        x = np.asarray(x, dtype=np.float64)
+        size = np.broadcast_to(np.asarray(self.shape if size is None else size, dtype=np.float64),
+                               x.shape[:-1] + (len(self.size_names),))
+        g, h = self._gradient(x, size), self.hessian_F(x, size)
+        bordered = np.zeros(x.shape[:-1] + (4, 4))
+        bordered[..., :3, :3] = h
+        bordered[..., :3, 3] = bordered[..., 3, :3] = g
+        return -np.linalg.det(bordered) / _dot(g, g) ** 2
 
     def polygon_area(self, points, size) -> float:
         """The flat signed area of one polygon (unwrapped), as :meth:`cell_geometry` measures cells."""

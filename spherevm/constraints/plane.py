@@ -169,6 +169,10 @@ class PeriodicPlane(Constraint):
         return (f"the cells cover an area {total:.12g}, but the box's is {surface:.12g}; some cell wraps around "
                 "the box or overlaps another")
 
+    def gaussian_curvature(self, x, box=None):
+        """0."""
+        return np.zeros(np.shape(x)[:-1])
+
     def polygon_area(self, points, box) -> float:
         """The shoelace area of the unwrapped polygon (x, y)."""
         x, y = points[:, 0], points[:, 1]

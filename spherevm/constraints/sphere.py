@@ -102,6 +102,12 @@ class Sphere(Constraint):
         xp = array_module(radius)
         return xp.asarray(radius) ** 2 * geo.solid_angle(geo.normalize(a), geo.normalize(b), geo.normalize(c))
 
+    def gaussian_curvature(self, x, radius):
+        """``1 / R^2``."""
+        if radius is None or not np.all(np.asarray(radius) > 0):
+            raise ValueError(f"radius must be given and positive on a sphere, got {radius}")
+        return np.broadcast_to(1.0 / np.asarray(radius, dtype=np.float64) ** 2, np.shape(x)[:-1]).copy()
+
     def polygon_area(self, points, radius) -> float:
         """The spherical polygon's area (:func:`spherevm.geometry.sphere.polygon_area`)."""
         return float(geo.polygon_area(geo.normalize(points), float(radius)))

@@ -75,6 +75,14 @@ class Torus(ImplicitSurface):
         """The minor radius r."""
         return size[..., 1]
 
+    def gaussian_curvature(self, x, size=None):
+        """``(rho - R) / (r^2 rho)``, ``rho`` the distance from the axis: from ``1 / (r (R + r))`` on the
+        outer equator to ``-1 / (r (R - r))`` on the inner."""
+        x = np.asarray(x, dtype=np.float64)
+        R, r = self.parameters(np.asarray(self.shape if size is None else size, dtype=np.float64))
+        rho = np.hypot(x[..., 0], x[..., 1])
+        return (rho - R) / (r * r * rho)
+
     def replica_spacing(self, size, cell_width) -> float:
         """2.5 times the largest outer radius R + r (tori drawn side by side do not touch)."""
         s = np.asarray(size).reshape(-1, 2)

@@ -20,7 +20,7 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 
 from ..validation import SHAPE_INDEX_MAX, integer, positive, real
-from .spec import SURFACES, Chunk, Sweep, _check_forces
+from .spec import Chunk, Sweep, _check_forces
 from .store import CURVE_COLUMNS, CURVE_DIR, DYNAMICS_COLUMNS, write_columns
 
 def _grid(name, values, low, high=math.inf, low_open=False) -> tuple:
@@ -115,7 +115,8 @@ class DynamicsSweep(Sweep):
         Part of the sweep: the noise of a tissue depends on its place in its chunk.
     dt, steps, equilibrate_steps, relax_steps, b, points_per_decade
         As in :func:`~spherevm.protocols.glassy_dynamics` (``equilibrate_steps`` None: ``steps // 10``).
-    surface : {"sphere", "plane"}
+    surface : str
+        "sphere", "plane" or an implicit surface's spec, ``"torus:R=3,r=1"`` (:func:`spherevm.init.tilings_on`)
     forces : tuple
         Further forces, ``(name, {parameter: value})`` of registered plugins, at every point."""
     cells: tuple
@@ -140,8 +141,8 @@ class DynamicsSweep(Sweep):
 
     def __post_init__(self):
         set_ = object.__setattr__
-        if self.surface not in SURFACES:
-            raise ValueError(f"surface must be one of {SURFACES}, got {self.surface!r}")
+        from ..init import check_surface_spec
+        check_surface_spec(self.surface)
         least = 8 if self.surface == "plane" else 4
         cells = self.cells if not isinstance(self.cells, (int, np.integer)) else (self.cells,)
         try:

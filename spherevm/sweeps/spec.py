@@ -75,9 +75,10 @@ class RigiditySweep(Sweep):
         ``t1_length_factor`` times the old one), units sqrt(<A>); a replica stops when one pair
         re-joins ``t1_max_flip_backs`` times. The paper code's rule is ``t1_threshold=0.1,
         t1_length_factor=2`` (:meth:`reference_t1`).
-    surface : {"sphere", "plane"}
-        Random convex-hull tilings of radius sqrt(N / 4 pi), or periodic Voronoi tilings in the
-        square box of side sqrt(N) (N >= 8): <A> = 1 on both.
+    surface : str
+        "sphere": random convex-hull tilings of radius sqrt(N / 4 pi); "plane": periodic Voronoi
+        tilings in the square box of side sqrt(N) (N >= 8); an implicit surface's spec
+        (``"torus:R=3,r=1"``): its tilings, shape scaled (:func:`spherevm.init.tilings_on`); <A> = 1 on all.
     forces : tuple
         Extra forces, ``(name, {parameter: value})`` of registered plugins."""
     cells: tuple

@@ -11,25 +11,39 @@ from __future__ import annotations
 
 from ..device import weighted_bincount
 from ..geometry import flat
-from ..geometry.sphere import _cross, _norm
+from ..geometry.flat import cross_rows as _cross_rows
+from ..geometry.flat import dot_rows as _dot_rows
+from ..geometry.sphere import _norm
 from .base import CellMeasures
 
 
 class FlatGeometry(CellMeasures):
     """Per-cell ``area`` (signed flat areas), ``perimeter`` (sums of chords) and ``area_vector``
-    (``(n_cells, 3)``), and the per-corner ``edge`` ``(V, 3, 3)``: ``x[vertex_neighbors[v, k]] -
-    x[v]`` (nearest image), which the gradient reuses. ``center`` (the surface's cell centres) is
-    computed on first use."""
+    (``(n_cells, 3)``), and per corner ``edge`` ``(3 components, 3 slots, V)``: ``x[vertex_neighbors[v,
+    k]] - x[v]`` (nearest image) and its ``length`` ``(3, V)``, which the gradient reuses. ``center``
+    (the surface's cell centres) is computed on first use."""
 
-    def __init__(self, area, perimeter, area_vector, edge, center):
-        self.area, self.perimeter, self.area_vector, self.edge = area, perimeter, area_vector, edge
+    def __init__(self, area, perimeter, area_vector, edge, length, center):
+        self.area, self.perimeter, self.area_vector = area, perimeter, area_vector
+        self.edge, self.length = edge, length
         self._center = center
 
 
+def _slots(state):
+    """Slot-major corner tables ``(3, V)``, cached per topology: ``neighbors`` (n_k), ``cells`` (the
+    corner's cell) and ``apex`` (that cell's first vertex)."""
+    def build():
+        xp = state.device.xp
+        cells = xp.ascontiguousarray(state.vertex_cells.T)
+        return dict(neighbors=xp.ascontiguousarray(state.vertex_neighbors.T), cells=cells,
+                    apex=xp.ascontiguousarray(state.cell_vertices[cells, 0]), flat=cells.reshape(-1))
+    return state.cached((FlatGeometry, "slots"), build, topology=True)
+
+
 def _per_cell(state, values):
-    """Per-corner vectors ``(V, 3 slots, 3)`` summed into their cells, ``(n_cells, 3)``."""
-    cells = state.vertex_cells.reshape(-1)
-    return state.device.xp.stack([weighted_bincount(cells, weights=values[..., i].reshape(-1),
+    """Per-corner vectors ``(3 components, 3 slots, V)`` summed into their cells, ``(n_cells, 3)``."""
+    cells = _slots(state)["flat"]
+    return state.device.xp.stack([weighted_bincount(cells, weights=values[i].reshape(-1),
                                                     minlength=state.n_cells) for i in range(3)], axis=1)
 
 
@@ -39,15 +53,15 @@ class FlatFacets:
 
     Corner (v, k) lies in cell ``vertex_cells[v, k]``, whose boundary runs from v to ``n_k =
     vertex_neighbors[v, k]`` and arrives at v from ``n_{k+1}``: the corner owns that cell's edge
-    ``v -> n_k``, and the edge borders cells k and k - 1.
+    ``v -> n_k``, and the edge borders cells k and k - 1. Corner arrays are component- and
+    slot-major, ``(3, 3, V)``: every NumPy call runs on contiguous rows (measured 1.5 times faster
+    than ``(V, 3, 3)`` at 65,536 cells).
     """
 
-    def _corner_edges(self, state):
-        """``(edge, size)``: ``x[n_k] - x[v]`` per corner ``(V, 3, 3)`` (nearest images) and the
-        vertices' surface sizes shaped to broadcast against it."""
-        x = state.positions
-        size = self.size(state, state.vertex_replica)[:, None]
-        return self.unwrap(x[state.vertex_neighbors], x[:, None], size) - x[:, None], size
+    def nearest_images(self, d, size):
+        """Differences ``d`` ``(3, ..., V)`` (component-major; ``size`` per vertex ``(V, ...)``) taken
+        to their nearest periodic images, in place: none here (a surface without images)."""
+        return d
 
     def cell_geometry(self, state, area_vectors: bool = False, metric: bool = True) -> FlatGeometry:
         """Flat areas, chord perimeters and vector areas of every cell (the two flags of
@@ -57,16 +71,18 @@ class FlatFacets:
         and ``e = x_{n_k} - x_v``, the vector area gains ``r x e / 2`` (= ``(x_v - x_0) x (x_{n_k}
         - x_0) / 2``) and the perimeter ``|e|``. The area is ``|a|`` signed by ``a . sum_v n(x_v)``,
         the surface normals at the cell's vertices (:func:`spherevm.geometry.flat.signed_area`)."""
-        x = state.positions
-        edge, size = self._corner_edges(state)
-        apex = state.cell_vertices[state.vertex_cells, 0]
-        r = x[:, None] - self.unwrap(x[apex], x[:, None], size)
-        vector = _per_cell(state, 0.5 * _cross(r, edge))
-        normals = state.device.xp.broadcast_to(self.normal(x, size[:, 0])[:, None], edge.shape)
-        perimeter = weighted_bincount(state.vertex_cells.reshape(-1), weights=_norm(edge).reshape(-1),
-                                      minlength=state.n_cells)
+        xp = state.device.xp
+        t = _slots(state)
+        size = self.size(state, state.vertex_replica)
+        comp = xp.ascontiguousarray(state.positions.T)
+        edge = self.nearest_images(comp[:, t["neighbors"]] - comp[:, None, :], size)
+        r = self.nearest_images(comp[:, None, :] - comp[:, t["apex"]], size)
+        vector = _per_cell(state, 0.5 * _cross_rows(r, edge))
+        normals = xp.broadcast_to(xp.ascontiguousarray(self.normal(state.positions, size).T)[:, None, :], edge.shape)
+        length = xp.sqrt(_dot_rows(edge, edge))
+        perimeter = weighted_bincount(t["flat"], weights=length.reshape(-1), minlength=state.n_cells)
         return FlatGeometry(area=flat.signed_area(vector, _per_cell(state, normals)), perimeter=perimeter,
-                            area_vector=vector, edge=edge, center=lambda: self.cell_centers(state))
+                            area_vector=vector, edge=edge, length=length, center=lambda: self.cell_centers(state))
 
     def shape_gradient(self, state, geometry: FlatGeometry, d_area, d_perimeter, d_area_vector=None):
         """Surface gradient (V, 3) of ``sum_c d_area[c] A_c + d_perimeter[c] P_c + d_area_vector[c] . a_c``
@@ -79,23 +95,24 @@ class FlatFacets:
         The edge ``v -> n_k`` adds ``(d_perimeter[k] + d_perimeter[k - 1])`` times ``-e/|e|``.
         Projected on the tangent plane at each vertex (``project_tangent``)."""
         xp = state.device.xp
-        vc, edge = state.vertex_cells, geometry.edge
-        terms = []                                                # per corner (V, 3, 3)
+        cells, edge = _slots(state)["cells"], geometry.edge
+        corners = None                                            # per corner (3, 3, V)
         if d_area is not None or d_area_vector is not None:
             w = xp.zeros((state.n_cells, 3)) if d_area_vector is None else d_area_vector
             if d_area is not None:
                 area = geometry.area
                 per_area = xp.where(area != 0, d_area, 0.0) / xp.where(area != 0, area, 1.0)
                 w = w + per_area[:, None] * geometry.area_vector
-            terms.append(flat.vector_area_gradient(xp.roll(edge, -1, axis=1), edge, w[vc]))
+            w = xp.ascontiguousarray(w.T)[:, cells]
+            corners = 0.5 * _cross_rows(edge - xp.roll(edge, -1, axis=1), w)
         if d_perimeter is not None:
-            p = d_perimeter[vc]
-            terms.append((p + xp.roll(p, 1, axis=1))[..., None] * flat.chord_gradient(edge))
-        if not terms:
+            p = d_perimeter[cells]
+            coefficient = -(p + xp.roll(p, 1, axis=0)) / xp.where(geometry.length > 0, geometry.length, 1.0)
+            chords = coefficient * edge
+            corners = chords if corners is None else corners + chords
+        if corners is None:
             return xp.zeros((state.n_vertices, 3))
-        corners = sum(terms)
-        # three slices added: a strided sum over the slot axis took several times longer
-        return self.project_tangent(state.positions, corners[:, 0] + corners[:, 1] + corners[:, 2],
+        return self.project_tangent(state.positions, (corners[:, 0] + corners[:, 1] + corners[:, 2]).T,
                                     self.size(state, state.vertex_replica))
 
     def edge_lengths(self, state, u, v):

@@ -155,6 +155,14 @@ class ImplicitSurface(FlatFacets, Constraint):
         out[..., :2] = reference[..., :2] + d - box * array_module(d).rint(d / box)
         return out
 
+    def nearest_images(self, d, size):
+        """Component-major differences ``d`` ``(3, ..., V)`` (the flat-facet metric's corner arrays;
+        ``size`` per vertex ``(V, k)``) taken to their nearest images in x and y, in place."""
+        if self.periodic:
+            box = size[:, :2].T.reshape((2,) + (1,) * (d.ndim - 2) + (-1,))
+            d[:2] -= box * array_module(d).rint(d[:2] / box)
+        return d
+
     def wrap(self, x, size):
         """Positions with x and y wrapped into the periodic box (a copy; ``x`` itself if not periodic)."""
         if not self.periodic:

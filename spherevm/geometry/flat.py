@@ -32,6 +32,17 @@ from ..device import array_module
 from .sphere import _cross, _dot, _norm
 
 
+def cross_rows(a, b):
+    """``a x b`` of vectors stored component-first, ``(3, ...)`` (contiguous rows: faster than a last
+    axis of length 3)."""
+    return array_module(a, b).stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def dot_rows(a, b):
+    """``a . b`` of vectors stored component-first, ``(3, ...)`` -> ``(...)``."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
 def vector_area(vertices):
     """Vector area ``(..., 3)`` of the closed polygons ``vertices`` ``(..., n, 3)``:
     ``1/2 sum_j (x_j - x_0) x (x_{j+1} - x_0)``."""

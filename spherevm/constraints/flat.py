@@ -20,12 +20,13 @@ from .base import CellMeasures
 class FlatGeometry(CellMeasures):
     """Per-cell ``area`` (signed flat areas), ``perimeter`` (sums of chords) and ``area_vector``
     (``(n_cells, 3)``), and per corner ``edge`` ``(3 components, 3 slots, V)``: ``x[vertex_neighbors[v,
-    k]] - x[v]`` (nearest image) and its ``length`` ``(3, V)``, which the gradient reuses. ``center``
-    (the surface's cell centres) is computed on first use."""
+    k]] - x[v]`` (nearest image) and its ``length`` ``(3, V)``, and the unit ``normal`` at each vertex
+    ``(3, V)``, which the gradient reuses. ``center`` (the surface's cell centres) is computed on first
+    use."""
 
-    def __init__(self, area, perimeter, area_vector, edge, length, center):
+    def __init__(self, area, perimeter, area_vector, edge, length, normal, center):
         self.area, self.perimeter, self.area_vector = area, perimeter, area_vector
-        self.edge, self.length = edge, length
+        self.edge, self.length, self.normal = edge, length, normal
         self._center = center
 
 
@@ -78,11 +79,12 @@ class FlatFacets:
         edge = self.nearest_images(comp[:, t["neighbors"]] - comp[:, None, :], size)
         r = self.nearest_images(comp[:, None, :] - comp[:, t["apex"]], size)
         vector = _per_cell(state, 0.5 * _cross_rows(r, edge))
-        normals = xp.broadcast_to(xp.ascontiguousarray(self.normal(state.positions, size).T)[:, None, :], edge.shape)
+        normal = xp.ascontiguousarray(self.normal(state.positions, size).T)
         length = xp.sqrt(_dot_rows(edge, edge))
         perimeter = weighted_bincount(t["flat"], weights=length.reshape(-1), minlength=state.n_cells)
-        return FlatGeometry(area=flat.signed_area(vector, _per_cell(state, normals)), perimeter=perimeter,
-                            area_vector=vector, edge=edge, length=length, center=lambda: self.cell_centers(state))
+        reference = _per_cell(state, xp.broadcast_to(normal[:, None, :], edge.shape))
+        return FlatGeometry(area=flat.signed_area(vector, reference), perimeter=perimeter, area_vector=vector,
+                            edge=edge, length=length, normal=normal, center=lambda: self.cell_centers(state))
 
     def shape_gradient(self, state, geometry: FlatGeometry, d_area, d_perimeter, d_area_vector=None):
         """Surface gradient (V, 3) of ``sum_c d_area[c] A_c + d_perimeter[c] P_c + d_area_vector[c] . a_c``
@@ -93,7 +95,8 @@ class FlatFacets:
         d_area_vector`` (0 for a cell of zero area, the minimal-norm subgradient); cell k at v adds
         ``(x_{n_k} - x_{n_{k+1}}) x w / 2`` (:func:`~spherevm.geometry.flat.vector_area_gradient`).
         The edge ``v -> n_k`` adds ``(d_perimeter[k] + d_perimeter[k - 1])`` times ``-e/|e|``.
-        Projected on the tangent plane at each vertex (``project_tangent``)."""
+        Projected on the tangent plane at each vertex, ``P_T = I - n n^T`` with the normals of
+        ``geometry``."""
         xp = state.device.xp
         cells, edge = _slots(state)["cells"], geometry.edge
         corners = None                                            # per corner (3, 3, V)
@@ -112,8 +115,8 @@ class FlatFacets:
             corners = chords if corners is None else corners + chords
         if corners is None:
             return xp.zeros((state.n_vertices, 3))
-        return self.project_tangent(state.positions, (corners[:, 0] + corners[:, 1] + corners[:, 2]).T,
-                                    self.size(state, state.vertex_replica))
+        g, n = corners[:, 0] + corners[:, 1] + corners[:, 2], geometry.normal
+        return (g - _dot_rows(g, n) * n).T
 
     def edge_lengths(self, state, u, v):
         """Chord lengths ``|x[v] - x[u]|`` of the edges (u[i], v[i]) (nearest images)."""

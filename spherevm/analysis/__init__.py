@@ -8,13 +8,13 @@ from ..plugins.writers.recorder import Recorder, Recording, log_spaced_times
 from ..shapes import (cell_centroids, cell_shapes, mean_shape_index, pentagon_perimeter, regular_polygon_perimeter,
                       shape_index)
 from ..trigger import OnTimesteps
-from .dynamics import (NoRelaxationWarning, TimeCorrelation, msd, self_intermediate_scattering, self_overlap,
-                       tau_alpha)
+from .dynamics import (ArrheniusFit, NoRelaxationWarning, TimeCorrelation, arrhenius_fit, msd,
+                       self_intermediate_scattering, self_overlap, tau_alpha)
 from .rigidity import classify, critical_perimeter, p0_star, smoothing_width, transition_density, zero_fraction
 from .trajectory import Trajectory, remove_rigid_rotation
 
-__all__ = ["NoRelaxationWarning", "OnTimesteps", "Recorder", "Recording", "TimeCorrelation", "Trajectory",
-           "cell_centroids", "cell_shapes", "classify", "critical_perimeter", "p0_star", "rigidity",
-           "smoothing_width", "transition_density", "zero_fraction", "log_spaced_times", "mean_shape_index", "msd",
+__all__ = ["ArrheniusFit", "NoRelaxationWarning", "OnTimesteps", "Recorder", "Recording", "TimeCorrelation",
+           "Trajectory", "arrhenius_fit", "cell_centroids", "cell_shapes", "classify", "critical_perimeter", "p0_star",
+           "rigidity", "smoothing_width", "transition_density", "zero_fraction", "log_spaced_times", "mean_shape_index", "msd",
            "pentagon_perimeter", "regular_polygon_perimeter", "remove_rigid_rotation",
            "self_intermediate_scattering", "self_overlap", "shape_index", "tau_alpha"]

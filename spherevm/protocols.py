@@ -147,11 +147,40 @@ def stable_dt(sim, method: str = "brownian", mu: float = 1.0, safety: float = No
     return c / (mu * lam) if method == "brownian" else c / np.sqrt(lam)
 
 
+def inherent_states(n_cells, replicas, p0, kr, steps=5000, seed=0, device="auto", dt=0.02) -> State:
+    """Random tilings relaxed by FIRE + T1 under the vertex model alone (at most ``steps`` iterations):
+    the start of a run with extra forces that the raw tilings cannot take (a ``Bending`` term makes
+    FIRE's first steps from a random Voronoi tiling's smallest cells explode).
+
+    Parameters
+    ----------
+    n_cells, replicas, seed : int
+        As :func:`spherevm.init.random_tiling`.
+    p0, kr : float
+        The dimensionless vertex model.
+    steps : int
+        FIRE iterations at most (force tolerance 1e-8).
+    device : str
+    dt : float
+        FIRE's initial step (dt_max ten times it).
+
+    Returns
+    -------
+    State"""
+    sim = Simulation(device=device, seed=seed)
+    sim.state = init.random_tiling(n_cells, replicas=replicas, seed=seed)
+    sim.operations.forces.append(VertexModel.dimensionless(kr=kr, p0=p0))
+    sim.operations.updaters.append(T1())
+    sim.operations.integrator = FIRE(dt=dt)
+    sim.minimize(force_tol=1e-8, max_steps=steps)
+    return sim.state
+
+
 def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=0, device="auto",
                     relax_steps=10_000, equilibrate_steps=None, b=0.5, points_per_decade=10, out=None,
                     frames=50, t1=True, progress=None, surface: str = "sphere",
                     extra_forces=(), restart=None, initial_state=None, graphs=None, until_relaxed: bool = False,
-                    max_seconds: float = None) -> DynamicsResult:
+                    max_seconds: float = None, max_time: float = None) -> DynamicsResult:
     """Overdamped Brownian dynamics of random tilings, measured as in the paper (Fig. 3).
 
     1. **relax**: FIRE (+ T1) from a random tiling for at most ``relax_steps`` steps, so the run
@@ -197,7 +226,9 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
     stops as soon as every replica's Q_s has fallen to 1/e; ``max_seconds``: it stops after the
     stretch in which that many wall seconds (counted from the call) have passed. ``steps`` is then
     the cap; the result's ``production_steps`` and ``stopped`` ("steps", "relaxed", "max_seconds")
-    say what ran. The lags end where production ended.
+    say what ran. The lags end where production ended. ``max_time``: the cap in time units instead
+    (``steps = ceil(max_time / dt)``, with the step ``dt`` resolves to; equilibration a tenth of it
+    unless given).
     """
     if surface not in ("sphere", "plane"):
         raise ValueError(f"surface must be 'sphere' or 'plane', got {surface!r}")
@@ -208,7 +239,8 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
         raise ValueError(f"dt must be a positive number or 'auto', got {dt!r}")
     if max_seconds is not None and not max_seconds > 0:
         raise ValueError(f"max_seconds must be > 0 or None, got {max_seconds!r}")
-    equilibrate_steps = steps // 10 if equilibrate_steps is None else int(equilibrate_steps)
+    if max_time is not None and not max_time > 0:
+        raise ValueError(f"max_time must be > 0 or None, got {max_time!r}")
     sim = Simulation(device=device, seed=seed)
     if restart is not None and initial_state is not None:
         raise ValueError("give restart or initial_state, not both")
@@ -224,7 +256,7 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
         sim.state = tiling(n_cells, replicas=replicas, seed=seed)
     else:
         sim.create_state_from_gsd(restart)
-        relax_steps = equilibrate_steps = 0
+        relax_steps, equilibrate_steps = 0, 0
     sim.operations.forces.append(VertexModel.dimensionless(kr=kr, p0=p0))
     sim.operations.forces.extend(extra_forces)
     if t1:
@@ -236,6 +268,9 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
                      progress=None if progress is None else lambda k, d, n: progress("relax", k, relax_steps))
     if dt == "auto":
         dt = float(stable_dt(sim, "brownian").min())
+    if max_time is not None:
+        steps = int(np.ceil(max_time / dt))
+    equilibrate_steps = steps // 10 if equilibrate_steps is None else int(equilibrate_steps)
     sim.operations.integrator = Brownian(dt=dt, T=T)
     if equilibrate_steps:
         sim.run(equilibrate_steps, check_every=100, graphs=graphs,

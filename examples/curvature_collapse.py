@@ -49,14 +49,15 @@ def read_p0star(path):
 
 def scatter(x, logs):
     """S: per temperature a quadratic in ``x`` (n_points,) fitted to ``logs`` (n_T, n_points, tissues)
-    averaged over tissues; the RMS of the residuals over every point with all tissues relaxed."""
+    averaged over tissues; the RMS of the residuals over every point with all tissues relaxed (a
+    temperature needs 4 such points at 3 values of x at least)."""
     y = logs.mean(axis=2)
     residuals = []
     for row in y:
         ok = np.isfinite(row)
-        if ok.sum() >= 4:
-            coef = np.polyfit(x[ok], row[ok], 2)
-            residuals.append(row[ok] - np.polyval(coef, x[ok]))
+        if ok.sum() >= 4 and len(np.unique(x[ok])) >= 3:
+            xc = x[ok] - x[ok].mean()
+            residuals.append(row[ok] - np.polyval(np.polyfit(xc, row[ok], 2), xc))
     return float(np.sqrt(np.mean(np.concatenate(residuals) ** 2))) if residuals else float("nan")
 
 
@@ -64,6 +65,7 @@ def collapse(p0, p0star, logs, n_boot=1000, seed=0):
     """S on the raw and the shifted axis, with bootstrap errors over tissues. ``p0``, ``p0star``:
     per point (N, p0); ``logs`` (n_T, n_points, tissues) of log tau_alpha (NaN: not relaxed)."""
     axes = {"p0": p0, "p0 - p0*(N)": p0 - p0star}
+    logs = np.where(np.all(np.isfinite(logs), axis=2, keepdims=True), logs, np.nan)   # a point: all relaxed
     k = logs.shape[2]
     pick = np.random.default_rng(seed).integers(0, k, size=(n_boot,) + logs.shape)
     boot = {name: [] for name in axes}

@@ -35,7 +35,7 @@ from spherevm.protocols import glassy_dynamics, inherent_states
 
 PRESETS = {
     "small": dict(cells=[32], B=[0.0, 3.0], T=[0.025, 0.03, 0.035, 0.04], replicas=2, max_time=250.0, relax=1000),
-    "full": dict(cells=[128, 1024], B=[0.0, 1.0, 10.0, 30.0, 100.0], T=[0.01, 0.0125, 0.015, 0.02, 0.03],
+    "full": dict(cells=[128, 1024], B=[0.0, 1.0, 3.0, 10.0, 30.0, 100.0], T=[0.01, 0.0125, 0.015, 0.02, 0.03],
                  replicas=4, max_time=2000.0, relax=5000),
 }
 
@@ -99,7 +99,7 @@ def main(argv=None):
                    stopped=error or res.stopped, time_run=None if res is None else res.production_steps * res.dt,
                    relaxed=int(np.isfinite(tau).sum()), tissues=tau.size, seconds=seconds,
                    c=None if fit is None else fit.c, c_err=None if fit is None else fit.c_err,
-                   verdict="exploded" if error else "no fit (fewer than 4 T with all relaxed)" if fit is None
+                   verdict="failed: " + error if error else "no fit (fewer than 4 T with all relaxed)" if fit is None
                    else fit.verdict())
         fits.append(row)
         taus = "  ".join(f"T={T:g}: {np.exp(np.mean(np.log(t))):.4g}" if np.all(np.isfinite(t)) else

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import analysis, init
+from . import analysis, init, shapes
 from .plugins.forces import VertexModel
 from .plugins.integrators import FIRE, Brownian
 from .plugins.updaters import T1
@@ -20,6 +20,8 @@ from .validation import check_run_memory, integer
 
 #: ``stable_dt``'s safety factors c: Brownian ``dt = c / (mu lambda)``, FIRE ``dt_max = c / sqrt(lambda)``
 STABILITY = {"brownian": 0.35, "fire": 0.8}
+#: glassy_dynamics(dt="auto") refuses a smaller step (the forces are then close to singular)
+MIN_AUTO_DT = 1e-4
 
 
 @dataclass
@@ -220,7 +222,9 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
     ``dt="auto"``: steps from the stiffest mode of the forces (:func:`stable_dt`, the smallest over the
     replicas): FIRE's ``dt_max`` (at most its usual 0.2, ``dt`` a tenth of it) from the starting
     state, the Brownian step from the relaxed one (about 0.02 without bending; stiff ``Bending``
-    terms get proportionally smaller steps). The result's ``dt`` is the step used.
+    terms get proportionally smaller steps). The result's ``dt`` is the step used. A step below
+    :data:`MIN_AUTO_DT` raises FloatingPointError naming the smallest cell (such stiffness comes from
+    a cell flattening to zero area, not from a stiff but healthy tissue).
 
     ``until_relaxed``: production runs in stretches (about ``steps / 40`` each, at least 1,000) and
     stops as soon as every replica's Q_s has fallen to 1/e; ``max_seconds``: it stops after the
@@ -268,6 +272,11 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
                      progress=None if progress is None else lambda k, d, n: progress("relax", k, relax_steps))
     if dt == "auto":
         dt = float(stable_dt(sim, "brownian").min())
+        if dt < MIN_AUTO_DT:
+            area = shapes.cell_shapes(sim.state)[0] / sim.state.mean_cell_area[sim.state.cell_replica_np()]
+            raise FloatingPointError(f"dt='auto': the stable Brownian step is {dt:.3g}, below {MIN_AUTO_DT:g}: the "
+                                     f"forces are close to singular (smallest cell area {area.min():.3g} <A>; a cell "
+                                     "flattening under a stiff Bending term?)")
     if max_time is not None:
         steps = int(np.ceil(max_time / dt))
     equilibrate_steps = steps // 10 if equilibrate_steps is None else int(equilibrate_steps)

@@ -117,3 +117,11 @@ def test_glassy_dynamics_auto_dt_and_stopping_rules():
     assert capped.stopped == "max_seconds" and capped.production_steps == 1000
     with pytest.raises(ValueError, match="dt must be a positive number or 'auto'"):
         glassy_dynamics(None, 3.9, 0.0, dt="fast", **kw)
+
+
+def test_auto_dt_refuses_a_step_too_small_to_be_a_healthy_tissue(monkeypatch):
+    from spherevm import protocols
+    monkeypatch.setattr(protocols, "MIN_AUTO_DT", 1.0)
+    with pytest.raises(FloatingPointError, match=r"dt='auto': the stable Brownian step is 0\.0\d+, below 1: the "
+                       r"forces are close to singular \(smallest cell area 0\.\d+ <A>"):
+        glassy_dynamics(16, 3.9, 0.0, T=0.05, dt="auto", steps=100, relax_steps=10, device="cpu")

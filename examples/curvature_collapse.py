@@ -47,17 +47,22 @@ def read_p0star(path):
         return {int(r["n_cells"]): float(r["p0_star"]) for r in csv.DictReader(f)}
 
 
-def scatter(x, logs):
-    """S: per temperature a quadratic in ``x`` (n_points,) fitted to ``logs`` (n_T, n_points, tissues)
-    averaged over tissues; the RMS of the residuals over every point with all tissues relaxed (a
-    temperature needs 4 such points at 3 values of x at least)."""
-    y = logs.mean(axis=2)
+def usable(p0, logs):
+    """The temperatures S uses: 4 points (N, p0) at least with every tissue relaxed, at 3 values of
+    p0 at least (so that both axes fit a quadratic to the same points)."""
+    ok = np.all(np.isfinite(logs), axis=2)
+    return np.array([row.sum() >= 4 and len(np.unique(p0[row])) >= 3 for row in ok])
+
+
+def scatter(x, logs, rows):
+    """S: at each temperature of ``rows`` a quadratic in ``x`` (n_points,) fitted to ``logs`` (n_T,
+    n_points, tissues) averaged over tissues; the RMS of the residuals over every point with all
+    tissues relaxed."""
     residuals = []
-    for row in y:
+    for row in logs.mean(axis=2)[rows]:
         ok = np.isfinite(row)
-        if ok.sum() >= 4 and len(np.unique(x[ok])) >= 3:
-            xc = x[ok] - x[ok].mean()
-            residuals.append(row[ok] - np.polyval(np.polyfit(xc, row[ok], 2), xc))
+        xc = x[ok] - x[ok].mean()
+        residuals.append(row[ok] - np.polyval(np.polyfit(xc, row[ok], 2), xc))
     return float(np.sqrt(np.mean(np.concatenate(residuals) ** 2))) if residuals else float("nan")
 
 
@@ -66,18 +71,19 @@ def collapse(p0, p0star, logs, n_boot=1000, seed=0):
     per point (N, p0); ``logs`` (n_T, n_points, tissues) of log tau_alpha (NaN: not relaxed)."""
     axes = {"p0": p0, "p0 - p0*(N)": p0 - p0star}
     logs = np.where(np.all(np.isfinite(logs), axis=2, keepdims=True), logs, np.nan)   # a point: all relaxed
-    k = logs.shape[2]
+    rows, k = usable(p0, logs), logs.shape[2]
     pick = np.random.default_rng(seed).integers(0, k, size=(n_boot,) + logs.shape)
     boot = {name: [] for name in axes}
     for b in range(n_boot):
         sample = np.take_along_axis(logs, pick[b], axis=2)
         for name, x in axes.items():
-            boot[name].append(scatter(x, sample))
+            boot[name].append(scatter(x, sample, rows))
     se = logs.std(axis=2, ddof=1) / np.sqrt(k) if k > 1 else np.full(logs.shape[:2], np.nan)
     raw, shifted = np.array(boot["p0"]), np.array(boot["p0 - p0*(N)"])
-    return dict(S_raw=scatter(axes["p0"], logs), S_raw_err=float(np.nanstd(raw, ddof=1)),
-                S_shifted=scatter(axes["p0 - p0*(N)"], logs), S_shifted_err=float(np.nanstd(shifted, ddof=1)),
-                shifted_better=float(np.mean(shifted < raw)), noise=float(np.sqrt(np.nanmean(se ** 2))))
+    return dict(temperatures_used=int(rows.sum()), S_raw=scatter(axes["p0"], logs, rows),
+                S_raw_err=float(np.nanstd(raw, ddof=1)), S_shifted=scatter(axes["p0 - p0*(N)"], logs, rows),
+                S_shifted_err=float(np.nanstd(shifted, ddof=1)), shifted_better=float(np.mean(shifted < raw)),
+                noise=float(np.sqrt(np.nanmean(se[rows] ** 2))) if rows.any() else float("nan"))
 
 
 def main(argv=None):
@@ -141,7 +147,8 @@ def main(argv=None):
             print(f"{n:>5} {p:>6.3f} {p - p0star[n]:>+7.3f} " + " ".join(cells))
     m = collapse(points_p0, points_star, logs)
     m.update(seconds=seconds, stopped=res.stopped, time_run=res.production_steps * args.dt)
-    print(f"\ncollapse measure S (RMS of log tau about one quadratic per T; noise of the means {m['noise']:.3g}):\n"
+    print(f"\ncollapse measure S (RMS of log tau about one quadratic per T, {m['temperatures_used']} temperatures; "
+          f"noise of the means {m['noise']:.3g}):\n"
           f"  raw p0:        S = {m['S_raw']:.3g} +- {m['S_raw_err']:.2g}\n"
           f"  p0 - p0*(N):   S = {m['S_shifted']:.3g} +- {m['S_shifted_err']:.2g}\n"
           f"  shifted below raw in {100 * m['shifted_better']:.0f}% of bootstrap resamplings", flush=True)

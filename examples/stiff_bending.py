@@ -148,7 +148,7 @@ def plot(out, fits, rows, temps):
         ok = np.all(np.isfinite(tau), axis=1) if tau.size else []
         if tau.size and np.any(ok):
             ax1.plot(1 / temps[ok], np.log(tau[ok]).mean(axis=1), "o-", label=f"N={r['N']} B={r['B']:g}")
-    ax1.set_xlabel("1/T"), ax1.set_ylabel("<log tau_alpha>"), ax1.legend(fontsize=7)
+    ax1.set_xlabel("1/T"), ax1.set_ylabel("<log tau_alpha>")
     for n in sorted({r["N"] for r in fits}):
         pts = [(r["B"], r["c"], r["c_err"]) for r in fits if r["N"] == n and r.get("c") is not None]
         if pts:
@@ -156,7 +156,10 @@ def plot(out, fits, rows, temps):
             ax2.errorbar(B, c, yerr=e, marker="o", capsize=3, label=f"N = {n}")
     ax2.axhline(0, color="k", lw=0.5)
     ax2.set_xscale("symlog", linthresh=1.0)
-    ax2.set_xlabel("B (kP <A>)"), ax2.set_ylabel("curvature c of log tau(1/T)"), ax2.legend(fontsize=8)
+    ax2.set_xlabel("B (kP <A>)"), ax2.set_ylabel("curvature c of log tau(1/T)")
+    for ax in (ax1, ax2):
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(os.path.join(out, "stiff_bending.png"), dpi=120)
     plt.close(fig)

@@ -67,7 +67,7 @@ def test_stiff_bending_writes_its_tables(tmp_path, capsys):
 
 
 def test_fig3_runs_until_relaxed_or_its_cap(tmp_path, capsys):
-    example("fig3_relaxation").main(["--sizes", "16", "--T", "0.08", "--until-relaxed", "--max-time", "100",
+    example("fig3_relaxation").main(["--sizes", "16", "--T", "0.03", "--until-relaxed", "--max-time", "100",
                                      "--no-inset", "--device", "cpu", "--out", str(tmp_path)])
     out = capsys.readouterr().out
     assert "stopped: relaxed" in out or "stopped: steps" in out
@@ -76,3 +76,21 @@ def test_fig3_runs_until_relaxed_or_its_cap(tmp_path, capsys):
     assert row["N"] == "16" and row["replicas"] == "2"
     with open(tmp_path / "fig3_fits.csv") as f:
         assert list(csv.DictReader(f))[0]["verdict"].startswith("fewer than 4")
+
+
+def test_collapse_measure_finds_a_dependence_on_the_shift_alone():
+    """tau depending on p0 - p0*(N) only: S on the shifted axis is the tissues' noise, on the raw axis more."""
+    ex = example("curvature_collapse")
+    cells, p0s, temps = [32, 64, 256], np.array([3.70, 3.75, 3.80, 3.85]), np.array([0.02, 0.015])
+    p0 = np.tile(p0s, len(cells))
+    star = np.repeat([ex.P0STAR[n] for n in cells], len(p0s))
+    rng = np.random.default_rng(2)
+    curve = 5.0 - 8.0 * (p0 - star) + 30.0 * (p0 - star) ** 2
+    logs = curve[None, :, None] + 0.02 / temps[:, None, None] + 0.01 * rng.normal(size=(2, len(p0), 4))
+    m = ex.collapse(p0, star, logs, n_boot=200)
+    assert m["temperatures_used"] == 2 and m["S_shifted"] < 2 * m["noise"] < m["S_raw"]
+    assert m["shifted_better"] == 1.0
+    logs[0, 0, 1] = np.nan                                   # a tissue that did not relax: its point goes
+    assert ex.collapse(p0, star, logs, n_boot=20)["temperatures_used"] == 2
+    logs[1, :9, 0] = np.nan                                  # only 3 points left at that T: it goes
+    assert ex.collapse(p0, star, logs, n_boot=20)["temperatures_used"] == 1

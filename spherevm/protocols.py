@@ -55,8 +55,9 @@ class DynamicsResult:
 
 
 def hessian_scale(sim, iterations: int = 30, seed: int = 0, eps: float = 1e-6):
-    """Per replica, the largest |eigenvalue| of the Hessian of the energy of ``sim``'s forces at its
-    State, on the surface: the stiffest mode, which sets the largest stable time step.
+    """Per replica, the largest eigenvalue (in absolute value) of the Hessian of the energy of
+    ``sim``'s forces at its State, on the surface: the stiffest mode, which sets the largest stable
+    time step.
 
     Power iteration on Hessian-vector products, each a central difference of the forces,
     ``H v = (F(x - e v) - F(x + e v)) / 2e`` (displacements tangent, points put back on the surface,

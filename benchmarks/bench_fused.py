@@ -9,6 +9,9 @@ Rows (each with T1, on random spherical tilings, p0 = 3.775, kr = 0):
 * ``+ Active (cell directors)`` and ``+ Active (vertex directors)``: the integrator's own stage;
 * ``VertexModel + line tension + Brownian``: a user's force with its fused stage
   (``tests/plugin_example``, ``FastLineTension``);
+* ``VertexModel + Bending + Brownian``: the bending force's stage joined into the vertex model's
+  (``Force.fused_combined``), its neighbour part a second per-cell phase (target: within 1.3x of
+  the reference);
 * ``... in graphs``: the same, ``run(fused=False)``, for comparison.
 
 Each row prints ``sim.explain()``'s executor and the median ms a step over ``--repeat`` runs of
@@ -24,7 +27,7 @@ import numpy as np
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent / "tests" / "plugin_example"))
 
 import spherevm as svm  # noqa: E402
-from spherevm.plugins.forces import VertexModel  # noqa: E402
+from spherevm.plugins.forces import Bending, VertexModel  # noqa: E402
 from spherevm.plugins.integrators import Active, Brownian  # noqa: E402
 from spherevm.plugins.updaters import T1  # noqa: E402
 from spherevm_line_tension import FastLineTension  # noqa: E402
@@ -59,6 +62,9 @@ def main(argv=None):
             lambda: simulation(state, Brownian(dt=0.01, T=0.01), FastLineTension(0.1)), {}),
         "VertexModel + line tension, in graphs": (
             lambda: simulation(state, Brownian(dt=0.01, T=0.01), FastLineTension(0.1)), {"fused": False}),
+        "VertexModel + Bending + Brownian": (lambda: simulation(state, Brownian(dt=0.01, T=0.01), Bending(1.0)), {}),
+        "VertexModel + Bending, in graphs": (
+            lambda: simulation(state, Brownian(dt=0.01, T=0.01), Bending(1.0)), {"fused": False}),
     }
     sims = {name: make() for name, (make, _) in rows.items()}
     times = {name: [] for name in rows}

@@ -4,11 +4,15 @@
     python examples/fig3_relaxation.py --full --device gpu
     python examples/fig3_relaxation.py --full --device gpu --sizes 1024 --prefix fig3_1024
     python examples/fig3_relaxation.py --full --device gpu --until-relaxed --max-time 50000 --max-seconds 120
+    python examples/fig3_relaxation.py --full --sweep fig3_sweep --gpus 2     # main panel as a sweep
 
 Main panel: one ensemble holds every size and temperature (Brownian takes one T per replica; tissues
 of different N sit side by side, so a GPU steps them all in about the time of the largest alone;
 ``--separate``: one ensemble per size), relaxed with FIRE + T1, equilibrated, then run with T1 exchanges; tau_alpha is where the
 self-overlap Q_s (b = 1/2, co-rotating frame) reaches 1/e, averaged over the replicas at each T.
+``--sweep FOLDER``: the main panel as a :class:`spherevm.sweeps.DynamicsSweep` instead, one chunk per
+(N, T), saved as it finishes (rerun to resume) and spread over ``--gpus N`` or a Dask ``--scheduler``;
+its tables (tau_alpha.csv, curves.csv) are in FOLDER.
 Inset: MSD at T = 5e-4, p0 = 3.75, kr = 1, averaged over 8192/N tissues (--full) or fewer; caging is
 read off the local slope d log MSD / d log t (1: diffusive; a minimum well below 1: a plateau, cages).
 
@@ -28,7 +32,7 @@ import time
 
 import numpy as np
 
-from spherevm import State, init
+from spherevm import State, init, sweeps
 from spherevm.analysis import arrhenius_fit
 from spherevm.progress import StageLines
 from spherevm.protocols import glassy_dynamics
@@ -52,6 +56,28 @@ def msd_slopes(lag, msd, span=3):
     return np.exp(lt[span:-span]), (lm[2 * span:] - lm[:-2 * span]) / (lt[2 * span:] - lt[:-2 * span])
 
 
+def sweep_panel(args, sizes, temps, reps, steps, dt, t0):
+    """The main panel as a resumable DynamicsSweep in ``args.sweep`` (one chunk per (N, T)), on this
+    machine or over ``--gpus`` / ``--scheduler``: rows (N, T, tau_alpha, its error, relaxed, tissues)."""
+    sweep = sweeps.DynamicsSweep(cells=sizes, T=temps, p0=[3.775], kr=0.0, replicas=reps, steps=steps, dt=dt,
+                                 relax_steps=5000, equilibrate_steps=steps // 10)
+    client = sweeps.cluster.client(scheduler=args.scheduler, gpus=args.gpus) if args.gpus or args.scheduler else None
+    bar = sweeps.TextProgress(label="fig3", units="tissues")
+    try:
+        result = sweeps.run_sweep(sweep, args.sweep, executor=client, device="gpu" if args.gpus else args.device,
+                                  progress=bar)
+    finally:
+        bar.close()
+        if client is not None:
+            client.close()
+    tau = sweeps.write_dynamics_tables(args.sweep, result.records)["tau_alpha"]
+    rows = list(zip(tau["n_cells"], tau["T"], tau["tau_alpha"], tau["tau_alpha_err"], tau["relaxed"], tau["tissues"]))
+    for n, T, t, _, relaxed, tissues in rows:
+        print(f"N={n:5d}  T={T:<7g} tau_alpha={t:10.4g}  ({relaxed}/{tissues} replicas relaxed)  "
+              f"[{time.time() - t0:6.1f} s]", flush=True)
+    return rows
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--full", action="store_true", help="paper size: N = 32, 128, 1024, longer runs")
@@ -63,6 +89,9 @@ def main(argv=None):
                     "ensemble, which a GPU steps in about the time of the largest alone)")
     ap.add_argument("--step-by-step", action="store_true", help="no CUDA graphs on the GPU (the same numbers, "
                     "slower; to check that they are)")
+    ap.add_argument("--sweep", metavar="FOLDER", help="run the main panel as a resumable dynamics sweep in FOLDER")
+    ap.add_argument("--gpus", type=int, help="with --sweep: one Dask worker per GPU of this host")
+    ap.add_argument("--scheduler", help="with --sweep: a Dask scheduler address, or 'local'")
     ap.add_argument("--T", type=float, nargs="+", help="only these temperatures")
     ap.add_argument("--until-relaxed", action="store_true", help="run until every tissue relaxes (or a cap)")
     ap.add_argument("--max-time", type=float, default=None, help="--until-relaxed: the cap in time units "
@@ -72,6 +101,8 @@ def main(argv=None):
     ap.add_argument("--no-inset", action="store_true", help="leave out the MSD inset")
     ap.add_argument("--out", default=".", help="folder for the CSV files and the figure")
     args = ap.parse_args(argv)
+    if args.sweep and args.until_relaxed:
+        ap.error("--until-relaxed runs the single-ensemble recipe; leave out --sweep")
     os.makedirs(args.out, exist_ok=True)
     prefix = os.path.join(args.out, args.prefix)
     graphs = False if args.step_by_step else None
@@ -90,31 +121,34 @@ def main(argv=None):
     rows, per_tissue, t0 = [], [], time.time()
     curves = {}
     groups = [[n] for n in sizes] if args.separate else [sizes]
+    if args.sweep:
+        rows = sweep_panel(args, sizes, temps, reps, steps, dt, t0)
     for k, group in enumerate(groups):
         # main panel: every size and temperature of the group in one ensemble (tilings seeded by N)
-        T = np.tile(np.repeat(temps, reps), len(group))
-        if until.get("max_seconds"):
-            until["max_seconds"] = max((args.max_seconds - (time.time() - t0)) / (len(groups) - k), 1e-3)
-        res = glassy_dynamics(None, 3.775, 0.0, T=T, dt=dt, steps=steps, seed=group[0], device=args.device,
-                              relax_steps=5000, equilibrate_steps=steps // 10, graphs=graphs,
-                              initial_state=tilings(group, len(temps) * reps, seed_of=lambda n: n),
-                              progress=StageLines(f"sizes {group}") if args.until_relaxed else None, **until)
-        if args.until_relaxed:
-            print(f"sizes {group}: production {res.production_steps * dt:g} time units, stopped: {res.stopped}",
-                  flush=True)
-        per_size = len(temps) * reps
-        for g, n in enumerate(group):
-            mine = slice(g * per_size, (g + 1) * per_size)
-            for Ti in temps:
-                taus = res.tau_alpha_per_replica[mine][T[mine] == Ti]
-                relaxed = np.isfinite(taus)
-                tau = float(np.mean(taus[relaxed])) if relaxed.all() else float("nan")
-                err = float(np.std(taus, ddof=1) / np.sqrt(len(taus))) if relaxed.all() and len(taus) > 1 else \
-                    float("nan")
-                rows.append((n, Ti, tau, err, int(relaxed.sum()), len(taus)))
-                per_tissue += [(n, Ti, j, x) for j, x in enumerate(taus)]
-                print(f"N={n:5d}  T={Ti:<7g} tau_alpha={tau:10.4g} +- {err:<8.3g} ({relaxed.sum()}/{len(taus)} "
-                      f"replicas relaxed)  [{time.time() - t0:6.1f} s]", flush=True)
+        if not args.sweep:
+            T = np.tile(np.repeat(temps, reps), len(group))
+            if until.get("max_seconds"):
+                until["max_seconds"] = max((args.max_seconds - (time.time() - t0)) / (len(groups) - k), 1e-3)
+            res = glassy_dynamics(None, 3.775, 0.0, T=T, dt=dt, steps=steps, seed=group[0], device=args.device,
+                                  relax_steps=5000, equilibrate_steps=steps // 10, graphs=graphs,
+                                  initial_state=tilings(group, len(temps) * reps, seed_of=lambda n: n),
+                                  progress=StageLines(f"sizes {group}") if args.until_relaxed else None, **until)
+            if args.until_relaxed:
+                print(f"sizes {group}: production {res.production_steps * dt:g} time units, stopped: {res.stopped}",
+                      flush=True)
+            per_size = len(temps) * reps
+            for g, n in enumerate(group):
+                mine = slice(g * per_size, (g + 1) * per_size)
+                for Ti in temps:
+                    taus = res.tau_alpha_per_replica[mine][T[mine] == Ti]
+                    relaxed = np.isfinite(taus)
+                    tau = float(np.mean(taus[relaxed])) if relaxed.all() else float("nan")
+                    err = float(np.std(taus, ddof=1) / np.sqrt(len(taus))) if relaxed.all() and len(taus) > 1 else \
+                        float("nan")
+                    rows.append((n, Ti, tau, err, int(relaxed.sum()), len(taus)))
+                    per_tissue += [(n, Ti, j, x) for j, x in enumerate(taus)]
+                    print(f"N={n:5d}  T={Ti:<7g} tau_alpha={tau:10.4g} +- {err:<8.3g} ({relaxed.sum()}/{len(taus)} "
+                          f"replicas relaxed)  [{time.time() - t0:6.1f} s]", flush=True)
         if args.no_inset:
             continue
         # inset: msd_total / N tissues of each size, one ensemble
@@ -132,7 +166,7 @@ def main(argv=None):
             print(f"N={n:5d}  MSD at t={inset.lag[-1]:g}: {m[-1]:.4g}{low}  [{time.time() - t0:6.1f} s]", flush=True)
 
     fits = []
-    for n in sizes:
+    for n in sizes if per_tissue else ():
         tau = np.array([[x for (m, Ti, _, x) in per_tissue if m == n and Ti == T] for T in temps])
         fit = arrhenius_fit(temps, tau)
         fits.append((n, None if fit is None else fit.c, None if fit is None else fit.c_err,

@@ -20,7 +20,6 @@ import os
 
 import numpy as np
 
-from .constraints import PeriodicPlane
 from .gsdio import Reader
 from .shapes import cell_shapes, shape_index_of
 from .validation import check_memory, integer
@@ -88,7 +87,8 @@ def _grid(n):
 
 def fan_triangles(state, cells=None):
     """Per fan triangle: the cell's centre, the two ends of one edge (counter-clockwise, unwrapped
-    on a periodic plane) and the cell; ``cells`` selects cells (default all)."""
+    about the cell's first vertex on a periodic surface) and the cell; ``cells`` selects cells
+    (default all)."""
     s = state.to("cpu") if state.device.is_gpu else state
     cells = np.arange(s.n_cells) if cells is None else np.asarray(cells)
     cv, sides = np.asarray(s.cell_vertices)[cells], np.asarray(s.cell_sides)[cells]
@@ -99,9 +99,8 @@ def fan_triangles(state, cells=None):
     a, b = pos[cv[mask]], pos[nxt[mask]]
     cell_of = np.repeat(cells, sides)
     first = pos[cv[:, 0]][np.repeat(np.arange(len(cells)), sides)]
-    if isinstance(s.constraint, PeriodicPlane):
-        box = np.asarray(s.box)[s.cell_replica_np()[cell_of]]
-        a, b = s.constraint.unwrap(a, first, box), s.constraint.unwrap(b, first, box)
+    size = s.constraint.size_np(s)[s.cell_replica_np()[cell_of]]
+    a, b = s.constraint.unwrap(a, first, size), s.constraint.unwrap(b, first, size)
     centre = np.zeros((len(cells), 3))
     np.add.at(centre, np.repeat(np.arange(len(cells)), sides), a)
     centre = (centre / sides[:, None])[np.repeat(np.arange(len(cells)), sides)]
@@ -110,17 +109,13 @@ def fan_triangles(state, cells=None):
 
 def replica_offsets(state) -> np.ndarray:
     """The shifts ``(n_replicas, 3)`` that lay the replicas side by side along x, replica 0 in
-    place: 2.5 of the largest radius apart on a sphere; on the plane 1.1 of the widest box plus
-    twice the widest cell, as cells unwrapped across the box edge reach out of it by up to a cell."""
-    size = state.constraint.size_np(state)
-    if isinstance(state.constraint, PeriodicPlane):
-        _, a, _, cell_of = fan_triangles(state)
-        hi, lo = np.full(state.n_cells, -np.inf), np.full(state.n_cells, np.inf)
-        np.maximum.at(hi, cell_of, a[:, 0])
-        np.minimum.at(lo, cell_of, a[:, 0])
-        step = 1.1 * size[:, 0].max() + 2 * (hi - lo).max()
-    else:
-        step = 2.5 * size.max()
+    place, :meth:`~spherevm.constraints.Constraint.replica_spacing` apart: 2.5 of the largest
+    radius on a sphere; on the plane 1.1 of the widest box plus twice the widest cell."""
+    _, a, _, cell_of = fan_triangles(state)
+    hi, lo = np.full(state.n_cells, -np.inf), np.full(state.n_cells, np.inf)
+    np.maximum.at(hi, cell_of, a[:, 0])
+    np.minimum.at(lo, cell_of, a[:, 0])
+    step = state.constraint.replica_spacing(state.constraint.size_np(state), (hi - lo).max())
     out = np.zeros((state.n_replicas, 3))
     out[:, 0] = step * np.arange(state.n_replicas)
     return out
@@ -170,9 +165,8 @@ def cell_mesh(state, values=None, quantity: str = "shape_index", cmap: str = "vi
     w, tris = _grid(n)
     points = w[None, :, 0, None] * centre[:, None] + w[None, :, 1, None] * a[:, None] + w[None, :, 2, None] * b[:, None]
     rep = crep[cell_of]
-    if not isinstance(state.constraint, PeriodicPlane):
-        pr = np.repeat(state.constraint.size_np(state)[rep], len(w))
-        points = np.asarray(state.constraint.project_normal(points.reshape(-1, 3), pr)).reshape(points.shape)
+    pr = np.repeat(state.constraint.size_np(state)[rep], len(w), axis=0)
+    points = np.asarray(state.constraint.draw_points(points.reshape(-1, 3), pr)).reshape(points.shape)
     if replica is None and side_by_side:
         points = points + replica_offsets(state)[rep][:, None, :]
     nf, npt = len(centre), len(w)

@@ -118,13 +118,9 @@ def inverted_edges(state):
     corner = np.flatnonzero((np.arange(len(vn))[:, None] < vn).reshape(-1))
     u, slot = corner // 3, corner % 3
     v, a, b, c, d = t1_cells(vn, vc, u, slot)[:5]
-    if hasattr(con, "unwrapped_cells"):            # each end's image nearest u
-        size = con.size_np(state)[state.vertex_replica_np()[u]]
-        pu = simplicity.points(state, pos[u])
-        pa, pb, pc, pd, pv = (simplicity.points(state, pos[w], pos[u], size) for w in (a, b, c, d, v))
-    else:
-        unit = simplicity.points(state, pos)
-        pu, pa, pb, pc, pd, pv = (unit[w] for w in (u, a, b, c, d, v))
+    size = con.size_np(state)[state.vertex_replica_np()[u]]      # each end's image nearest u
+    pu = simplicity.points(state, pos[u])
+    pa, pb, pc, pd, pv = (simplicity.points(state, pos[w], pos[u], size) for w in (a, b, c, d, v))
     # in a triangle the two edges share a vertex (a = d, or b = c) and never cross
     bow = ((a != d) & simplicity.arcs_cross(pa, pu, pv, pd)) | ((b != c) & simplicity.arcs_cross(pc, pv, pu, pb))
     return u[bow], slot[bow]

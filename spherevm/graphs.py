@@ -169,7 +169,7 @@ class StepGraphs:
             keys.append((id(op), op.parameter_version, key))   # a parameter change: a new capture
         state = self.sim.state
         arrays = (state.positions, state.cell_vertices, state.cell_sides, state.vertex_neighbors,
-                  state.vertex_cells, getattr(state, state.constraint.size_name))
+                  state.vertex_cells, state.size)
         return (id(state), tuple(a.data.ptr for a in arrays), tuple(keys)), None
 
     def advance(self, steps) -> bool:

@@ -43,9 +43,9 @@ BOX_FACTOR = 2.2
 DIAMETER_FACTOR = 0.15
 PREFIX = "spherevm/"
 # chunks written every frame (the restore needs them) and chunks left out when equal to frame 0's
-ALWAYS = ("format_version", "constraint", "position", "vertex_start", "cell_start", "radius")
-# the surface size chunk is named after the State's size array: "radius" (n_replicas,) on a sphere,
-# "box" (n_replicas, 2) on a periodic plane; the constraint (read first) says which
+ALWAYS = ("format_version", "constraint", "position", "vertex_start", "cell_start")
+# and the surface size chunk, named by the constraint's size_key (read first): "radius"
+# (n_replicas,) on a sphere, "box" (n_replicas, 2) on a periodic plane
 TOPOLOGY = ("cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cells")
 CELL_QUANTITIES = ("area", "perimeter", "shape_index", "energy")
 CHECKSUM = PREFIX + "checksum"   # CRC32 of the step and of each spherevm chunk of the frame
@@ -154,9 +154,7 @@ class FrameWriter:
         vc = np.ascontiguousarray(to_np(state.vertex_cells), dtype=np.int32)
         cv = np.ascontiguousarray(to_np(state.cell_vertices), dtype=np.int32)
         sides = np.ascontiguousarray(to_np(state.cell_sides), dtype=np.int32)
-        planar = state.box is not None
-        size = np.ascontiguousarray(state.box_np() if planar else state.radius_np(), dtype=np.float64)
-        radius = size if not planar else np.zeros(1)
+        size = np.ascontiguousarray(state.size_np(), dtype=np.float64)
         n_v = len(pos)
         vrep = state.vertex_replica_np()
         bonds = _edges(vn)
@@ -164,17 +162,17 @@ class FrameWriter:
 
         # ---- HOOMD part
         chord = np.sqrt(((pos[bonds[:, 0]] - pos[bonds[:, 1]]) ** 2).sum(axis=1))
-        extent = max(float(radius.max()), float(np.abs(pos).max()), float(chord.max(initial=0.0)))
+        extent = max(state.constraint.display_extent(size), float(np.abs(pos).max()), float(chord.max(initial=0.0)))
         # fixed unless something outgrows it; float32 as stored, so gsd skips an unchanged box
         self._box = max(self._box, float(np.float32(BOX_FACTOR * extent * (1 + 1e-6))))
         frame = gsd.hoomd.Frame()
         frame.configuration.step = int(timestep)
         frame.configuration.dimensions = 3
         frame.configuration.box = np.array([self._box] * 3 + [0.0] * 3, dtype=np.float32)
-        if planar:   # the real periodic box (the largest replica's), HOOMD's 2D convention: Lz = 0, centred
-            lx, ly = size.max(axis=0)
-            frame.configuration.dimensions = 2
-            frame.configuration.box = np.array([lx, ly, 0.0, 0.0, 0.0, 0.0], dtype=np.float32)
+        own = state.constraint.hoomd_box(size)     # a periodic surface's real box
+        if own is not None:
+            frame.configuration.dimensions, box = own
+            frame.configuration.box = np.asarray(box, dtype=np.float32)
         frame.particles.N = n_v
         frame.particles.types = ["V"]
         frame.particles.typeid = np.zeros(n_v, dtype=np.uint32)
@@ -213,7 +211,7 @@ class FrameWriter:
                   "position": pos,
                   "vertex_start": np.asarray(state.vertex_start, dtype=np.int64),
                   "cell_start": np.asarray(state.cell_start, dtype=np.int64),
-                  state.size_name: size}
+                  state.constraint.size_key: size}
         first = len(traj) == 0
         for name, arr in zip(TOPOLOGY, (cv, sides, vn, vc)):
             if first or name not in self._frame0 or not np.array_equal(self._frame0[name], arr):
@@ -239,13 +237,11 @@ class FrameWriter:
 
 
 def particle_origin(state) -> np.ndarray:
-    """Where a State's origin sits in the file's particle coordinates, ``(3,)``: half the largest
-    box on the periodic plane (HOOMD's box is centred on the origin), zero on a sphere. Particle
-    positions are the State's positions minus this."""
-    if state.box is None:
-        return np.zeros(3)
-    lx, ly = state.box_np().max(axis=0)
-    return np.array([lx / 2, ly / 2, 0.0])
+    """Where a State's origin sits in the file's particle coordinates, ``(3,)``
+    (:meth:`~spherevm.constraints.Constraint.particle_origin`: half the largest box on the periodic
+    plane, whose HOOMD box is centred on the origin; zero on a sphere). Particle positions are the
+    State's positions minus this."""
+    return state.constraint.particle_origin(state.size_np())
 
 
 def _diameters(state, chord, bonds):
@@ -390,9 +386,9 @@ class Reader:
         if version > FORMAT_VERSION:
             raise ValueError(f"{path!r} uses spherevm GSD format version {version}, newer than this spherevm "
                              f"reads ({FORMAT_VERSION}); upgrade spherevm")
-        data = {name: chunk(name) for name in ALWAYS[1:-1] + TOPOLOGY}
+        data = {name: chunk(name) for name in ALWAYS[1:] + TOPOLOGY}
         constraint = _constraint_from_json(check("constraint", data.pop("constraint"), np.uint8, (None,)), path)
-        size_name = getattr(constraint, "size_name", "radius")
+        key = constraint.size_key
         pos = check("position", data["position"], np.float64, (None, 3), finite=False)   # validate names a bad vertex
         nv, nc = len(pos), len(check("cell_sides", data["cell_sides"], np.int32, (None,)))
         cv = data["cell_vertices"]
@@ -404,14 +400,13 @@ class Reader:
         starts = [check(name, data[name], np.int64, (None,), low=0, high=n)
                   for name, n in (("vertex_start", nv), ("cell_start", nc))]
         n_rep = len(starts[1]) - 1
-        size = {size_name: check(size_name, chunk(size_name), np.float64,
-                                 (n_rep,) if size_name == "radius" else (n_rep, 2), above=0)}
-        stored_size(self._where(idx, PREFIX + size_name), size[size_name], np.diff(starts[1]))
+        size = check(key, chunk(key), np.float64, (n_rep,) + tuple(constraint.size_shape), above=0)
+        stored_size(self._where(idx, PREFIX + key), size, np.diff(starts[1]), constraint.total_area_np)
         where = f"{path!r}, frame {idx} (timestep {self.step(idx)})"
         try:
             state = State(positions=pos, cell_vertices=cv, cell_sides=data["cell_sides"],
                           vertex_neighbors=data["vertex_neighbors"], vertex_cells=data["vertex_cells"],
-                          vertex_start=data["vertex_start"], cell_start=data["cell_start"], **size,
+                          vertex_start=data["vertex_start"], cell_start=data["cell_start"], size=size,
                           constraint=constraint, device=CPU, validate=False)
             if validate:
                 bad = (cv < -1) | (cv >= nv)

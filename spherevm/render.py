@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .constraints import PeriodicPlane
 from .export import cell_values, check_replica, colors, fan_triangles
 from .gsdio import Reader
 from .validation import check_memory, positive
@@ -38,15 +37,14 @@ def view_direction(elev: float, azim: float) -> np.ndarray:
 
 def cell_polygons(state, cells, segments: int = 4):
     """Boundary polygons of ``cells``: a list of ``(k * segments, 3)`` arrays, one per cell of
-    ``k`` sides (edges cut into ``segments`` pieces and put back on the surface; unwrapped about
-    the cell's first vertex on the periodic plane)."""
+    ``k`` sides (edges cut into ``segments`` pieces and put back on the surface,
+    :meth:`~spherevm.constraints.Constraint.draw_points`; unwrapped about the cell's first vertex
+    on the periodic plane)."""
     _, a, b, cell_of = fan_triangles(state, cells)
     t = (np.arange(segments) / segments)[None, :, None]
     pts = (1 - t) * a[:, None] + t * b[:, None]                  # (edges, segments, 3)
-    plane = isinstance(state.constraint, PeriodicPlane)
-    if not plane:
-        radius = state.constraint.size_np(state)[state.cell_replica_np()[cell_of]]
-        pts = np.asarray(state.constraint.project_normal(pts, radius[:, None]))
+    size = state.constraint.size_np(state)[state.cell_replica_np()[cell_of]]
+    pts = np.asarray(state.constraint.draw_points(pts, size[:, None]))
     bounds = np.concatenate([[0], np.cumsum(np.bincount(np.searchsorted(cells, cell_of), minlength=len(cells)))])
     polys = [pts[bounds[i]:bounds[i + 1]].reshape(-1, 3) for i in range(len(cells))]
     return polys
@@ -101,7 +99,7 @@ def clip_to_front(poly, view, radius, rim_step: float = STEP):
     return np.array(out)
 
 
-def _draw_plane(ax, state, polys, face, replica):
+def _draw_box(ax, state, polys, face, replica, elev, azim):
     """The cells of one replica on the periodic plane: the box outlined, the cells and their
     periodic images filling it (so cells that cross an edge show on both sides), and the images
     around it faded."""
@@ -122,7 +120,7 @@ def _draw_plane(ax, state, polys, face, replica):
     ax.set_aspect("equal")
 
 
-def _draw_sphere(ax, state, polys, face, replica, elev, azim):
+def _draw_ball(ax, state, polys, face, replica, elev, azim):
     """The hemisphere of one replica's sphere that faces the camera, seen orthographically: cells
     clipped at the rim, so its outline is the sphere's circle."""
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
@@ -140,6 +138,25 @@ def _draw_sphere(ax, state, polys, face, replica, elev, azim):
     ax.set_box_aspect((1, 1, 1), zoom=1.35)
     ax.view_init(elev=elev, azim=azim)
     ax.set_axis_off()
+
+
+def _draw_mesh(ax, state, polys, face, replica, elev, azim):
+    """The cells of one replica as 3D polygons (matplotlib sorts them by depth), seen
+    orthographically from (``elev``, ``azim``), the axes spanning them with equal scales."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    ax.add_collection3d(Poly3DCollection(polys, facecolors=face, edgecolors="k", linewidths=0.4), autolim=False)
+    pts = np.concatenate(polys)
+    centre, half = 0.5 * (pts.max(axis=0) + pts.min(axis=0)), 0.5 * (pts.max(axis=0) - pts.min(axis=0)).max()
+    for set_lim, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre):
+        set_lim(c - half, c + half)
+    ax.set_proj_type("ortho")
+    ax.set_box_aspect((1, 1, 1), zoom=1.2)
+    ax.view_init(elev=elev, azim=azim)
+    ax.set_axis_off()
+
+
+#: the drawing of each :attr:`~spherevm.constraints.Constraint.drawing`
+DRAWINGS = {"mesh": _draw_mesh, "ball": _draw_ball, "box": _draw_box}
 
 
 def draw(ax, state, values=None, quantity: str = "shape_index", cmap: str = "viridis", replica: int = 0,
@@ -163,19 +180,16 @@ def draw(ax, state, values=None, quantity: str = "shape_index", cmap: str = "vir
     hi = vmax if vmax is not None else (vals[ok].max() if ok.any() else 1.0)
     face = colors(vals, cmap, lo, hi) / 255.0
     polys = cell_polygons(state, cells, segments)
-    if isinstance(state.constraint, PeriodicPlane):
-        _draw_plane(ax, state, polys, face, replica)
-    else:
-        _draw_sphere(ax, state, polys, face, replica, elev, azim)
+    DRAWINGS[state.constraint.drawing](ax, state, polys, face, replica, elev, azim)
     mappable = ScalarMappable(norm=matplotlib.colors.Normalize(lo, hi), cmap=cmap)
     mappable.set_array(vals[ok])
     return mappable
 
 
 def new_axes(fig, state, *position):
-    """An axes for :func:`draw`: 3D on a sphere, 2D on the plane."""
-    plane = isinstance(state.constraint, PeriodicPlane)
-    return fig.add_subplot(*position) if plane else fig.add_subplot(*position, projection="3d")
+    """An axes for :func:`draw`: 2D for a surface drawn as a periodic box (the plane), else 3D."""
+    flat = DRAWINGS[state.constraint.drawing] is _draw_box
+    return fig.add_subplot(*position) if flat else fig.add_subplot(*position, projection="3d")
 
 
 def render_state(state, out, values=None, quantity: str = "shape_index", size=(6.0, 5.0), dpi: int = 100,

@@ -8,10 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .constraints import PeriodicPlane, Sphere
 from .constraints.kernels import KERNEL_SURFACES, cell_measures
-from .constraints.plane import _wrap
-from .device import weighted_bincount
 
 CENTROID_METHODS = ("area", "vertex")
 
@@ -74,21 +71,83 @@ def mean_shape_index(state):
 
 
 def regular_polygon_perimeter(n_sides: int, area: float, radius: float) -> float:
-    """Perimeter of the regular spherical ``n_sides``-gon of the given area on a sphere of ``radius``.
-
-    Interior angle from the angle excess ``alpha = (A/R^2 + (n-2) pi)/n``; side from the right
-    triangle centre-vertex-midpoint, ``cos(s/2) = cos(pi/n) / sin(alpha/2)``.
-    """
-    n = int(n_sides)
-    if n < 3:
-        raise ValueError(f"n_sides must be >= 3, got {n_sides}")
+    """Perimeter of the regular spherical ``n_sides``-gon of the given area on a sphere of ``radius``
+    (:func:`polygon_perimeter_at_curvature` at ``K = 1 / radius^2``)."""
     if not radius > 0 or not area > 0:
         raise ValueError(f"area and radius must be positive, got area={area}, radius={radius}")
     if area >= 2 * np.pi * radius ** 2:
         raise ValueError(f"area must be below a hemisphere, 2 pi R^2 = {2 * np.pi * radius ** 2:g}, got {area}")
-    alpha = (area / radius ** 2 + (n - 2) * np.pi) / n
-    half_side = np.arccos(np.clip(np.cos(np.pi / n) / np.sin(alpha / 2), -1.0, 1.0))
-    return float(2 * n * half_side * radius)
+    return float(polygon_perimeter_at_curvature(n_sides, 1.0 / radius ** 2, area))
+
+
+#: Taylor coefficients of arcsin(sqrt(w)) / sqrt(w) = sum c_k w^k (also arcsinh(sqrt(-w)) / sqrt(-w))
+_ASIN_SERIES = np.array([1.0, 1 / 6, 3 / 40, 5 / 112, 35 / 1152, 63 / 2816, 231 / 13312])
+
+
+def _asin_ratio(w):
+    """``arcsin(sqrt(w)) / sqrt(w)`` for w > 0, ``arcsinh(sqrt(-w)) / sqrt(-w)`` for w < 0: one
+    analytic function of w, 1 at w = 0 (series for |w| < 1e-3, error below 1e-22)."""
+    small = np.abs(w) < 1e-3
+    safe = np.where(small, 1.0, w)
+    root = np.sqrt(np.abs(safe))
+    direct = np.where(safe > 0, np.arcsin(np.minimum(root, 1.0)), np.arcsinh(root)) / root
+    return np.where(small, np.polynomial.polynomial.polyval(w, _ASIN_SERIES), direct)
+
+
+def polygon_perimeter_at_curvature(n_sides: int, curvature, area=1.0):
+    """Perimeter of the regular geodesic ``n_sides``-gon of ``area`` on the surface of constant
+    Gaussian curvature ``K`` (sphere K > 0, plane K = 0, hyperbolic plane K < 0).
+
+    ``P = sqrt(4 n A g) f(w)`` with ``beta = pi/n``, ``delta = K A / (2n)``,
+    ``g = sin(beta - delta/2) sinc(delta/2) / cos(beta - delta)``, ``w = g delta / 2`` and
+    ``f(w) = arcsin(sqrt w)/sqrt w`` (``arcsinh(sqrt -w)/sqrt -w`` for w < 0): analytic through
+    K = 0, where it is ``sqrt(4 n A tan(pi/n))``. Derivation in docs/results.md ("Curvature gradients").
+
+    Parameters
+    ----------
+    n_sides : int
+        At least 3.
+    curvature : float or array
+        Gaussian curvature K; ``K * area`` must lie in ``(-(n - 2) pi, 2 pi)`` (ideal polygon to
+        hemisphere).
+    area : float or array
+        Positive; broadcast with ``curvature``.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        The broadcast shape of ``curvature`` and ``area``."""
+    n = int(n_sides)
+    if n < 3:
+        raise ValueError(f"n_sides must be >= 3, got {n_sides}")
+    k, a = np.broadcast_arrays(np.asarray(curvature, dtype=np.float64), np.asarray(area, dtype=np.float64))
+    if not np.all(np.isfinite(a) & (a > 0)):
+        raise ValueError(f"area must be positive and finite, got {area}")
+    ka = k * a
+    if not np.all((ka > -(n - 2) * np.pi) & (ka < 2 * np.pi)):
+        raise ValueError(f"curvature * area must lie in ({-(n - 2) * np.pi:.6g}, {2 * np.pi:.6g}) for a regular "
+                         f"{n}-gon (ideal polygon to hemisphere), got curvature={curvature}, area={area}")
+    beta, delta = np.pi / n, ka / (2 * n)
+    g = np.sin(beta - delta / 2) * np.sinc(delta / (2 * np.pi)) / np.cos(beta - delta)
+    p = np.sqrt(4 * n * a * g) * _asin_ratio(g * delta / 2)
+    return float(p) if p.ndim == 0 else p
+
+
+def pentagon_perimeter_at_curvature(curvature, area=1.0):
+    """The pentagon bound at any Gaussian curvature K: perimeter of the regular pentagon of
+    ``area`` on the surface of constant curvature K (:func:`polygon_perimeter_at_curvature`, n = 5);
+    3.81194 at K = 0 and unit area, lower where K > 0, higher where K < 0.
+
+    Parameters
+    ----------
+    curvature : float or array
+        K, with ``K * area`` in ``(-3 pi, 2 pi)``.
+    area : float or array
+
+    Returns
+    -------
+    float or numpy.ndarray"""
+    return polygon_perimeter_at_curvature(5, curvature, area)
 
 
 def pentagon_perimeter(n_cells) -> float:
@@ -105,8 +164,7 @@ def pentagon_perimeter(n_cells) -> float:
     n = np.asarray(n_cells)
     if np.any(n < 4):
         raise ValueError(f"n_cells must be >= 4, got {n_cells}")
-    values = [regular_polygon_perimeter(5, 1.0, np.sqrt(k / (4 * np.pi))) for k in np.atleast_1d(n)]
-    return values[0] if n.ndim == 0 else np.array(values)
+    return pentagon_perimeter_at_curvature(4 * np.pi / n)
 
 
 def planar_pentagon_perimeter() -> float:
@@ -127,22 +185,22 @@ def surface_pentagon_perimeter(n_cells, surface: str = "sphere"):
 
 # ======================================================================================== centroids
 def cell_centroids(state, method: str = "area"):
-    """Cell positions, ``(n_cells, 3)`` NumPy float64: on the sphere each at distance R from the
-    centre; on a :class:`~spherevm.constraints.PeriodicPlane` wrapped into the box, ``z = 0`` (each
-    polygon unwrapped from its first vertex, :func:`planar_cell_centroids`).
+    """Cell positions on the surface, ``(n_cells, 3)`` NumPy float64
+    (:meth:`~spherevm.constraints.Constraint.cell_centroids`): on the sphere each at distance R from
+    the centre; on a periodic plane wrapped into the box, ``z = 0`` (each polygon unwrapped from its
+    first vertex).
 
-    ``method="area"`` (default): the centre of mass of the spherical polygon, pushed radially onto
-    the sphere: ``integral of n dA = (R^2 / 2) sum_edges theta_e (a_e x b_e) / |a_e x b_e|`` over the
-    edges ``a_e -> b_e`` taken counter-clockwise (exact), normalised. It is continuous through a T1,
-    while the vertex centroid jumps by about ``|r_edge - r_cell| / n`` (0.08 sqrt(<A>) for a
-    hexagon) at every T1, which an MSD's cage plateau would feel. A folded cell (non-positive area,
-    allowed at kA = 0) falls back to the vertex centroid. ``method="vertex"``: ``R`` times the
-    normalised mean of the unit vertex directions (:meth:`spherevm.constraints.Sphere.cell_centers`).
+    ``method="area"`` (default): the centre of mass of the cell's area, on the sphere pushed
+    radially onto it. It is continuous through a T1, while the vertex centroid jumps by about
+    ``|r_edge - r_cell| / n`` (0.08 sqrt(<A>) for a hexagon) at every T1, which an MSD's cage
+    plateau would feel. A folded cell (non-positive area, allowed at kA = 0) falls back to the
+    vertex centroid. ``method="vertex"``: the mean of the vertices (on the sphere ``R`` times the
+    normalised mean of the unit vertex directions).
 
     Parameters
     ----------
     state : State
-        Sphere or PeriodicPlane, either device.
+        Any surface that gives cell centroids (Sphere, PeriodicPlane), either device.
     method : {"area", "vertex"}
 
     Returns
@@ -150,62 +208,4 @@ def cell_centroids(state, method: str = "area"):
     numpy.ndarray (n_cells, 3)"""
     if method not in CENTROID_METHODS:
         raise ValueError(f"method must be one of {CENTROID_METHODS}, got {method!r}")
-    if isinstance(state.constraint, PeriodicPlane):
-        return planar_cell_centroids(state, method)
-    if not isinstance(state.constraint, Sphere):
-        raise NotImplementedError(f"cell_centroids supports the Sphere and PeriodicPlane constraints only, got "
-                                  f"{type(state.constraint).__name__}")
-    xp = state.device.xp
-    pos = state.positions
-    unit = pos / xp.sqrt((pos * pos).sum(axis=1))[:, None]
-    cells = state.vertex_cells.reshape(-1)            # corner k of vertex v lies in cell vertex_cells[v, k]
-    n = state.n_cells
-
-    def per_cell(w):                                  # w: (V, 3 corners, 3 components)
-        return xp.stack([weighted_bincount(cells, weights=w[..., i].reshape(-1), minlength=n) for i in range(3)],
-                        axis=1)
-
-    vertex_centroid = state.constraint.cell_centers(state)
-    direction = vertex_centroid
-    if method == "area":
-        a = unit[:, None, :]
-        b = unit[state.vertex_neighbors]               # edge v -> vertex_neighbors[v, k] runs CCW in that cell
-        cr = xp.cross(a, b)
-        s = xp.sqrt((cr * cr).sum(axis=-1))
-        theta = xp.arctan2(s, (a * b).sum(axis=-1))
-        factor = xp.where(s > 0, theta / xp.where(s > 0, s, 1.0), 1.0)
-        area_vec = per_cell(cr * factor[..., None])    # = 2 * integral of n over the cell (unit sphere)
-        ok = (area_vec * vertex_centroid).sum(axis=1) > 0
-        direction = xp.where(ok[:, None], area_vec, vertex_centroid)
-    direction = direction / xp.sqrt((direction * direction).sum(axis=1))[:, None]
-    out = state.radius[state.cell_replica][:, None] * direction
-    return np.asarray(state.device.to_numpy(out), dtype=np.float64)
-
-
-def planar_cell_centroids(state, method: str = "area"):
-    """Cell centroids on the periodic plane, ``(n_cells, 3)`` NumPy float64, wrapped into the box, z = 0.
-
-    Each polygon is unwrapped edge by edge from its first vertex (vertex j at ``sum_{i<j} e_i``,
-    ``e_i`` the minimum-image edges, as for its area), so a cell straddling the boundary is whole.
-    ``method="area"``: the centroid of the polygon's area, ``sum_i (r_i + r_{i+1}) (r_i x r_{i+1}) / 6A``
-    (continuous through a T1, see :func:`cell_centroids`); a cell of non-positive area falls back to
-    the vertex centroid. ``method="vertex"``: the mean of the unwrapped vertices. The point is then
-    wrapped back into ``[0, Lx) x [0, Ly)``.
-    """
-    xp = state.device.xp
-    pos, sides = state.positions[:, :2], state.cell_sides
-    box = state.box[state.cell_replica]
-    first, valid, e, r = state.constraint.unwrapped_cells(state)
-    mean = xp.where(valid[..., None], r, 0.0).sum(axis=1) / sides[:, None].astype(xp.float64)
-    centre = mean
-    if method == "area":
-        r1 = r + e                                                      # vertex j + 1
-        cross = r[..., 0] * r1[..., 1] - r[..., 1] * r1[..., 0]         # padding rows do not count
-        cross = xp.where(valid, cross, 0.0)
-        area = 0.5 * cross.sum(axis=1)
-        ok = area > 0
-        c = ((r + r1) * cross[..., None]).sum(axis=1) / (6.0 * xp.where(ok, area, 1.0))[:, None]
-        centre = xp.where(ok[:, None], c, mean)
-    out = xp.zeros((state.n_cells, 3))
-    out[:, :2] = _wrap(xp, pos[first[:, 0]] + centre, box)
-    return np.asarray(state.device.to_numpy(out), dtype=np.float64)
+    return np.asarray(state.device.to_numpy(state.constraint.cell_centroids(state, method)), dtype=np.float64)

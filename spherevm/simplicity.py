@@ -17,10 +17,6 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Relative size of a cell's closing sum (the sum of its minimum-image edges) that counts as open.
-OPEN_TOLERANCE = 1e-9
-
-
 def _pairs(width: int):
     """Every pair ``(i, j)`` of edges of a ``width``-gon that share no vertex, ordered by ``j`` and
     then by decreasing ``i``: those of an ``s``-gon are the first ``s (s - 3) / 2`` rows."""
@@ -28,22 +24,17 @@ def _pairs(width: int):
 
 
 def measurable(constraint) -> bool:
-    """Whether the crossing tests know this surface: the sphere's arcs or the plane's minimum images."""
-    return hasattr(constraint, "unwrapped_cells") or getattr(constraint, "name", "") == "sphere"
+    """Whether the crossing tests know this surface: it gives
+    :meth:`~spherevm.constraints.Constraint.orientation_points` (the sphere's arcs, the plane's
+    minimum images)."""
+    return not constraint.missing(["orientation_points"])
 
 
 def points(state, positions, reference=None, size=None):
-    """Points as 3-vectors whose triple products give orientations: unit vectors on the sphere (a
-    great circle's normal is ``a x b``), ``(x, y, 1)`` on the plane (``(a x b) . c`` is twice the
-    signed area of the triangle a, b, c). On the plane ``positions`` are unwrapped to the images
-    nearest ``reference`` first (given: they are unwrapped already)."""
-    con = state.constraint
-    if hasattr(con, "unwrapped_cells"):
-        p = positions if reference is None else con.unwrap(positions, reference, size)
-        out = np.ones(p.shape[:-1] + (3,))
-        out[..., :2] = p[..., :2]
-        return out
-    return positions / np.linalg.norm(positions, axis=-1)[..., None]
+    """Points as 3-vectors whose triple products give orientations
+    (:meth:`~spherevm.constraints.Constraint.orientation_points`: unit vectors on the sphere,
+    ``(x, y, 1)`` on the plane, unwrapped to the images nearest ``reference`` where given)."""
+    return state.constraint.orientation_points(positions, reference, size)
 
 
 def arcs_cross(a, b, c, d):
@@ -56,24 +47,6 @@ def arcs_cross(a, b, c, d):
                 + (x[:, 0] * y[:, 1] - x[:, 1] * y[:, 0]) * z[:, 2])
     s1, s2, s3, s4 = triple(a, b, c), triple(a, b, d), triple(c, d, a), triple(c, d, b)
     return (s1 * s2 < 0) & (s3 * s4 < 0) & (s2 * s3 > 0)
-
-
-def _corner_points(state, sides):
-    """Each cell's edges as ``(start, stop)`` in :func:`_points` coordinates, ``(corners, 3)`` with
-    the corners of cell 0 first, in slot order; on the plane each polygon unwrapped from its first
-    vertex along its minimum-image edges."""
-    con = state.constraint
-    to_np = state.device.to_numpy
-    if hasattr(con, "unwrapped_cells"):
-        _, valid, e, r = con.unwrapped_cells(state)
-        valid, e, r = to_np(valid), to_np(e), to_np(r)
-        return points(state, r[valid]), points(state, r[valid] + e[valid])
-    pos, cv = to_np(state.positions), to_np(state.cell_vertices)
-    col = np.arange(cv.shape[1])[None, :]
-    valid = col < sides[:, None]
-    nxt = np.where(col + 1 < sides[:, None], np.roll(cv, -1, axis=1), cv[:, :1])
-    unit = points(state, pos)
-    return unit[cv[valid]], unit[nxt[valid]]
 
 
 def self_crossings(state):
@@ -94,26 +67,15 @@ def self_crossings(state):
         return sides, cell, pair[:, 0], pair[:, 1], first + pair[:, 0], first + pair[:, 1]
 
     sides, cell, i, j, ci, cj = state.cached(("simplicity", "pairs"), build, topology=True)
-    start, stop = _corner_points(state, sides)
+    start, stop = state.constraint.edge_points(state, sides)
     cross = arcs_cross(start[ci], stop[ci], start[cj], stop[cj])
     return cell[cross], i[cross], j[cross]
 
 
 def open_cells(state):
-    """Cells whose minimum-image edges do not add up to zero (a periodic surface only; otherwise an
-    empty array): an edge of theirs reached half the box, and its minimum image jumped to another
-    image. Returns ``(cells, edge slots)``: for each open cell the slot of its edge longest along
-    the box (relative to the box side), the one that jumped."""
-    con = state.constraint
-    if not hasattr(con, "unwrapped_cells"):
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    _, valid, e, _ = con.unwrapped_cells(state)
-    e = state.device.to_numpy(e)
-    box = state.device.to_numpy(state.box)[state.cell_replica_np()]              # (C, 2)
-    closing = np.abs(e.sum(axis=1)) / box                                         # (C, 2)
-    bad = np.flatnonzero((closing > OPEN_TOLERANCE).any(axis=1))
-    reach = (np.abs(e[bad]) / box[bad, None, :]).max(axis=2)                     # (bad, W)
-    return bad, np.argmax(reach, axis=1)
+    """Cells whose edges do not add up to zero, with the slot of the edge that jumped
+    (:meth:`~spherevm.constraints.Constraint.open_cells`: a periodic surface's; else none)."""
+    return state.constraint.open_cells(state)
 
 
 def counts(state, areas=None):
@@ -143,15 +105,16 @@ def check_closed(state):
         c, k = int(cells[0]), int(slot[0])
         r = int(state.cell_replica_np()[c])
         raise ValueError(f"replica {r}: edge {int(cv[c, k])} -> {int(cv[c, (k + 1) % sides[c]])} of cell {c} reached "
-                         f"half the box {state.device.to_numpy(state.box)[r].tolist()}: its minimum image jumped and "
+                         f"half the box {state.constraint.size_np(state)[r].tolist()}: its minimum image jumped and "
                          f"the cell no longer closes ({len(cells)} open cell(s)); the box is too small for its "
                          "cells, or the step too large")
 
 
 def check_cover(state, areas):
-    """The cells cover the surface exactly once: their areas add up to its area, and on a sphere
-    none covers more than a hemisphere. A cell's area is a fan of signed triangles, exact below a
-    hemisphere; a larger cell measures A - 4 pi R^2 (and looks clockwise), so the sum catches it."""
+    """The cells cover the surface exactly once: their areas add up to its area (the constraint
+    explains a mismatch, :meth:`~spherevm.constraints.Constraint.cover_error`), and each is one the
+    surface measures (:meth:`~spherevm.constraints.Constraint.check_cell_areas`: on a sphere none
+    covers more than a hemisphere)."""
     con = state.constraint
     try:
         surface = con.total_area_np(con.size_np(state))
@@ -160,28 +123,10 @@ def check_cover(state, areas):
     crep = state.cell_replica_np()
     total = np.bincount(crep, weights=areas, minlength=state.n_replicas)
     wrong = np.flatnonzero(np.abs(total - surface) > 1e-9 * surface)
-    if len(wrong) and getattr(con, "euler_characteristic", 2) == 0:
-        r = int(wrong[0])
-        raise ValueError(f"replica {r}: the cells cover an area {total[r]:.12g}, but the box's is {surface[r]:.12g}; "
-                         "some cell wraps around the box or overlaps another")
     if len(wrong):
         r = int(wrong[0])
-        cells = np.flatnonzero(crep == r)
-        if abs(total[r] + surface[r]) <= 1e-9 * surface[r]:
-            raise ValueError(f"replica {r}: cell {int(cells[0])} and every other cell is listed clockwise seen from "
-                             "outside (their areas add up to -4 pi R^2); list cell vertices counter-clockwise")
-        c = int(cells[np.argmin(areas[cells])])
-        raise ValueError(f"replica {r}: the cell areas add up to {total[r]:.12g}, not the sphere's 4 pi R^2 = "
-                         f"{surface[r]:.12g}: cell {c} (measured {areas[c]:.6g}) is larger than a hemisphere, which "
-                         "spherevm cannot measure (areas are fans of spherical triangles: such a cell gets "
-                         "A - 4 pi R^2), or cells overlap; use more cells, so that every cell is smaller than a "
-                         "hemisphere")
-    if getattr(con, "euler_characteristic", 2) == 2:
-        big = np.flatnonzero(areas > 0.5 * surface[crep])
-        if len(big):
-            c = int(big[0])
-            raise ValueError(f"cell {c} covers {areas[c] / surface[crep[c]]:.3g} of its sphere, more than a "
-                             "hemisphere: spherevm measures cells smaller than a hemisphere only; use more cells")
+        raise ValueError(f"replica {r}: {con.cover_error(state, areas, r, total[r], surface[r])}")
+    con.check_cell_areas(state, areas, surface)
 
 
 def check_simple(state):

@@ -36,8 +36,9 @@ class State:
         Each vertex's three neighbours and three cells, counter-clockwise.
     vertex_start, cell_start : array (R + 1,)
         Where each replica's vertices and cells start.
-    radius : float or array (R,), optional
-        Sphere radius per replica (sphere only).
+    size : array, ``(R,) + constraint.size_shape``, optional
+        Each replica's surface size (:attr:`~spherevm.constraints.Constraint.size_names`), or one
+        size for all replicas.
     constraint : Constraint, optional
         The surface (default :class:`~spherevm.constraints.Sphere`).
     device : Device or str
@@ -45,51 +46,54 @@ class State:
     validate : bool
         Check the network (:func:`spherevm.topology.check`); call :meth:`validate` again after
         editing arrays by hand.
-    box : array (R, 2), optional
-        The periodic box (Lx, Ly) per replica, with ``constraint=PeriodicPlane()``."""
+    radius, box : optional
+        The size under the name of its :attr:`~spherevm.constraints.Constraint.size_key`, instead
+        of ``size``: a sphere's radius per replica (or one), a periodic plane's (Lx, Ly)."""
 
     def __init__(self, positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells,
-                 vertex_start, cell_start, radius=None, constraint=None, device=CPU, validate=True, box=None):
+                 vertex_start, cell_start, radius=None, constraint=None, device=CPU, validate=True, box=None,
+                 size=None):
         from .constraints import Sphere
         self.device = resolve(device)
         self.constraint = constraint if constraint is not None else Sphere()
         xp = self.device.xp
         self.vertex_start = np.asarray(vertex_start, dtype=np.int64)
         n_rep = max(len(self.vertex_start) - 1, 1)      # the layout itself is checked by _derive_layout
-        self.radius = self.box = None
-        if getattr(self.constraint, "size_name", "radius") == "box":
-            if radius is not None or box is None:
-                raise ValueError(f"a State on {self.constraint!r} needs box (Lx, Ly per replica) and no radius; "
-                                 f"got radius={'None' if radius is None else 'given'}, "
-                                 f"box={'None' if box is None else 'given'}")
-            b = np.asarray(self.device.to_numpy(box), dtype=np.float64)
-            if b.ndim not in (1, 2) or b.shape[-1] != 2 or (b.ndim == 2 and len(b) not in (1, n_rep)):
-                raise ValueError(f"box must be (Lx, Ly) or one (Lx, Ly) per replica ({n_rep} replicas), "
-                                 f"got shape {b.shape}")
-            self.box = xp.asarray(np.broadcast_to(b, (n_rep, 2)).copy())
-        elif box is not None:
-            raise ValueError(f"box is given, but {self.constraint!r} takes a radius; a periodic box needs "
-                             "constraint=PeriodicPlane()")
-        elif radius is None:
-            raise ValueError(f"a State on {self.constraint!r} needs radius")
         self.positions = xp.asarray(positions, dtype=xp.float64)
         self.cell_vertices = xp.asarray(cell_vertices, dtype=xp.int32)
         self.cell_sides = xp.asarray(cell_sides, dtype=xp.int32)
         self.vertex_neighbors = xp.asarray(vertex_neighbors, dtype=xp.int32)
         self.vertex_cells = xp.asarray(vertex_cells, dtype=xp.int32)
         self.cell_start = np.asarray(cell_start, dtype=np.int64)
-        if self.box is None:
-            r = np.asarray(self.device.to_numpy(radius), dtype=np.float64)
-            if r.ndim > 1 or r.size not in (1, n_rep):
-                raise ValueError(f"radius must be a scalar or one value per replica ({n_rep} replicas), "
-                                 f"got shape {r.shape}")
-            self.radius = xp.asarray(np.broadcast_to(r.reshape(-1), (n_rep,)).copy())
+        self.size = xp.asarray(self._per_replica(n_rep, size=size, radius=radius, box=box))
         self.topology_version = 0   # bumped by every topology edit (T1 flips): caches key on it
         self._cached = {}
         self._buffers = {}          # capacity of the arrays resize() refills (Device.fit)
         self._derive_layout()
         if validate:
             self.validate()
+
+    def _per_replica(self, n_rep, **given):
+        """The one size given (as ``size`` or under the constraint's ``size_key``) as a
+        ``(n_rep, *size_shape)`` float64 NumPy array, or a ValueError naming the argument."""
+        con = self.constraint
+        key, shape, names = con.size_key, tuple(con.size_shape), ", ".join(con.size_names)
+        passed = [k for k, v in given.items() if v is not None]
+        wrong = [k for k in passed if k not in ("size", key)]
+        if wrong:
+            raise ValueError(f"{wrong[0]} is given, but a State on {con!r} needs {key} ({names} per replica), "
+                             "the size its constraint declares")
+        if len(passed) != 1:
+            raise ValueError(f"a State on {con!r} needs {key} ({names} per replica) or size, given once; got "
+                             f"{', '.join(f'{k}=given' for k in passed) or 'none'}")
+        name = passed[0]
+        value = np.asarray(self.device.to_numpy(given[name]), dtype=np.float64)
+        if value.shape == shape or (value.shape[1:] == shape and value.ndim == len(shape) + 1
+                                    and len(value) in (1, n_rep)):
+            return np.broadcast_to(value, (n_rep,) + shape).copy()
+        one = "a scalar" if shape == () else f"({names})"
+        each = "one value" if shape == () else f"one ({names})"
+        raise ValueError(f"{name} must be {one} or {each} per replica ({n_rep} replicas), got shape {value.shape}")
 
     # ------------------------------------------------------------------ layout
     def _derive_layout(self):
@@ -101,11 +105,7 @@ class State:
         if vs[-1] != len(self.positions) or cs[-1] != len(self.cell_sides):
             raise ValueError(f"replica layout covers {vs[-1]} vertices and {cs[-1]} cells, "
                              f"but the arrays hold {len(self.positions)} and {len(self.cell_sides)}")
-        size = self.box if self.box is not None else self.radius
-        r = np.asarray(self.device.to_numpy(size))
-        if not np.all(np.isfinite(r)) or np.any(r <= 0):
-            name = "box" if self.box is not None else "radius"
-            raise ValueError(f"{name} must be positive and finite, got {r[~(np.isfinite(r) & (r > 0))][0]}")
+        self.constraint.check_size(self.size_np())
         self._vertex_replica = np.repeat(np.arange(self.n_replicas, dtype=np.int32), np.diff(vs))
         self._cell_replica = np.repeat(np.arange(self.n_replicas, dtype=np.int32), np.diff(cs))
         self._refill("vertex_replica", self._vertex_replica, np.int32)
@@ -123,31 +123,44 @@ class State:
         return self._cell_replica
 
     @property
-    def radius(self):
-        """Per-replica sphere radius on the device (None on a periodic plane). Assign a new array
-        to change it (RadiusSchedule does): the host copy :meth:`radius_np` follows assignments,
-        not edits in place."""
-        return self._radius
+    def size(self):
+        """Each replica's surface size on the device, ``(n_replicas, *constraint.size_shape)``
+        (a sphere's radius, a periodic plane's (Lx, Ly)). Assign a new array to change it
+        (RadiusSchedule does): the host copy :meth:`size_np` follows assignments, not edits in place."""
+        return self._size
 
-    @radius.setter
-    def radius(self, value):
-        self._radius, self._radius_host = value, None
+    @size.setter
+    def size(self, value):
+        self._size, self._size_host = value, None
 
-    def radius_np(self):
-        """The radius as a NumPy array: a host copy kept from the last assignment, so reading it
-        every step costs no device-to-host transfer."""
-        if self._radius_host is None:
-            self._radius_host = np.asarray(self.device.to_numpy(self._radius))
-        return self._radius_host.copy()
+    def size_np(self):
+        """The size as a NumPy array: a host copy kept from the last assignment, so reading it every
+        step costs no device-to-host transfer."""
+        if self._size_host is None:
+            self._size_host = np.asarray(self.device.to_numpy(self._size))
+        return self._size_host.copy()
 
-    def box_np(self):
-        """``(n_replicas, 2)`` (Lx, Ly) of a periodic plane; None on other surfaces."""
-        return None if self.box is None else np.asarray(self.device.to_numpy(self.box))
+    def _views(key, what):        # called in the class body: builds two members
+        """``state.<key>`` and ``state.<key>_np()``: :attr:`size` (and :meth:`size_np`) where the
+        constraint's ``size_key`` is ``key``, else None."""
+        def get(self):
+            return self._size if self.constraint.size_key == key else None
 
-    @property
-    def size_name(self) -> str:
-        """``"box"`` on a periodic plane, ``"radius"`` otherwise: the per-replica size array's name."""
-        return "box" if self.box is not None else "radius"
+        def put(self, value):
+            if self.constraint.size_key != key:
+                raise ValueError(f"{self.constraint!r} has no {key}: its size is {self.constraint.size_key} "
+                                 f"({', '.join(self.constraint.size_names)}); assign state.size")
+            self.size = value
+
+        def host(self):
+            return self.size_np() if self.constraint.size_key == key else None
+
+        host.__doc__ = f":meth:`size_np` where the size is {what}, else None."
+        return property(get, put, doc=f":attr:`size` where it is {what}, else None (assigning sets :attr:`size`)."), host
+
+    radius, radius_np = _views("radius", "a radius per replica (a sphere)")
+    box, box_np = _views("box", "a box (Lx, Ly) per replica (a periodic plane)")
+    del _views
 
     @property
     def n_vertices(self) -> int:
@@ -176,8 +189,7 @@ class State:
     @property
     def mean_cell_area(self):
         """<A> per replica: total surface area over the number of cells."""
-        size = self.box_np() if self.box is not None else self.radius_np()
-        return self.constraint.total_area_np(size) / self.cells_per_replica
+        return self.constraint.total_area_np(self.size_np()) / self.cells_per_replica
 
     def cached(self, key, build, topology: bool = False):
         """``build()``, computed once and kept with this State under ``key`` (recomputed after a
@@ -257,10 +269,11 @@ class State:
         return dict(positions=self.positions.copy(), cell_vertices=self.cell_vertices.copy(),
                     cell_sides=self.cell_sides.copy(), vertex_neighbors=self.vertex_neighbors.copy(),
                     vertex_cells=self.vertex_cells.copy(), vertex_start=self.vertex_start.copy(),
-                    cell_start=self.cell_start.copy(), **{self.size_name: getattr(self, self.size_name).copy()})
+                    cell_start=self.cell_start.copy(), **{self.constraint.size_key: self.size.copy()})
 
     def arrays_np(self):
-        """Every array of the State by its constructor's name, as NumPy copies."""
+        """Every array of the State by its constructor's name, as NumPy copies (the size under its
+        constraint's ``size_key``: ``radius``, ``box`` or ``size``)."""
         return {k: self.device.to_numpy(v) for k, v in self._arrays().items()}
 
     def replica(self, r: int) -> "State":
@@ -307,7 +320,7 @@ class State:
                      np.concatenate(([0], np.cumsum(self.vertex_start[r + 1] - self.vertex_start[r]))),
                      np.concatenate(([0], np.cumsum(self.cell_start[r + 1] - self.cell_start[r]))),
                      constraint=self.constraint, device=self.device, validate=False,
-                     **{self.size_name: np.asarray(self.device.to_numpy(getattr(self, self.size_name)))[r]})
+                     size=self.size_np()[r])
 
     def write_back(self, selection: ReplicaSelection, part: "State"):
         """Copy ``part`` back into this State's rows of its replicas.
@@ -350,12 +363,12 @@ class State:
         if not states:
             raise ValueError("states must hold at least one State")
         width = max(s.max_sides for s in states)
-        size = states[0].size_name
         kinds = {type(s.constraint).__name__ for s in states}
         if len(kinds) > 1:
             raise ValueError(f"states must share one constraint type to be concatenated, got {sorted(kinds)}")
+        key = states[0].constraint.size_key
         parts = {k: [] for k in ("positions", "cell_vertices", "cell_sides", "vertex_neighbors",
-                                 "vertex_cells", size)}
+                                 "vertex_cells", key)}
         vstart, cstart = [0], [0]
         for s in states:
             a = s.arrays_np()
@@ -367,7 +380,7 @@ class State:
             parts["cell_sides"].append(a["cell_sides"])
             parts["vertex_neighbors"].append(a["vertex_neighbors"] + v0)
             parts["vertex_cells"].append(a["vertex_cells"] + c0)
-            parts[size].append(a[size])
+            parts[key].append(a[key])
             vstart.extend((s.vertex_start[1:] + v0).tolist())
             cstart.extend((s.cell_start[1:] + c0).tolist())
         return cls(**{k: np.concatenate(v) for k, v in parts.items()}, vertex_start=vstart,

@@ -62,11 +62,12 @@ __device__ __forceinline__ void to_others(double* const* bases, int rank, long o
 
 // The forces' cell parts (Forces::cell: the vertex model's vm_cell_terms, ...) of `count` cells,
 // cell(0) .. cell(count - 1), by the calling block, from each cell's area and perimeter, the
-// vertices' directions from norm (Surface::directions); the coefficients go to the stages' regions
-// of `data` (the tissue's coefficient area: nc cells from c0); sent(c) after each. On a surface that splits a cell's corners (the sphere: Surface::split_corners), a cell takes
-// `lanes` neighbouring threads (a power of two, at most 8): each lane computes every lanes-th
-// corner's arc and fan factor (Surface::cell_corner), and every lane adds them in the cell's order
-// (Surface::add_corner), so the chain of a cell's atan2s is shortened and the bits are
+// vertices' directions from norm (Surface::directions), and the cell's vertices; the coefficients
+// go to the stages' regions of `data` (the tissue's coefficient area: nc cells from c0); sent(c)
+// after each. On a surface that splits a cell's corners (the sphere: Surface::split_corners), a
+// cell takes `lanes` neighbouring threads (a power of two, at most 8): each lane computes every
+// lanes-th corner's arc and fan factor (Surface::cell_corner), and every lane adds them in the
+// cell's order (Surface::add_corner), so the chain of a cell's atan2s is shortened and the bits are
 // cell_measures' whatever the lanes. Every thread of the block calls it, with S = Surface.
 template <class S, class Forces, class Cell, class Sent>
 __device__ __forceinline__ void tissue_cells(const double* P, KeptNorm norm, const int* cell_vertices,
@@ -100,7 +101,7 @@ __device__ __forceinline__ void tissue_cells(const double* P, KeptNorm norm, con
                 if (mine && lane == 0) {
                     double A, Pc;
                     S::finish_measures(sum, s, &A, &Pc);
-                    forces.cell(A, Pc, c, s, data, nc, c0);
+                    forces.cell(A, Pc, c, s, data, nc, c0, P, row, n);
                     sent(c);
                 }
             }
@@ -109,9 +110,10 @@ __device__ __forceinline__ void tissue_cells(const double* P, KeptNorm norm, con
     }
     for (int i = tid; i < count; i += stride) {   // one thread a cell
         const int c = cell(i);
+        const int* row = cell_vertices + (long)c * max_sides;
         double A, Pc;
-        S::cell_measures(P, cell_vertices + (long)c * max_sides, sides[c], s, &A, &Pc, norm);
-        forces.cell(A, Pc, c, s, data, nc, c0);
+        S::cell_measures(P, row, sides[c], s, &A, &Pc, norm);
+        forces.cell(A, Pc, c, s, data, nc, c0, P, row, sides[c]);
         sent(c);
     }
 }
@@ -152,19 +154,52 @@ struct NoPass {
     __device__ __forceinline__ int index(const int*) const { return 0; }
 };
 
+// A force stage joined into another's vertex force (FusedStage.extra, Force.fused_combined): the
+// Extra's add_gradient (plugins/forces/vertex_model.cuh; Surface::vertex_force) through which the
+// other stage's vertex force adds the joined stage's gradient before its projection, as the pair's
+// general kernels do.
+template <class Stage>
+struct StageExtra {
+    const Stage& stage;
+    const double* coef;   // the joined stage's regions
+    const double* more;
+    __device__ __forceinline__ void add_gradient(vec3& g, const double* pos, const int* vn, const int* vc, long v,
+                                                 vec3 x) const
+    {
+        stage.add_gradient(g, pos, vn, vc, v, x, coef, more);
+    }
+};
+
+// The forces' neighbour parts (Forces::neighbours: a second per-cell part, which may read any cell's
+// coefficients) of cells cb0..cb1 by the calling block, into the stages' regions of `more`; sent(c)
+// after each.
+template <class Forces, class Sent>
+__device__ __forceinline__ void tissue_neighbours(const Forces& forces, const TissueState& st, const double* P,
+                                                  Surface::Size s, int cb0, int cb1, const double* data,
+                                                  double* more, long nc, long c0, Sent sent)
+{
+    for (int c = cb0 + threadIdx.x; c < cb1; c += blockDim.x) {
+        forces.neighbours(P, st.vc, st.cell_vertices, st.sides, st.max_sides, c, s, data, more, nc, c0);
+        sent(c);
+    }
+}
+
 // The steps of run (Plan.device_cycle: update, integrate). At most TISSUE_THREADS threads a block
 // (tissue_steps.layout's bound). Shared memory of each block: TissueStepLayout (tissue_steps.py's
-// STEP_LAYOUT, its one definition): two copies of the positions (3 nv each: the step's, and the next,
-// which the move writes while other blocks still read the step's), the forces' cell coefficients
-// (Forces::cell_doubles a cell), on the sphere two copies of the kept 1 / |x| (nv each, as the
-// positions), the forces of the block's vertices (3 ceil(nv / TISSUE_CLUSTER)), then the pass's
-// claims (nc ints) and flips (ceil(nc / 4) ints).
+// STEP_LAYOUT, its one definition): two copies of the positions (3 nv each: the step's, and the
+// next, which the move writes while other blocks still read the step's), the forces' cell
+// coefficients (Forces::cell_doubles a cell) and neighbour parts (Forces::neighbour_doubles a
+// cell), on the sphere two copies of the kept 1 / |x| (nv each, as the positions), the forces of
+// the block's vertices (3 ceil(nv / TISSUE_CLUSTER)), then the pass's claims (nc ints) and flips
+// (ceil(nc / 4) ints).
 //
 // A step: every block lists the short edges of its vertices and computes its cells' coefficients on
 // the step's positions (a barrier); if any edge is short, the first block checks and flips them and
 // computes again the four cells of each flip (a flip moves and re-links only its four cells, and the
-// flips of a pass share no cell: T1's claims), then a barrier; then the forces and the move of every
-// block's vertices (a barrier). Where the move has a cell part (active cell directors), every block
+// flips of a pass share no cell: T1's claims), then a barrier; where a force has a neighbour part
+// (Forces::neighbours, read from every cell's coefficients: the bending force's), every block's cells'
+// neighbour parts, on the cells after the flips, then a barrier; then the forces and the move of
+// every block's vertices (a barrier). Where the move has a cell part (active cell directors), every block
 // does its cells' part of a step's move with the next step's first phase (on the positions before
 // that step's flips, as the general path does it) and after the last step. The cells are those the
 // general path computes after T1's pass, with two or three barriers a step instead of four.
@@ -183,13 +218,15 @@ __device__ __forceinline__ void tissue_steps_body(const TissueState& st, const F
     const int vb0 = min(v1, v0 + rank * vchunk), vb1 = min(v1, vb0 + vchunk);   // this block's vertices
     const int cb0 = min(c1, c0 + rank * cchunk), cb1 = min(c1, cb0 + cchunk);   // and cells
     const int kept = Surface::directions ? nv : 0;
-    const TissueStepLayout at = tissue_step_layout(nv, nc, kept, vchunk, Forces::cell_doubles);
+    const TissueStepLayout at = tissue_step_layout(nv, nc, kept, vchunk, Forces::cell_doubles,
+                                                   Forces::neighbour_doubles);
     // the arrays, as offsets from a block's shared memory that global indices address (copy k of the
     // positions at at_pos + 3 nv k, of the kept norms at at_inv + kept k: scalars, not arrays that a
     // step's index would leave in local memory)
     const long at_pos = at.pos - 3L * v0;
     const long at_inv = at.inv - v0;
     double* coef = shared + at.coef;   // the coefficient area: each force stage's region (Forces::cell)
+    double* more = shared + at.more;   // and of the neighbour parts (Forces::neighbours)
     double* F = shared + at.force - 3L * vb0;
     int* claim = (int*)(shared + at.ints) + at.claim - c0;
     int* flipped = (int*)(shared + at.ints) + at.flipped;   // the first block's: the candidates its pass flipped
@@ -207,6 +244,10 @@ __device__ __forceinline__ void tissue_steps_body(const TissueState& st, const F
     auto send = [&](int c) {   // a cell's coefficients to the other blocks
         for (int q = 0; q < TISSUE_CLUSTER; ++q)
             if (q != rank) Forces::copy_cell(c, coef, bases[q] + at.coef, nc, c0);
+    };
+    auto send_more = [&](int c) {   // a cell's neighbour parts to the other blocks
+        for (int q = 0; q < TISSUE_CLUSTER; ++q)
+            if (q != rank) Forces::copy_more(c, more, bases[q] + at.more, nc, c0);
     };
     cluster_sync();   // every block of the cluster has started (its shared memory may be written)
     int now = 0;
@@ -247,8 +288,12 @@ __device__ __forceinline__ void tissue_steps_body(const TissueState& st, const F
             cluster_sync();   // the flips and their cells everywhere; every block has read the count
             if (rank == 0 && tid == 0) { n_cand = 0; n_flipped = 0; }
         }
+        if constexpr (Forces::neighbour_doubles > 0) {   // this block's cells' neighbour parts, everywhere
+            tissue_neighbours(forces, st, P, s, cb0, cb1, coef, more, nc, c0, send_more);
+            cluster_sync();
+        }
         for (int v = vb0 + tid; v < vb1; v += stride) {   // this block's vertices: force, then the move
-            store3(F, v, forces.vertex(P, st.vn, st.vc, v, s, coef, nc, c0, norm));
+            store3(F, v, forces.vertex(P, st.vn, st.vc, v, s, coef, more, nc, c0, norm));
             store3(next, v, load3(P, v));
             move.vertex(next, F, v, st.vc, s, r, timestep);
             to_others(bases, rank, pos_next, v, load3(next, v));
@@ -272,7 +317,8 @@ __device__ __forceinline__ void tissue_steps_body(const TissueState& st, const F
 // move, then the pass of the next timestep, as minimize orders them. A stopped replica (st.active
 // false) only has its vertex state (velocities) zeroed (and the pass's counters, as each pass does).
 // Shared memory: TissueMinimizeLayout (tissue_steps.py's MINIMIZE_LAYOUT): the positions, forces
-// and the minimiser's vertex state (3 nv each), the forces' cell coefficients, on the sphere the kept
+// and the minimiser's vertex state (3 nv each), the forces' cell coefficients and neighbour parts (after
+// the cell coefficients, a barrier between), on the sphere the kept
 // 1 / |x| (nv, KeptNorm: after each move and flip), the sums' warp parts (n_sums (n_warps + 1),
 // n_warps the warps from v0 & ~31 to v1), then the pass's claims (nc ints).
 template <class Forces, class Move, class Pass>
@@ -288,13 +334,15 @@ __device__ __forceinline__ void tissue_minimize_body(const TissueState& st, cons
     const long base = v0 & ~31L;
     const int n_warps = (int)((v1 - base + 31) >> 5), rounds = (int)((v1 - base + stride - 1) / stride);
     const int kept = Surface::directions ? nv : 0;
-    const TissueMinimizeLayout at = tissue_minimize_layout(nv, nc, kept, n_warps, Forces::cell_doubles, Move::n_sums,
+    const TissueMinimizeLayout at = tissue_minimize_layout(nv, nc, kept, n_warps, Forces::cell_doubles,
+                                                             Forces::neighbour_doubles, Move::n_sums,
                                                              Move::vertex_doubles);
     // the arrays, offset so that global indices address them
     double* P = shared + at.pos - 3L * v0;
     double* F = shared + at.force - 3L * v0;
     double* V = shared + at.velocity - 3L * v0;
     double* coef = shared + at.coef;
+    double* more = shared + at.more;
     double* inv = shared + at.inv - v0;
     double* part = shared + at.part;
     int* claim = (int*)(shared + at.ints) + at.claim - c0;
@@ -320,12 +368,16 @@ __device__ __forceinline__ void tissue_minimize_body(const TissueState& st, cons
                 tissue_cells<Surface>(P, norm, st.cell_vertices, st.sides, st.max_sides, s, nc,
                                       [=](int i) { return c0 + i; }, lanes, forces, coef, nc, c0, [](int) {});
             __syncthreads();
+            if constexpr (Forces::neighbour_doubles > 0) {
+                tissue_neighbours(forces, st, P, s, c0, c1, coef, more, nc, c0, [](int) {});
+                __syncthreads();
+            }
             for (int k = 0; k < rounds; ++k) {   // forces, and the terms of the sums
                 long g = base + tid + (long)k * stride;
                 bool mine = g >= v0 && g < v1;
                 double terms[Move::n_sums] = {};
                 if (mine) {
-                    vec3 f = forces.vertex(P, st.vn, st.vc, g, s, coef, nc, c0, norm);
+                    vec3 f = forces.vertex(P, st.vn, st.vc, g, s, coef, more, nc, c0, norm);
                     store3(F, g, f);
                     move.terms(f, load3(V, g), terms);
                 }

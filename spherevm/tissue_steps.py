@@ -12,10 +12,14 @@ between them.
 
 The kernel is assembled from the stages of the operations present
 (:meth:`spherevm.plugins.base.Operation.fused_stage`, :mod:`spherevm.plugins.fusion`): the forces'
-stages, the integrator's (a run's move, or a minimiser's sums, control and move) and at most one
-updater's pass. It is compiled once per combination of stages, surface and cluster size. Nothing
-here names an operation: an operation without a stage (None) keeps the steps on CUDA graphs of
-the general kernels, and :func:`why_not` says which. Each stage calls the same device functions as
+stages (a pair that ``Force.combined`` computes together as one, through ``Force.fused_combined``:
+:func:`force_stages`), the integrator's (a run's move, or a minimiser's sums, control and move) and
+at most one updater's pass. A force's stage has a cell part (from each cell's area, perimeter and
+vertices), optionally a second per-cell part that reads its neighbours' coefficients (after every
+cell's first part and T1's flips, a barrier between: the bending force's), and a vertex part. The
+kernel is compiled once per combination of stages, surface and cluster size. Nothing here names an
+operation: an operation without a stage (None) keeps the steps on CUDA graphs of the general
+kernels, and :func:`why_not` says which. Each stage calls the same device functions as
 its operation's general kernels with the same global indices, so the trajectory is the general
 kernels' bit for bit: the same Philox draws, the same flips (lowest edge index wins), the same
 arithmetic, the forces summed in the operations' order (``tests/test_tissue_steps.py``).
@@ -28,7 +32,8 @@ offsets and the bytes asked for at launch come from it.
 Sizes (on an H200): spherical tissues of about 1,150 cells on one block and 1,500 on a cluster of
 blocks, planar ones of 1,400 and 1,900, for the vertex model, T1 and Brownian dynamics; a
 minimisation uses one block a tissue (about 1,250 cells on the sphere, 1,400 on the plane): its
-sums would cross the cluster at every iteration.
+sums would cross the cluster at every iteration. With the bending force (7 doubles a cell more):
+about 900 cells on one block, 1,100 on a cluster, 950 minimising.
 """
 from __future__ import annotations
 
@@ -37,8 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .constraints import Sphere
-from .constraints.kernels import SURFACE_DEFINES
+from .constraints.kernels import SURFACE_DEFINES, keeps_directions
 from .device import BLOCK, load_source
 from .kernel_struct import KernelStruct
 from .plan import Plan
@@ -109,19 +113,22 @@ class Layout:
         return 8 * doubles + 4 * ints
 
 
-#: A run's steps: two copies of the positions, the forces' cell coefficients (cd a cell), on the
-#: sphere two copies of the kept inverse norms (kept: nv, else 0), the forces of the block's vertices
-#: (vchunk of them); the pass's claims (an int a cell) and a pass's flips (an int per four cells).
-STEP_LAYOUT = Layout("TissueStepLayout", "tissue_step_layout", ("nv", "nc", "kept", "vchunk", "cd"),
-                     [("pos", "6 * nv"), ("coef", "cd * nc"), ("inv", "2 * kept"), ("force", "3 * vchunk")],
+#: A run's steps: two copies of the positions, the forces' cell coefficients (cd a cell) and their
+#: neighbour parts' (md a cell), on the sphere two copies of the kept inverse norms (kept: nv, else
+#: 0), the forces of the block's vertices (vchunk of them); the pass's claims (an int a cell) and a
+#: pass's flips (an int per four cells).
+STEP_LAYOUT = Layout("TissueStepLayout", "tissue_step_layout", ("nv", "nc", "kept", "vchunk", "cd", "md"),
+                     [("pos", "6 * nv"), ("coef", "cd * nc"), ("more", "md * nc"), ("inv", "2 * kept"),
+                      ("force", "3 * vchunk")],
                      [("claim", "nc"), ("flipped", "(nc + 3) // 4")])
 #: A minimisation (one block a tissue): the positions, forces and the minimiser's vertex state (vd
-#: doubles a vertex), the forces' cell coefficients, the kept inverse norms, the sums' warp parts
-#: (n_sums (n_warps + 1), n_warps the warps from v0 rounded down to a warp's start to v1); the claims.
+#: doubles a vertex), the forces' cell coefficients and neighbour parts, the kept inverse norms, the
+#: sums' warp parts (n_sums (n_warps + 1), n_warps the warps from v0 rounded down to a warp's start
+#: to v1); the claims.
 MINIMIZE_LAYOUT = Layout("TissueMinimizeLayout", "tissue_minimize_layout",
-                         ("nv", "nc", "kept", "n_warps", "cd", "n_sums", "vd"),
+                         ("nv", "nc", "kept", "n_warps", "cd", "md", "n_sums", "vd"),
                          [("pos", "3 * nv"), ("force", "3 * nv"), ("velocity", "vd * nv"), ("coef", "cd * nc"),
-                          ("inv", "kept"), ("part", "n_sums * (n_warps + 1)")],
+                          ("more", "md * nc"), ("inv", "kept"), ("part", "n_sums * (n_warps + 1)")],
                          [("claim", "nc")])
 
 
@@ -141,12 +148,12 @@ def shared_bytes(state, cluster: int, minimizing: bool, stages) -> int:
     """Shared memory of a block of the largest tissue (:data:`STEP_LAYOUT` or :data:`MINIMIZE_LAYOUT`)."""
     forces, move, _ = stages
     nv, nc = state.vertices_per_replica, state.cells_per_replica
-    kept = nv if isinstance(state.constraint, Sphere) else 0   # Surface::directions
-    cd = sum(s.cell_doubles for s in forces)
+    kept = nv if keeps_directions(state.constraint) else 0   # Surface::directions
+    cd, md = sum(s.cell_doubles for s in forces), sum(s.neighbour_doubles for s in forces)
     if minimizing:
-        return int(np.max(MINIMIZE_LAYOUT.bytes(nv=nv, nc=nc, kept=kept, n_warps=(nv + 62) // 32, cd=cd,
+        return int(np.max(MINIMIZE_LAYOUT.bytes(nv=nv, nc=nc, kept=kept, n_warps=(nv + 62) // 32, cd=cd, md=md,
                                                 n_sums=move.sums, vd=move.vertex_doubles)))
-    return int(np.max(STEP_LAYOUT.bytes(nv=nv, nc=nc, kept=kept, vchunk=-(-nv // cluster), cd=cd)))
+    return int(np.max(STEP_LAYOUT.bytes(nv=nv, nc=nc, kept=kept, vchunk=-(-nv // cluster), cd=cd, md=md)))
 
 
 def layout(state, minimizing: bool, n_sm: int, stages):
@@ -159,7 +166,8 @@ def layout(state, minimizing: bool, n_sm: int, stages):
     H200: 8 x 1,024 cells, Brownian + T1, 16.3 us a step against 17.1; 1,024 x 32 cells, FIRE + T1,
     0.025 ms an iteration on a bound of 512 against 0.019)."""
     forces, move, _ = stages
-    shape = (sum(s.cell_doubles for s in forces), move.sums, move.vertex_doubles)
+    shape = (sum(s.cell_doubles for s in forces), sum(s.neighbour_doubles for s in forces), move.sums,
+             move.vertex_doubles)
 
     def build():
         cluster = 1 if minimizing else cluster_size(state, n_sm)
@@ -184,29 +192,69 @@ def device_limits(device_id: int):
 
 def stages(plan):
     """``((force stages...), move stage, pass stage or None)`` of ``plan``'s operations, or a string
-    saying which operation has no stage (or what else stands in the way)."""
+    saying which operation has no stage (or what else stands in the way). The force stages are in
+    :func:`~spherevm.plugins.base.compute_all`'s order, a pair that ``Force.fused_combined`` joins
+    as its host's stage followed by the joined (``extra``) one."""
     sim = plan.simulation
-    forces, move, passes = [], None, []
-    for op in plan.device_operations():
+    passes = []
+    for op in plan.updaters:
         stage = op.fused_stage(sim, plan.minimizing)
-        if stage is None:
-            return (f"{type(op).__name__} has no fused stage for {'minimize' if plan.minimizing else 'run'} "
-                    "(Operation.fused_stage; docs/plugins.md, making your plugin fusable)")
-        if op is plan.integrator:
-            if stage.role != "move":
-                return f"the integrator {type(op).__name__}'s fused stage has role {stage.role!r}, not 'move'"
-            move = stage
-        elif stage.role == "force" and op in plan.forces:
-            forces.append(stage)
-        elif stage.role == "pass" and op in plan.updaters:
-            passes.append(stage)
-        else:
-            return f"{type(op).__name__}'s fused stage has role {stage.role!r}, which its kind cannot take"
+        if stage is None or stage.role != "pass":
+            return _refused(op, stage, plan.minimizing)
+        passes.append(stage)
+    forces = force_stages(plan)
+    if isinstance(forces, str):
+        return forces
+    move = plan.integrator.fused_stage(sim, plan.minimizing)
+    if move is None:
+        return _refused(plan.integrator, move, plan.minimizing)
+    if move.role != "move":
+        return f"the integrator {type(plan.integrator).__name__}'s fused stage has role {move.role!r}, not 'move'"
     if len(passes) > 1:
         return "more than one updater's pass (the fused steps take at most one)"
     if not any(s.measures for s in forces):
         return "no force stage computes the cells (the fused steps need one, such as the vertex model's)"
     return tuple(forces), move, (passes[0] if passes else None)
+
+
+def _refused(op, stage, minimizing):
+    """Why ``op``'s ``stage`` (None, or of a role its kind cannot take) keeps the steps unfused."""
+    if stage is None:
+        return (f"{type(op).__name__} has no fused stage for {'minimize' if minimizing else 'run'} "
+                "(Operation.fused_stage; docs/plugins.md, making your plugin fusable)")
+    return f"{type(op).__name__}'s fused stage has role {stage.role!r}, which its kind cannot take"
+
+
+def force_stages(plan):
+    """The forces' stages, paired as :func:`~spherevm.plugins.base.compute_all` pairs the forces
+    (``Force.fused_combined`` asked both ways round, in order), or why they cannot be fused."""
+    sim, minimizing = plan.simulation, plan.minimizing
+    left, out = list(plan.forces), []
+    while left:
+        force = left.pop(0)
+        host, joined = force, None
+        for i, other in enumerate(left):
+            host, joined = other, force.fused_combined(other, sim, minimizing)
+            if joined is None:
+                host, joined = force, other.fused_combined(force, sim, minimizing)
+            if joined is not None:
+                del left[i]
+                break
+        stage = host.fused_stage(sim, minimizing)   # (host is force where nothing joined it)
+        if stage is None or stage.role != "force":
+            return _refused(host, stage, minimizing)
+        if stage.extra:
+            return f"{type(host).__name__}'s fused stage is an extra, which only Force.fused_combined gives"
+        out.append(stage)
+        if joined is not None:
+            partner = other if host is force else force
+            if not joined.extra or joined.role != "force":
+                return f"{type(partner).__name__}.fused_combined gave a stage that is no force's extra"
+            if not stage.takes_extra:
+                return (f"{type(host).__name__}'s fused stage takes no extra, which {type(partner).__name__}'s "
+                        "combined stage needs")
+            out.append(joined)
+    return out
 
 
 def why_not(simulation, minimizing: bool = False) -> str | None:
@@ -251,49 +299,21 @@ def _unique(items):
 
 def _signature(found, minimizing):
     forces, move, pas = found
-    return (minimizing,) + tuple((s.role, s.struct, s.source, id(s.arguments), s.cell_doubles, s.measures, s.sums,
-                                  s.vertex_doubles) for s in (*forces, move, *([pas] if pas is not None else [])))
+    return (minimizing,) + tuple((s.role, s.struct, s.source, id(s.arguments), s.cell_doubles, s.measures,
+                                  s.neighbour_doubles, s.takes_extra, s.extra, s.sums, s.vertex_doubles)
+                                 for s in (*forces, move, *([pas] if pas is not None else [])))
 
 
 def kernel_source(found, minimizing: bool) -> str:
     """The CUDA source of the fused kernel for the stages ``found`` (see :func:`stages`): the
     argument structs, the layouts, tissue_steps.cu, the stages' sources, the forces' aggregate
-    (each stage's coefficient region in turn, the forces summed in order) and the extern "C"
-    kernel."""
+    (:func:`_forces_aggregate`) and the extern "C" kernel."""
     forces, move, pas = found
     structs = _unique([TISSUE_STATE.cuda, NO_PASS.cuda] + [s.arguments.cuda for s in (*forces, move)]
                       + ([pas.arguments.cuda] if pas is not None else []))
     sources = _unique([s.source for s in (*forces, move)] + ([pas.source] if pas is not None else []))
     out = structs + [STEP_LAYOUT.cuda, MINIMIZE_LAYOUT.cuda, '#include "tissue_steps.cu"'] + sources
-    members, cells, vertex, copies, offset = [], [], [], [], 0
-    for k, s in enumerate(forces):
-        region = f"{offset}L * nc - {s.cell_doubles}L * c0"
-        members.append(f"    {s.struct} s{k};")
-        if s.measures:
-            cells.append(f"        s{k}.cell(A, P, c, s, data + {region});")
-        term = f"s{k}.vertex(pos, vn, vc, v, s, data + {region}, norm)"
-        vertex.append(f"        vec3 f = {term};" if k == 0 else f"        f = add3_rn(f, {term});")
-        if s.cell_doubles:
-            copies.append(f"        for (int j = 0; j < {s.cell_doubles}; ++j) {{ long i = {region} + "
-                          f"{s.cell_doubles}L * c + j; to[i] = from[i]; }}")
-        offset += s.cell_doubles
-    out.append("struct TissueForcesArgs {\n" + "".join(f"    {s.arguments.name} s{k};\n"
-                                                       for k, s in enumerate(forces)) + "};")
-    out.append("\n".join([
-        "struct TissueForces {",
-        f"    static constexpr int cell_doubles = {offset};",
-        f"    static constexpr bool measures = {'true' if any(s.measures for s in forces) else 'false'};",
-        *members,
-        "    __device__ explicit TissueForces(const TissueForcesArgs& a) : "
-        + ", ".join(f"s{k}{{a.s{k}}}" for k in range(len(forces))) + " {}",
-        "    __device__ __forceinline__ void cell(double A, double P, long c, Surface::Size s, double* data, long nc,",
-        "                                         long c0) const {", *cells, "    }",
-        "    __device__ __forceinline__ vec3 vertex(const double* pos, const int* vn, const int* vc, long v,",
-        "                                           Surface::Size s, const double* data, long nc, long c0,",
-        "                                           KeptNorm norm) const {", *vertex, "        return f;", "    }",
-        "    __device__ static __forceinline__ void copy_cell(long c, const double* from, double* to, long nc,",
-        "                                                     long c0) {", *copies, "    }",
-        "};"]))
+    out += _forces_aggregate(forces)
     pass_type, pass_args = (pas.struct, pas.arguments.name) if pas is not None else ("NoPass", NO_PASS.name)
     out.append(f"using TissueMove = {move.struct};\nusing TissuePass = {pass_type};")
     head = "extern \"C\" __global__ void __launch_bounds__(TISSUE_THREADS)"
@@ -310,6 +330,68 @@ def kernel_source(found, minimizing: bool) -> str:
                    f"{build}    tissue_steps_body(st, forces, move, pass, step0, steps);\n}}")
     return "\n".join(out) + "\n"
 
+
+def _copy(width, region):
+    """The line of the forces' aggregate that copies a stage's ``width`` doubles of cell ``c``."""
+    return f"        for (int j = 0; j < {width}; ++j) {{ long i = {region} + {width}L * c + j; to[i] = from[i]; }}"
+
+
+def _forces_aggregate(forces):
+    """The CUDA of the forces' arguments (``TissueForcesArgs``) and aggregate (``TissueForces``):
+    each stage's regions of the coefficient areas in turn (``data``: ``cell_doubles`` a cell,
+    ``more``: ``neighbour_doubles``), its cell part, its neighbour part, and the vertex forces summed
+    in order, an ``extra`` stage's gradient added inside the vertex force of the stage before it
+    (``StageExtra``, tissue_steps.cu)."""
+    members, cells, neighbours, vertex, copies, more_copies = [], [], [], [], [], []
+    offset = more = 0
+    regions = []
+    for s in forces:
+        regions.append((f"{offset}L * nc - {s.cell_doubles}L * c0", f"{more}L * nc - {s.neighbour_doubles}L * c0"))
+        offset, more = offset + s.cell_doubles, more + s.neighbour_doubles
+    for k, s in enumerate(forces):
+        (at, more_at), rest = regions[k], forces[k + 1:]
+        coef, extra = f"data + {at}", f"more + {more_at}"
+        members.append(f"    {s.struct} s{k};")
+        if s.measures:
+            cells.append(f"        s{k}.cell(A, P, c, s, {coef}, pos, row, n);")
+        if s.neighbour_doubles:
+            neighbours.append(f"        s{k}.neighbours(pos, vc, cell_vertices, sides, max_sides, c, s, {coef}, "
+                              f"{extra});")
+            more_copies.append(_copy(s.neighbour_doubles, more_at))
+        if s.cell_doubles:
+            copies.append(_copy(s.cell_doubles, at))
+        if s.extra:
+            continue
+        args = coef + (f", {extra}" if s.neighbour_doubles else "") + ", norm"
+        if rest and rest[0].extra:
+            joined_at, joined_more_at = regions[k + 1]
+            args += f", StageExtra<{rest[0].struct}>{{s{k + 1}, data + {joined_at}, more + {joined_more_at}}}"
+        term = f"s{k}.vertex(pos, vn, vc, v, s, {args})"
+        vertex.append(f"        f = add3_rn(f, {term});" if vertex else f"        vec3 f = {term};")
+    measures = "true" if any(s.measures for s in forces) else "false"
+    return ["struct TissueForcesArgs {\n" + "".join(f"    {s.arguments.name} s{k};\n" for k, s in enumerate(forces))
+            + "};", "\n".join([
+                "struct TissueForces {",
+                f"    static constexpr int cell_doubles = {offset}, neighbour_doubles = {more};",
+                f"    static constexpr bool measures = {measures};",
+                *members,
+                "    __device__ explicit TissueForces(const TissueForcesArgs& a) : "
+                + ", ".join(f"s{k}{{a.s{k}}}" for k in range(len(forces))) + " {}",
+                "    __device__ __forceinline__ void cell(double A, double P, long c, Surface::Size s, double* data,",
+                "        long nc, long c0, const double* pos, const int* row, int n) const {", *cells, "    }",
+                "    __device__ __forceinline__ void neighbours(const double* pos, const int* vc,",
+                "        const int* cell_vertices, const int* sides, int max_sides, long c, Surface::Size s,",
+                "        const double* data, double* more,"
+                "        long nc, long c0) const {", *neighbours, "    }",
+                "    __device__ __forceinline__ vec3 vertex(const double* pos, const int* vn, const int* vc, long v,",
+                "        Surface::Size s, const double* data, const double* more, long nc, long c0,",
+                "        KeptNorm norm) const {",
+                *vertex, "        return f;", "    }",
+                "    __device__ static __forceinline__ void copy_cell(long c, const double* from, double* to, long nc,",
+                "        long c0) {", *copies, "    }",
+                "    __device__ static __forceinline__ void copy_more(long c, const double* from, double* to, long nc,",
+                "        long c0) {", *more_copies, "    }",
+                "};"])]
 
 class TissueSteps:
     """The fused steps of a plan: :meth:`run` advances the State ``steps`` cycles of the plan of
@@ -341,7 +423,7 @@ class TissueSteps:
         st = TISSUE_STATE.pack(
             pos=state.positions, vn=state.vertex_neighbors, vc=state.vertex_cells, cell_vertices=state.cell_vertices,
             sides=state.cell_sides, vertex_start=vertex_start, cell_start=cell_start,
-            size=getattr(state, state.constraint.size_name), max_sides=state.max_sides,
+            size=state.size, max_sides=state.max_sides,
             active=sim.operations.integrator.active_on_device(), step_need=self.step_need)
         fa = np.array(tuple(s.packed() for s in forces), dtype=forces_dtype)[()]
         args = (st, fa, move.packed(), pas.packed() if pas is not None else self.no_pass)

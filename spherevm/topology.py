@@ -268,23 +268,23 @@ def t1_new_positions(state, pos, u, v, a, b, c, d, new_length, turn=None):
     the other side (where the usual way would fold the network, :func:`spherevm.folding.t1_placement`).
     The CUDA twin is ``Surface::t1_positions`` (geometry/surface.cuh)."""
     con = state.constraint
-    radius = con.size_np(state)[state.vertex_replica_np()[u]]     # the surface size (a box on a plane)
+    size = con.size_np(state)[state.vertex_replica_np()[u]]       # each edge's surface size
     pu = pos[u]
-    pv, pa, pb, pc, pd = (con.unwrap(pos[w], pu, radius) for w in (v, a, b, c, d))  # nearest images
-    mid = con.project_normal(0.5 * (pu + pv), radius)
+    pv, pa, pb, pc, pd = (con.unwrap(pos[w], pu, size) for w in (v, a, b, c, d))  # nearest images
+    mid = con.project_normal(0.5 * (pu + pv), size)
     normal = con.normal(mid)
     along = con.project_tangent(mid, pv - pu)
     norm = np.linalg.norm(along, axis=1)
     # a zero-length edge has no direction: fall back to the direction between the cells' sides
     across_c1 = con.project_tangent(mid, 0.5 * (pa + pd) - 0.5 * (pb + pc))
-    tiny = norm <= 1e-12 * con.length_scale(radius)
+    tiny = norm <= 1e-12 * con.length_scale(size)
     perp = np.cross(normal, along / np.where(tiny, 1.0, norm)[:, None])
     perp[tiny] = across_c1[tiny]
     if turn is not None:
         perp[np.asarray(turn, dtype=bool)] *= -1.0
     perp /= np.linalg.norm(perp, axis=1)[:, None]
     half = 0.5 * np.broadcast_to(np.asarray(new_length, dtype=np.float64), u.shape)
-    return con.geodesic_offset(mid, perp, half, radius), con.geodesic_offset(mid, -perp, half, radius)
+    return con.geodesic_offset(mid, perp, half, size), con.geodesic_offset(mid, -perp, half, size)
 
 
 def t1_flip(state, u, slot, new_length, sense: int = 1, turn=None):

@@ -93,12 +93,16 @@ def stored(where: str, value, dtype, shape=None, low=None, high=None, above=None
     return arr
 
 
-def stored_size(where: str, size, cells):
-    """Refuse a stored radius (per replica, ``size`` 1-D) or box (per replica, two sides) whose
-    ``cells`` (per replica) would be of a size sqrt(<A>) outside [1e-50, 1e50], the range the
-    tilings accept (areas ~R^2 and energies ~R^4 stay in float64); ValueError naming ``where``."""
+def stored_size(where: str, size, cells, total_area):
+    """Refuse a stored surface size (per replica, ``(n_replicas, *size_shape)``) whose ``cells``
+    (per replica) would be of a size sqrt(<A>) outside [1e-50, 1e50], the range the tilings accept
+    (areas ~R^2 and energies ~R^4 stay in float64), with ``total_area`` the surface's area of a
+    size (``Constraint.total_area_np``; a surface without one is not checked); ValueError naming ``where``."""
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        area = 4 * np.pi * size ** 2 if size.ndim == 1 else size[:, 0] * size[:, 1]
+        try:
+            area = total_area(size)
+        except NotImplementedError:
+            return
         unit = np.sqrt(area / np.maximum(cells, 1))
     bad = ~((unit >= 1e-50) & (unit <= 1e50))
     if bad.any():

@@ -202,12 +202,14 @@ def sweep_like(state, p0, **t1):
     return sim
 
 
-def minimizations(state, p0, ways, calls=({},), t1=None):
+def minimizations(state, p0, ways, calls=({},), t1=None, extra=None):
     """The same minimisation(s) of :func:`sweep_like`, each of the ``ways`` (``minimize`` keywords:
-    graphs, fused): everything each leaves behind."""
+    graphs, fused): everything each leaves behind (``extra()``: a force added after the vertex model)."""
     out = []
     for way in ways:
         sim = sweep_like(state, p0, **(t1 or {}))
+        if extra is not None:
+            sim.operations.forces.append(extra())
         results = [sim.minimize(**way, **kw) for kw in calls]
         t1_op, fire = sim.operations.updaters[0], sim.operations.integrator
         t1_op._sync_counters()

@@ -1,6 +1,6 @@
 """Sweeps on Dask clusters: a worker killed mid-chunk loses nothing, and a scheduler started the
-way the SLURM recipe starts one (docs/rigidity.md) gives the same tables. CPU only; the one-worker-
-per-GPU path (``--gpus``) needs dask-cuda and several GPUs and is checked here only for its error."""
+way the SLURM recipe starts one (docs/rigidity.md) gives the same tables. The one-worker-per-GPU path (``--gpus``) needs
+dask-cuda and GPUs: its tests are marked ``gpu`` (the killed worker needs two)."""
 import os
 import signal
 import socket
@@ -33,35 +33,37 @@ def same(records, reference):
         assert np.array_equal(np.asarray(records[col]), np.asarray(reference[col])), col
 
 
-def test_a_worker_killed_mid_sweep_loses_no_chunk(tmp_path, reference):
-    client = sweeps.cluster.client(scheduler="local", workers=2)
-    try:
-        pids = client.run(os.getpid)
-        out = tmp_path / "sweep"
-        box = {}
+def kill_a_worker_mid_sweep(client, sweep, out, device, **run):
+    """Run ``sweep`` on ``client``, SIGKILL one worker once the first chunk is on disk; returns the
+    result (the chunk files finished before the kill are checked to be untouched)."""
+    pids = client.run(os.getpid)
+    box = {}
 
-        def run():
-            box["result"] = sweeps.run_sweep(sweeps.RigiditySweep(**SWEEP), out, executor=client, device="cpu",
-                                             batch_cells=40)
+    def run_it():
+        box["result"] = sweeps.run_sweep(sweep, out, executor=client, device=device, **run)
 
-        worker = threading.Thread(target=run)
-        worker.start()
-        chunks = out / "chunks"
-        deadline = time.time() + 120
-        while time.time() < deadline and not (chunks.exists() and any(chunks.iterdir())):
-            time.sleep(0.05)
-        assert chunks.exists() and any(chunks.iterdir()), "no chunk finished in time"
-        finished_before = {p.name: p.read_bytes() for p in chunks.iterdir()}
-        victim = sorted(pids.values())[0]
-        os.kill(victim, signal.SIGKILL)                  # a worker dies while chunks are still running
-        worker.join(timeout=300)
-        assert not worker.is_alive()
-        result = box["result"]
-    finally:
-        client.close()
-    same(result.records, reference)
-    for name, data in finished_before.items():           # nothing finished before the kill was redone
+    worker = threading.Thread(target=run_it)
+    worker.start()
+    chunks = out / "chunks"
+    deadline = time.time() + 120
+    while time.time() < deadline and not (chunks.exists() and any(chunks.iterdir())):
+        time.sleep(0.05)
+    assert chunks.exists() and any(chunks.iterdir()), "no chunk finished in time"
+    finished_before = {p.name: p.read_bytes() for p in chunks.iterdir()}
+    busy = [address for address, keys in client.processing().items() if keys] or sorted(pids)
+    os.kill(pids[busy[0]], signal.SIGKILL)                   # a worker dies in the middle of a chunk
+    worker.join(timeout=300)
+    assert not worker.is_alive()
+    for name, data in finished_before.items():               # nothing finished before the kill was redone
         assert (chunks / name).read_bytes() == data
+    return box["result"]
+
+
+def test_a_worker_killed_mid_sweep_loses_no_chunk(tmp_path, reference):
+    with sweeps.cluster.client(scheduler="local", workers=2) as client:
+        result = kill_a_worker_mid_sweep(client, sweeps.RigiditySweep(**SWEEP), tmp_path / "sweep", "cpu",
+                                         batch_cells=40)
+    same(result.records, reference)
 
 
 def _free_port():
@@ -142,3 +144,69 @@ def test_one_worker_per_gpu_gives_the_one_gpu_tables(tmp_path):
     with sweeps.cluster.client(gpus=n) as client:
         many = sweeps.run_sweep(sweep, tmp_path / "many", executor=client, device="gpu", batch_cells=2000, workers=2)
     same(many.records, one.records)
+
+
+@pytest.mark.gpu
+def test_a_gpu_worker_killed_mid_sweep_loses_no_chunk(tmp_path):
+    """``--gpus 2``: one GPU worker's process killed mid-sweep; its chunk is redone (by its restarted
+    worker or the other GPU's), and the sweep ends with every chunk and the in-process sweep's records."""
+    pytest.importorskip("dask_cuda")
+    cupy = pytest.importorskip("cupy")
+    if cupy.cuda.runtime.getDeviceCount() < 2:
+        pytest.skip("needs two GPUs")
+    sweep = sweeps.RigiditySweep(cells=[64, 128], p0=[3.7, 3.8, 3.9], replicas=64, seed=7)
+    one = sweeps.run_sweep(sweep, tmp_path / "one", device="gpu", batch_cells=2000, prefetch=False)
+    with sweeps.cluster.client(gpus=2) as client:
+        result = kill_a_worker_mid_sweep(client, sweep, tmp_path / "two", "gpu", batch_cells=2000, prefetch=False)
+    same(result.records, one.records)
+    assert sorted(result.computed) == sorted(one.computed)
+
+
+# dynamics: 2 temperatures x 3 tissues of N = 16, four chunks (tests/test_dynamics_sweep.py)
+DYNAMICS = dict(cells=[16], T=[0.1, 0.2], p0=[3.9], replicas=3, chunk_replicas=2, steps=600, relax_steps=200,
+                dt=0.02, seed=1)
+DYNAMICS_ARGS = ["dynamics", "--cells", "16", "--T", "0.1", "0.2", "--p0", "3.9", "--replicas", "3",
+                 "--chunk-replicas", "2", "--steps", "600", "--relax", "200", "--dt", "0.02", "--seed", "1",
+                 "--device", "cpu", "--quiet"]
+
+
+@pytest.fixture(scope="module")
+def dynamics_reference(tmp_path_factory):
+    out = tmp_path_factory.mktemp("dyn") / "sweep"
+    result = sweeps.run_sweep(sweeps.DynamicsSweep(**DYNAMICS), out, executor=sweeps.InProcessExecutor(), device="cpu")
+    sweeps.write_dynamics_tables(out, result.records)
+    return out
+
+
+def same_tables(out, reference):
+    for name in ("tau_alpha.csv", "curves.csv"):
+        assert (out / name).read_bytes() == (reference / name).read_bytes(), name
+
+
+def test_a_dynamics_sweep_on_a_local_cluster_gives_the_in_process_tables(tmp_path, dynamics_reference, capsys):
+    out = tmp_path / "sweep"
+    rc = cli.main(DYNAMICS_ARGS + ["--scheduler", "local", "--workers", "2", "--out", str(out)])
+    assert rc == 0, capsys.readouterr().err
+    same_tables(out, dynamics_reference)
+
+
+def test_a_worker_killed_mid_dynamics_chunk_has_its_chunk_redone(tmp_path, dynamics_reference):
+    out = tmp_path / "sweep"
+    with sweeps.cluster.client(scheduler="local", workers=2) as client:
+        result = kill_a_worker_mid_sweep(client, sweeps.DynamicsSweep(**DYNAMICS), out, "cpu")
+    assert len(result.computed) == 4
+    sweeps.write_dynamics_tables(out, result.records)
+    same_tables(out, dynamics_reference)
+
+
+@pytest.mark.gpu
+def test_a_dynamics_sweep_on_two_gpus_gives_the_one_gpu_tables(tmp_path):
+    """``spherevm dynamics ... --gpus 2``: tau_alpha and the curves byte for byte as on one GPU."""
+    pytest.importorskip("dask_cuda")
+    cupy = pytest.importorskip("cupy")
+    if cupy.cuda.runtime.getDeviceCount() < 2:
+        pytest.skip("needs two GPUs")
+    argv = [a for a in DYNAMICS_ARGS if a not in ("--device", "cpu")]
+    assert cli.main(argv + ["--device", "gpu", "--out", str(tmp_path / "one")]) == 0
+    assert cli.main(argv + ["--gpus", "2", "--out", str(tmp_path / "two")]) == 0
+    same_tables(tmp_path / "two", tmp_path / "one")

@@ -67,7 +67,7 @@ def host_gpu(kernels, monkeypatch):
     functions = types.SimpleNamespace(get_function=lambda name: name)
     monkeypatch.setattr(bending, "load_module", lambda path: functions)
     monkeypatch.setattr(vertex_model, "surface_kernels",
-                        lambda path, state: (functions, getattr(state, state.constraint.size_name)))
+                        lambda path, state: (functions, state.size))
     for module in (bending, vertex_model):
         monkeypatch.setattr(module, "launch", lambda kernel, n, args: kernels.launch(kernel, n, *args))
 

@@ -82,10 +82,11 @@ def test_active_cell_directors_in_graphs_are_the_step_by_step_run():
 @pytest.mark.gpu
 def test_bending_fused_in_graphs_is_the_step_by_step_run():
     """VertexModel + Bending (the fused kernels, per-replica B) while T1 flips every step: the
-    bending kernels walk the neighbours from the State's arrays, so graphs hold them as they are."""
+    bending kernels walk the neighbours from the State's arrays, so graphs hold them as they are
+    (``fused=False``: the fused small-tissue steps would take these tissues, test_tissue_steps.py)."""
     state = hot_ensemble("sphere")
     runs = twin_runs(state, lambda: Brownian(dt=0.01, T=0.3), 211, writer_steps=(1, 77, 150),
-                     forces=[lambda: Bending([0.02, 0.1])], check_every=70)
+                     forces=[lambda: Bending([0.02, 0.1])], check_every=70, fused=False)
     assert_twins(*runs)
     assert runs[1][2].sum() > 211, "hot enough that T1 flips every step"
 

@@ -333,7 +333,7 @@ def test_surface_and_size_must_match():
     arrays = dict(positions=s.positions, cell_vertices=s.cell_vertices, cell_sides=s.cell_sides,
                   vertex_neighbors=s.vertex_neighbors, vertex_cells=s.vertex_cells, vertex_start=s.vertex_start,
                   cell_start=s.cell_start)
-    with pytest.raises(ValueError, match="box is given.*PeriodicPlane"):
+    with pytest.raises(ValueError, match="box is given.*needs radius"):
         svm.State(**arrays, box=s.box_np(), constraint=Sphere())
     with pytest.raises(ValueError, match="needs box"):
         svm.State(**arrays, radius=2.0, constraint=PeriodicPlane())

@@ -45,7 +45,7 @@ def test_rigid_translation_across_the_boundary_gives_msd_d_squared():
     step = np.array([0.3, 0.1])            # sqrt(<A>) = 1; 40 frames carry every cell over the boundary
     frames = [_shifted(st, k * step) for k in range(40)]
     traj = Trajectory.from_states(np.arange(40), frames)
-    assert traj.planar and traj.radius is None
+    assert traj.box is not None and traj.radius is None
     d2 = (np.arange(40) * np.linalg.norm(step)) ** 2
     assert d2[-1] > (L / 2) ** 2 * 4                                   # much more than the box
     m = msd(traj, remove_drift=False)
@@ -154,7 +154,7 @@ def test_brownian_on_a_relaxed_planar_tiling_gives_a_growing_msd(tmp_path):
     rec2.close()
     back = Recorder.read_csv(csv, box=sim.state.box_np())
     np.testing.assert_allclose(back.centroids, rec2.recording().centroids, rtol=0, atol=1e-14)
-    assert Trajectory.from_recording(back).planar
+    assert Trajectory.from_recording(back).box is not None
 
 
 def test_tau_alpha_on_a_planar_trajectory():

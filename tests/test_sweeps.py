@@ -405,3 +405,17 @@ def test_reference_t1_is_the_t1_preset():
     assert ref["new_length"] is None
     assert sweeps.RigiditySweep.reference_t1() == {"t1_threshold": ref["threshold"],
                                                    "t1_length_factor": ref["length_factor"]}
+
+
+def test_timeline_orders_each_chunks_stages_and_changes_no_record(tiny_run, tmp_path):
+    _, reference, _ = tiny_run
+    res = sweeps.run_sweep(sweeps.RigiditySweep(**TINY), tmp_path / "t", executor=sweeps.InProcessExecutor(),
+                           device="cpu", batch_cells=32, timeline=True)
+    _same_records(reference.records, res.records)
+    assert [e["chunk"] for e in res.timeline] == res.computed and len(res.computed) == 2
+    stages = ("asked", "submitted", "started", "built", "minimized", "ended", "received", "written")
+    for e in res.timeline:
+        times = [res.started] + [e[s] for s in stages]
+        assert times == sorted(times), e
+        assert e["pid"] == os.getpid() and e["size"] == 2 and e["n_cells"] == 16
+    assert not reference.timeline           # only when asked

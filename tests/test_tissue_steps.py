@@ -15,6 +15,7 @@ import pytest
 
 import spherevm as svm
 from spherevm import tissue_steps
+from spherevm.plan import Plan
 from spherevm.plugins.forces import Bending, VertexModel
 from spherevm.plugins.integrators import FIRE, Active, Brownian
 from spherevm.plugins.updaters import T1
@@ -26,20 +27,29 @@ pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 WAYS = (dict(), dict(fused=False), dict(graphs=False))   # fused (the default), graphs, step by step
 
 
+class OtherBending(Bending):
+    """A subclass that computes its own force: the bending stage would compute the parent's."""
+
+    def compute(self, state):
+        return Bending.compute(self, state)
+
+
 def ensemble(surface, sizes):
     tiling = svm.init.random_planar_tiling if surface == "plane" else svm.init.random_tiling
     return svm.State.concatenate([tiling(n, seed=3 + i) for i, n in enumerate(sizes)])
 
 
-def three_runs(state, steps, t1=True, T=0.3, integrator=None, extra=None, **run):
+def three_runs(state, steps, t1=True, T=0.3, integrator=None, extra=None, arrange=None, **run):
     """``(snapshot, timestep, T1 counters)`` of the same run, fused, in graphs and step by step
     (``integrator()``: another than Brownian, its directors join the snapshot; ``extra()``: a force
-    added after the vertex model)."""
+    added after the vertex model; ``arrange(forces)``: edits the list of forces)."""
     out = []
     for way in WAYS:
         sim = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=T) if integrator is None else integrator())
         if extra is not None:
             sim.operations.forces.append(extra())
+        if arrange is not None:
+            arrange(sim.operations.forces)
         if not t1:
             sim.operations.updaters.clear()
         sim.run(steps, **run, **way)
@@ -125,6 +135,47 @@ def test_a_users_force_fuses_with_the_step_by_step_bits(monkeypatch, per_block):
     assert_same(three_runs(state, 150, T=0.2, extra=lambda: FastLineTension(0.3), check_every=64))
 
 
+ARRANGEMENTS = {   # the bending force beside the vertex model (Force.combined: one stage), or alone
+    "after": lambda forces: forces.append(Bending(2.0)),
+    "before": lambda forces: forces.insert(0, Bending([2.0, 0.5])),
+    "alone": lambda forces: forces.__setitem__(0, Bending(2.0)),
+}
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize("arrangement", list(ARRANGEMENTS))
+@pytest.mark.parametrize("per_block", [10 ** 6, 300])
+def test_bending_fuses_with_the_step_by_step_bits(monkeypatch, arrangement, per_block):
+    """The vertex model + bending (their combined general kernels; fused: the bending stage an extra
+    of the vertex model's, its per-cell terms over the neighbours a second cell part after T1's
+    flips), or bending alone, with T1 and Brownian dynamics, on one block and on clusters: the
+    step-by-step trajectory bit for bit over 200 hot steps."""
+    monkeypatch.setattr(tissue_steps, "VERTICES_PER_BLOCK", per_block)
+    state = ensemble("sphere", (300, 60))
+    sim = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=0.2))
+    ARRANGEMENTS[arrangement](sim.operations.forces)
+    assert tissue_steps.why_not(sim) is None
+    assert "fused" in sim.explain()
+    runs = three_runs(state, 200, T=0.2, arrange=ARRANGEMENTS[arrangement], check_every=64)
+    assert_same(runs)
+    assert runs[-1][2][0].sum() > 0, "T1 flipped"
+
+
+@pytest.mark.gpu
+def test_bending_fuses_in_minimisations_with_the_step_by_step_bits():
+    """FIRE + T1 with the vertex model and bending: the fused minimisation is the general one's."""
+    sizes = (40, 150, 32, 90)
+    p0 = np.linspace(3.7, 3.9, len(sizes))
+    sim = sweep_like(ensemble("sphere", sizes), p0)
+    sim.operations.forces.append(Bending(1.0))
+    assert tissue_steps.why_not(sim, minimizing=True) is None
+    *others, step = minimizations(ensemble("sphere", sizes), p0, MINIMIZE_WAYS, extra=lambda: Bending(1.0),
+                                  calls=({"max_steps": 1500, "check_every": 50},))
+    for other in others:
+        assert_same_minimizations(other, step)
+    assert step["flips"].sum() > 0, "T1 flipped"
+
+
 @pytest.mark.gpu
 def test_small_tissues_split_their_cells_corners():
     """Blocks of at most 256 threads give a spherical cell 2, 4 or 8 threads (tissue_cell_lanes: the
@@ -160,10 +211,12 @@ def test_the_fused_steps_are_chosen_only_where_they_apply():
     assert tissue_steps.why_not(sim) is None                                 # cell directors: a stage too
     sim = dynamics_simulation(ensemble("sphere", (40,)), "gpu", Brownian(dt=0.01))
     sim.operations.forces.append(Bending(0.1))
-    assert "Bending has no fused stage" in tissue_steps.why_not(sim)
-    with pytest.raises(ValueError, match=r"run\(fused=True\): Bending has no fused stage"):
+    assert tissue_steps.why_not(sim) is None                                 # with the vertex model: one stage
+    sim.operations.forces[1] = OtherBending(0.1)
+    assert "OtherBending has no fused stage" in tissue_steps.why_not(sim)
+    with pytest.raises(ValueError, match=r"run\(fused=True\): OtherBending has no fused stage"):
         sim.run(10, fused=True)
-    assert "Bending" in sim.explain() and "CUDA graphs" in sim.explain()
+    assert "OtherBending" in sim.explain() and "CUDA graphs" in sim.explain()
     sim = dynamics_simulation(ensemble("sphere", (2500,)), "gpu", Brownian(dt=0.01))
     assert "shared memory" in tissue_steps.why_not(sim)
     with pytest.raises(ValueError, match=r"fused must be None \(auto\), True or False"):
@@ -262,6 +315,69 @@ def test_the_fused_steps_need_the_gpu():
     assert tissue_steps.cluster_size(big) == 4                      # 2,044 vertices: four blocks
     assert tissue_steps.cluster_size(big, n_sm=3) == 2              # ... fewer where the SMs run out
     assert tissue_steps.cluster_size(big, n_sm=1) == 1
+
+
+def cpu_plan(*forces):
+    """A Plan of ``forces`` on a CPU sphere of 40 cells (the forces' stages need no GPU)."""
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_tiling(40, seed=1)
+    sim.operations.forces.extend(forces)
+    sim.operations.integrator = Brownian(dt=0.01)
+    return Plan(sim)
+
+
+def test_a_pair_that_combined_computes_is_one_fused_force():
+    """Force.fused_combined pairs the forces as compute_all does (both ways round, in order): the
+    vertex model's stage, then the bending stage joined into its vertex force (an extra, with a second
+    cell part over the neighbours); bending alone, or beside a vertex model subclass, is its own."""
+    def shape(*forces):
+        found = tissue_steps.force_stages(cpu_plan(*forces))
+        return found if isinstance(found, str) else [(s.struct, s.extra) for s in found]
+
+    pair = [("VertexModelStage", False), ("BendingStage", True)]
+    assert shape(VertexModel(), Bending(1.0)) == pair
+    assert shape(Bending(1.0), VertexModel()) == pair
+    assert shape(Bending(1.0)) == [("BendingStage", False)]
+    assert shape(Bending(1.0), VertexModel(), Bending(0.5)) == pair + [("BendingStage", False)]
+
+    class OtherModel(VertexModel):
+        def compute(self, state):
+            return VertexModel.compute(self, state)
+
+    assert shape(Bending(1.0), OtherModel()) == "OtherModel has no fused stage for run " \
+        "(Operation.fused_stage; docs/plugins.md, making your plugin fusable)"
+    assert shape(OtherBending(1.0), VertexModel()) == "OtherBending has no fused stage for run " \
+        "(Operation.fused_stage; docs/plugins.md, making your plugin fusable)"
+
+    class Joiner(Bending):   # joins a force whose stage takes no extra
+        def fused_combined(self, other, simulation, minimizing):
+            return Bending.fused_combined(self, VertexModel(), simulation, minimizing)
+
+    assert shape(Joiner(1.0), Bending(1.0)) == "Bending's fused stage takes no extra, which Joiner's combined " \
+        "stage needs"
+
+
+def test_the_fused_kernel_joins_the_bending_stage_into_the_vertex_models(monkeypatch):
+    """The kernel's source: the bending stage's cell part beside the vertex model's, its neighbour part,
+    and its gradient inside the vertex model's vertex force (StageExtra), summed with the others'
+    forces in order; the shared memory holds its 4 + 3 doubles a cell."""
+    monkeypatch.syspath_prepend(str(pathlib.Path(__file__).parent / "plugin_example"))
+    from spherevm_line_tension import FastLineTension
+    forces = tissue_steps.force_stages(cpu_plan(VertexModel(), Bending(1.0), FastLineTension(0.1)))
+    move = shapes()[1]
+    source = tissue_steps.kernel_source((tuple(forces), move, None), False)
+    assert "s1.cell(A, P, c, s, data + 2L * nc - 4L * c0, pos, row, n);" in source
+    assert "s1.neighbours(pos, vc, cell_vertices, sides, max_sides, c, s, data + 2L * nc - 4L * c0, " \
+        "more + 0L * nc - 3L * c0);" in source
+    assert "vec3 f = s0.vertex(pos, vn, vc, v, s, data + 0L * nc - 2L * c0, norm, StageExtra<BendingStage>{s1, " \
+        "data + 2L * nc - 4L * c0, more + 0L * nc - 3L * c0});" in source
+    assert "f = add3_rn(f, s2.vertex(pos, vn, vc, v, s, data + 6L * nc - 0L * c0, norm));" in source
+    assert "s1.vertex" not in source
+    state = ensemble("sphere", (40, 100))   # 196 vertices; as test_the_fused_steps_need_the_gpu, 7 doubles a cell more
+    assert tissue_steps.shared_bytes(state, 1, False, (tuple(forces), move, None)) == \
+        8 * (6 * 196 + 9 * 100 + 2 * 196 + 3 * 196) + 4 * (100 + 25)
+    assert tissue_steps.shared_bytes(state, 1, True, (tuple(forces), shapes(True)[1], None)) == \
+        8 * (9 * 196 + 9 * 100 + 196 + 3 * 9) + 4 * 100
 
 
 def test_the_register_bound_keeps_every_block_of_a_launch_on_the_sms():

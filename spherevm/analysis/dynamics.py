@@ -81,47 +81,36 @@ def _origin_frames(origins, n):
 
 
 def _zero_modes(traj, remove_rotation, remove_drift):
-    """``(remove_rotation, remove_drift)`` resolved for the trajectory's surface (None: the default
-    of the surface, rotation on a sphere, drift on the plane); the other surface's refused."""
-    if traj.planar:
-        if remove_rotation:
-            raise ValueError("remove_rotation=True: a trajectory on the periodic plane has no rigid rotation to "
-                             "remove (its zero modes are the translations); use remove_drift (default on the plane)")
-        return False, True if remove_drift is None else bool(remove_drift)
-    if remove_drift:
-        raise ValueError("remove_drift=True: a tissue on a sphere has no centre-of-mass drift (the sphere's centre "
-                         "is fixed); its zero modes are rigid rotations, removed by remove_rotation")
-    return True if remove_rotation is None else bool(remove_rotation), False
-
-
-def _planar_displacements(traj, origin, remove_drift, scaled):
-    rep = traj.cell_replica
-    pos = traj.positions
-    dr = pos[origin:] - pos[origin]
-    if remove_drift:
-        dr = dr - replica_mean(dr, rep, traj.replica_order, traj.replica_starts)[:, rep, :]
-    d = np.linalg.norm(dr, axis=-1)
-    if scaled:
-        d = d / traj.length_unit[rep]
-    d[0] = 0.0
-    return d
+    """``(remove_rotation, remove_drift)`` resolved for the trajectory's surface: None is on where
+    the surface has that rigid motion (rotations on a sphere, translations on the plane); asking
+    for a motion the surface lacks is refused."""
+    motions = tuple(traj.constraint.rigid_motions)
+    resolved = []
+    for flag, value, motion, what in (("remove_rotation", remove_rotation, "rotations", "rigid rotation"),
+                                      ("remove_drift", remove_drift, "translations", "centre-of-mass drift")):
+        if value and motion not in motions:
+            raise ValueError(f"{flag}=True: a trajectory on {traj.constraint!r} has no {what} to remove (its rigid "
+                             f"motions: {', '.join(motions) or 'none'})")
+        resolved.append(motion in motions if value is None else bool(value))
+    return tuple(resolved)
 
 
 def _displacements(traj, origin, remove_rotation, geodesic, scaled, remove_drift=False):
-    """Distances ``(T - origin, n_cells)`` of every cell between frame ``origin`` and each later frame."""
-    if traj.planar:
-        return _planar_displacements(traj, origin, remove_drift, scaled)
+    """Distances ``(T - origin, n_cells)`` of every cell between frame ``origin`` and each later frame
+    (of the unwrapped positions), each pair's rigid rotation or drift removed first if asked."""
     rep = traj.cell_replica
-    ref = traj.centroids[origin]
-    cur = traj.centroids[origin:]
+    ref = traj.positions[origin]
+    cur = traj.positions[origin:]
     if remove_rotation:
         cur = remove_rigid_rotation(ref, cur, rep)
-    if geodesic:
-        a = ref / np.linalg.norm(ref, axis=-1)[:, None]
-        b = cur / np.linalg.norm(cur, axis=-1)[..., None]
-        d = traj.radius[rep] * 2.0 * np.arctan2(np.linalg.norm(a - b, axis=-1), np.linalg.norm(a + b, axis=-1))
+    dr = None
+    if remove_drift:
+        dr = cur - ref
+        dr = dr - replica_mean(dr, rep, traj.replica_order, traj.replica_starts)[:, rep, :]
+    if geodesic and dr is None:
+        d = traj.constraint.geodesic_distance(ref, cur, traj.size[rep])
     else:
-        d = np.linalg.norm(cur - ref, axis=-1)
+        d = np.linalg.norm(cur - ref if dr is None else dr, axis=-1)
     if scaled:
         d = d / traj.length_unit[rep]
     d[0] = 0.0   # the origin against itself (the fitted rotation is the identity only to rounding)

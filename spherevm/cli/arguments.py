@@ -132,6 +132,8 @@ def add_frame_arguments(parser, replica_default, replica_help):
 
 # ---------------------------------------------------------------------------------------- surface
 SURFACES = ("sphere", "plane")
+#: the ``--surface`` of a file's constraint (by its ``name``), for ``--restart``
+SURFACE_OF_CONSTRAINT = {"sphere": "sphere", "periodic_plane": "plane"}
 
 
 def add_surface(group, what="tilings", restart=False):
@@ -150,12 +152,13 @@ SYSTEM_DEFAULTS = {"cells": 64, "replicas": 4, "seed": 0, "surface": "sphere"}
 SEED_WARNING = r".*the checkpoint was written by a Simulation with seed"
 
 
-def add_system_arguments(group, replicas_help, seed_help):
+def add_system_arguments(group, replicas_help, seed_help, many=False):
     """``--cells``, ``--replicas`` and ``--seed`` of a command with ``--restart``: None unless given
-    (:func:`settle_restart` fills them in from :data:`SYSTEM_DEFAULTS` or the file)."""
+    (:func:`settle_restart` fills them in from :data:`SYSTEM_DEFAULTS` or the file). ``many``:
+    ``--cells`` takes one or more sizes (a list)."""
     def default(name):
         return f"(default: {SYSTEM_DEFAULTS[name]}; with --restart, the file's)"
-    group.add_argument("--cells", "-N", type=integer(4), default=None, metavar="N",
+    group.add_argument("--cells", "-N", type=integer(4), default=None, metavar="N", nargs="+" if many else None,
                        help=f"cells per replica, >= 4 {default('cells')}")
     group.add_argument("--replicas", "-R", type=integer(1), default=None, metavar="R",
                        help=f"{replicas_help} {default('replicas')}")
@@ -173,14 +176,12 @@ def settle_restart(args):
         for name, value in SYSTEM_DEFAULTS.items():
             setattr(args, name, value if given[name] is None else given[name])
         return
-    from ..constraints import PeriodicPlane, Sphere
     from ..gsdio import Reader
     with Reader(args.restart) as reader:
         state = reader.state(-1, validate=False)
         saved = reader.checkpoint(-1)["simulation"].get("seed")
     counts = np.unique(state.cells_per_replica)
-    surface = ("plane" if isinstance(state.constraint, PeriodicPlane) else "sphere"
-               if isinstance(state.constraint, Sphere) else repr(state.constraint))
+    surface = SURFACE_OF_CONSTRAINT.get(state.constraint.name, repr(state.constraint))
     found = {"cells": int(counts[0]) if len(counts) == 1 else counts.tolist(), "replicas": state.n_replicas,
              "surface": surface}
     what = {"cells": f"{found['cells']} cells per replica", "replicas": f"{found['replicas']} replica(s)",
@@ -224,12 +225,13 @@ def force_spec(text):
     return name, params
 
 
-def add_force_arguments(group):
-    """``--force NAME:k=v,...`` (repeatable) and ``--bending B``: forces added to the vertex model."""
+def add_force_arguments(group, many=False):
+    """``--force NAME:k=v,...`` (repeatable) and ``--bending B``: forces added to the vertex model.
+    ``many``: ``--bending`` takes one or more values (a list)."""
     group.add_argument("--force", dest="forces", type=force_spec, action="append", default=[],
                        metavar="NAME:K=V,...", help="add the registered force NAME (see 'spherevm plugins') "
                        "with these constructor parameters; repeatable")
-    group.add_argument("--bending", type=real(), default=None, metavar="B",
+    group.add_argument("--bending", type=real(), default=None, metavar="B", nargs="+" if many else None,
                        help="bending between neighbouring cells, B in units of kP <A> (same as --force bending:B=B)")
 
 
@@ -281,3 +283,37 @@ def resume_hint(command, path) -> str:
         return ""
     return (f"; {path} holds {frames} frame{'s' * (frames != 1)}, the last at step {step}: continue from it with "
             f"'spherevm {command} --restart {path}' and the other options as before")
+
+
+# ---------------------------------------------------------------------------------------- sweeps
+def run_sweep_command(args, sweep, what: str, label: str, units: str, **options):
+    """What the sweep commands (``rigidity``, ``dynamics`` as a sweep) share: the ``--out`` folder
+    checked before any work, the Dask client of ``--scheduler`` or ``--gpus``, a note of ``what``
+    runs where (unless ``--quiet``), the progress bar (``label``, counting ``units``) and
+    :func:`spherevm.sweeps.run_sweep` with ``options``.
+
+    Returns
+    -------
+    spherevm.sweeps.SweepResult"""
+    from ..sweeps import TextProgress, cluster, open_sweep_folder, run_sweep
+    err = sys.stderr
+    open_sweep_folder(sweep, args.out, create=False)        # a bad folder or a mismatch fails before any work
+    client = None
+    if args.scheduler or args.gpus:
+        client = cluster.client(scheduler=args.scheduler, gpus=args.gpus, workers=args.workers)
+    try:
+        if not args.quiet:
+            where = (f"{args.gpus} GPU worker(s)" if args.gpus else f"Dask cluster {args.scheduler}") if client \
+                else f"device {args.device}"
+            err.write(f"spherevm: {what} on {where}, writing {args.out}\n")
+            err.flush()
+        bar = TextProgress(err, label=label, enabled=None, units=units) if not args.quiet else None
+        try:
+            return run_sweep(sweep, args.out, executor=client, device="gpu" if args.gpus else args.device,
+                             workers=args.workers, progress=bar, **options)
+        finally:
+            if bar is not None:
+                bar.close()
+    finally:
+        if client is not None:
+            client.close()

@@ -1,4 +1,6 @@
-"""``spherevm dynamics``: Brownian dynamics of relaxed tilings; MSD, self-overlap and tau_alpha."""
+"""``spherevm dynamics``: Brownian dynamics of relaxed tilings; MSD, self-overlap and tau_alpha.
+Several values of --cells, --T, --p0 or --bending, or a sweep option (--gpus, --scheduler, ...),
+make it a sweep (:mod:`spherevm.cli.dynamics_sweep`)."""
 from __future__ import annotations
 
 import os
@@ -8,6 +10,7 @@ import time
 import numpy as np
 
 from ..progress import StageBars
+from . import dynamics_sweep
 from .arguments import (RUNTIME_ERROR, USAGE_ERROR, CLIError, add_force_arguments, add_overwrite, add_surface,
                         add_system_arguments, build_forces, check_existing, check_in_path, check_out_path,
                         extra_forces, integer, one_line, real, resume_hint, settle_restart, shape_index)
@@ -21,14 +24,15 @@ def add_parser(subparsers):
                                           "centroids at log-spaced times, and report MSD, self-overlap Q_s and "
                                           "tau_alpha (Q_s = 1/e) in the co-rotating frame.")
     g = d.add_argument_group("system")
-    add_system_arguments(g, "independent tissues, averaged", "random seed")
-    g.add_argument("--p0", type=shape_index(), default=3.775, metavar="P",
-                   help="target shape index, in [0, 100] (default: %(default)s)")
+    add_system_arguments(g, "independent tissues, averaged", "random seed", many=True)
+    g.add_argument("--p0", type=shape_index(), default=[3.775], metavar="P", nargs="+",
+                   help="target shape index, in [0, 100] (default: 3.775)")
     g.add_argument("--kr", type=real(), default=0.0, metavar="K", help="area stiffness (default: %(default)s)")
     add_surface(g, restart=True)
-    add_force_arguments(g)
+    add_force_arguments(g, many=True)
     g = d.add_argument_group("dynamics")
-    g.add_argument("--T", "-T", dest="T", type=real(), default=0.01, help="temperature, >= 0 (default: %(default)s)")
+    g.add_argument("--T", "-T", dest="T", type=real(), default=[0.01], nargs="+",
+                   help="temperature, >= 0 (default: 0.01)")
     g.add_argument("--dt", type=real(strict=True), default=0.05, help="time step, > 0 (default: %(default)s)")
     g.add_argument("--steps", type=integer(1), default=5000, help="production steps (default: %(default)s)")
     g.add_argument("--equilibrate", type=integer(0), default=None, metavar="STEPS",
@@ -38,7 +42,8 @@ def add_parser(subparsers):
     g.add_argument("--b", type=real(strict=True), default=0.5, help="self-overlap window, sqrt(<A>) (default: %(default)s)")
     g = d.add_argument_group("output")
     g.add_argument("--out", "-o", default=None, metavar="FILE.gsd",
-                   help="GSD trajectory of the production run; the --restart file itself is appended to")
+                   help="GSD trajectory of the production run; the --restart file itself is appended to "
+                        "(a sweep: the output folder)")
     g.add_argument("--restart", default=None, metavar="FILE.gsd",
                    help="continue from the last frame of a spherevm GSD file (its state and timestep); "
                         "skips relaxation and equilibration; the file gives --cells, --replicas, --surface and --seed "
@@ -47,13 +52,19 @@ def add_parser(subparsers):
     add_overwrite(g)
     g.add_argument("--device", choices=("cpu", "gpu", "auto"), default="auto", help="where to run (default: %(default)s)")
     g.add_argument("--quiet", "-q", action="store_true", help="no progress on standard error")
+    dynamics_sweep.add_sweep_arguments(d)
     d.set_defaults(func=run)
     return d
 
 
 def run(args) -> int:
-    """The handler of ``spherevm dynamics``."""
+    """The handler of ``spherevm dynamics``: one run, or a sweep (:func:`dynamics_sweep.is_sweep`)."""
     from ..protocols import glassy_dynamics
+    if dynamics_sweep.is_sweep(args):
+        return dynamics_sweep.run(args)
+    for name in ("cells", "T", "p0", "bending"):         # one value each: a single run
+        value = getattr(args, name)
+        setattr(args, name, None if value is None else value[0])
     for path, flag in ((args.out, "--out"), (args.csv, "--csv")):
         if path is not None:
             check_out_path(path, flag)

@@ -5,10 +5,9 @@ from __future__ import annotations
 import os
 import sys
 
-from ..sweeps import (CPU_BATCH_CELLS, GPU_BATCH_CELLS, STATE_DIR, RigiditySweep, TextProgress, format_p0star_table,
-                      open_sweep_folder, parse_p0_grid, run_sweep, write_tables)
-from ..sweeps import cluster
-from .arguments import add_force_arguments, add_surface, extra_forces, integer, real
+from ..sweeps import (CPU_BATCH_CELLS, GPU_BATCH_CELLS, STATE_DIR, RigiditySweep, format_p0star_table, parse_p0_grid,
+                      write_tables)
+from .arguments import add_force_arguments, add_surface, extra_forces, integer, real, run_sweep_command
 
 DEFAULT_CELLS = (16, 32)
 DEFAULT_P0 = "3.5:4.0:0.025"
@@ -100,30 +99,11 @@ def run(args) -> int:
     """The handler of ``spherevm rigidity``."""
     err = sys.stderr
     sweep = sweep_from_args(args)
-    open_sweep_folder(sweep, args.out, create=False)        # a bad folder or a mismatch fails before any work
-    client = None
-    if args.scheduler or args.gpus:
-        client = cluster.client(scheduler=args.scheduler, gpus=args.gpus, workers=args.workers)
-    try:
-        if not args.quiet:
-            where = (f"{args.gpus} GPU worker(s)" if args.gpus else f"Dask cluster {args.scheduler}") if client \
-                else f"device {args.device}"
-            err.write(f"spherevm: rigidity sweep on the {sweep.surface} of N = {list(sweep.cells)}, {len(sweep.p0)} p0 values "
-                      f"({sweep.p0[0]:g}..{sweep.p0[-1]:g}), {sweep.replicas} replicas, kr = {sweep.kr:g}: "
-                      f"{sweep.total_units} minimisations on {where}, writing {args.out}\n")
-            err.flush()
-        bar = TextProgress(err, enabled=None) if not args.quiet else None
-        try:
-            device = "gpu" if args.gpus else args.device
-            result = run_sweep(sweep, args.out, executor=client, device=device,
-                               workers=args.workers,
-                               batch_cells=args.batch_cells, progress=bar, save_states=args.save_states)
-        finally:
-            if bar is not None:
-                bar.close()
-    finally:
-        if client is not None:
-            client.close()
+    result = run_sweep_command(
+        args, sweep, f"rigidity sweep on the {sweep.surface} of N = {list(sweep.cells)}, {len(sweep.p0)} p0 values "
+                     f"({sweep.p0[0]:g}..{sweep.p0[-1]:g}), {sweep.replicas} replicas, kr = {sweep.kr:g}: "
+                     f"{sweep.total_units} minimisations", "rigidity", "minimisations",
+        batch_cells=args.batch_cells, save_states=args.save_states)
     tables = write_tables(args.out, result.records, zero_tol=args.zero_tol, plots=not args.no_plots,
                           sigma=args.sigma, surface=sweep.surface)
     print(format_p0star_table(tables["p0star"]))

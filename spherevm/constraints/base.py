@@ -4,6 +4,10 @@ from __future__ import annotations
 import numpy as np
 
 
+#: the size keys of :attr:`Constraint.size_key` and the size names each stands for
+SIZE_KEYS = {"radius": ("radius",), "box": ("Lx", "Ly")}
+
+
 class CellMeasures:
     """Base of what ``cell_geometry`` returns: ``center``, each cell's centre ``(n_cells, 3)``, is
     computed on first use from the callable a subclass keeps in ``_center`` (the forces do not
@@ -25,7 +29,8 @@ class Constraint:
     ``v`` tangent to the surface at ``x``; ``project_normal(x, radius)`` is P_N, the closest point
     of the surface. Forces need the metric: per-cell areas, perimeters and centroids
     (``cell_geometry``) and the surface gradient of any function of them (``shape_gradient``).
-    ``radius`` is the per-vertex (or per-replica) size parameter of the surface.
+    ``radius`` is the per-vertex (or per-replica) size parameter of the surface: each replica has
+    its own, ``State.size``, shaped by :attr:`size_shape` and named by :attr:`size_names`.
 
     A surface that does not implement some of these yet (a stub) says so before anything runs:
     operations list the methods they need in ``surface_needs`` and :meth:`require` refuses them at
@@ -33,23 +38,84 @@ class Constraint:
     """
 
     name = "constraint"
-    #: the State attribute holding each replica's surface size: ``"radius"`` (n_replicas,) or
-    #: ``"box"`` (n_replicas, 2); generic code passes ``size(state, index)`` where it passes a size
-    size_name = "radius"
+    #: the shape of one replica's size parameters: ``()`` for one number (a sphere's radius),
+    #: ``(2,)`` for two (a periodic box's Lx, Ly); ``State.size`` is ``(n_replicas, *size_shape)``
+    size_shape = ()
+    #: what each size parameter is, in order (one name per entry of ``size_shape``, one for ``()``)
+    size_names = ("radius",)
     #: V - E + F of every network on this surface (2 on a sphere, 0 on a torus or periodic plane)
     euler_characteristic = 2
 
+    @property
+    def size_key(self) -> str:
+        """The name a replica's size goes by in files and as a State keyword: ``"radius"`` for a
+        size named ``("radius",)``, ``"box"`` for ``("Lx", "Ly")`` (the GSD chunks and keywords of
+        the sphere and the plane), else ``"size"``."""
+        return next((k for k, names in SIZE_KEYS.items() if names == tuple(self.size_names)), "size")
+
+    def check_size(self, size):
+        """Raise ValueError unless ``size`` (``(n_replicas, *size_shape)``, NumPy) is a valid size
+        of this surface: here every entry positive and finite."""
+        bad = ~(np.isfinite(size) & (size > 0))
+        if bad.any():
+            raise ValueError(f"{self.size_key} must be positive and finite, got {size[bad][0]}")
+
     def size(self, state, index):
         """The surface size of the given replicas (per vertex when ``index`` is vertex_replica)."""
-        return getattr(state, self.size_name)[index]
+        return state.size[index]
 
     def size_np(self, state):
-        """Every replica's surface size as a NumPy array (``(n_replicas,)`` or ``(n_replicas, 2)``)."""
-        return np.asarray(state.device.to_numpy(getattr(state, self.size_name)))
+        """Every replica's surface size as a NumPy array, ``(n_replicas, *size_shape)``."""
+        return state.size_np()
+
+    # ------------------------------------------------------------------ files and pictures
+    def display_extent(self, size) -> float:
+        """A length the cube box of a GSD frame must hold about the origin besides the vertices
+        (``size`` per replica, NumPy): the largest size parameter here (a sphere's radius)."""
+        return float(np.max(size))
+
+    def hoomd_box(self, size):
+        """``(dimensions, (6,) HOOMD box)`` of a GSD frame for ``size`` (NumPy, per replica), or
+        None for the default: a cube about the origin holding every vertex."""
+        return None
+
+    def particle_origin(self, size):
+        """Where the State's origin sits in a GSD file's particle coordinates, ``(3,)``."""
+        return np.zeros(3)
+
+    #: how :mod:`spherevm.render` draws a replica: "mesh" (its cells as 3D polygons), "ball" (the
+    #: hemisphere facing the camera of a sphere about the origin) or "box" (a periodic box in 2D)
+    drawing = "mesh"
+
+    def draw_points(self, points, size):
+        """Points of a picture or mesh (cell edges cut into pieces, fan triangles) put on the
+        surface for drawing (``size`` per point): :meth:`project_normal` here; a periodic surface
+        keeps them unwrapped."""
+        return self.project_normal(points, size)
+
+    def replica_spacing(self, size, cell_width) -> float:
+        """The distance along x between replicas drawn side by side (export), given each replica's
+        ``size`` (NumPy) and the widest cell's extent along x: 2.5 of the largest size here
+        (a sphere's radius: half a diameter between spheres)."""
+        return 2.5 * float(np.max(size))
 
     def length_scale(self, size):
         """A length per entry of ``size`` (tolerances scale with it): the radius itself here."""
         return size
+
+    # ------------------------------------------------------------------ trajectories (spherevm.analysis)
+    #: the surface's rigid motions, which move a whole tissue without deforming it (noise makes it
+    #: diffuse along them): "rotations" (about the origin, removed by Kabsch) or "translations"
+    rigid_motions = ()
+
+    def unwrap_path(self, centroids, size):
+        """Points ``(T, n, 3)`` over time made continuous across a periodic boundary (``size`` per
+        point, ``(n, *size_shape)``): the points themselves on a surface without images."""
+        return centroids
+
+    def geodesic_distance(self, a, b, size):
+        """The distance along the surface between points ``a`` and ``b`` (``size`` per point)."""
+        raise NotImplementedError(f"{type(self).__name__} does not yet provide geodesic distances")
 
     def unwrap(self, x, reference, size):
         """The image of ``x`` nearest ``reference`` (periodic surfaces); ``x`` itself otherwise."""
@@ -106,6 +172,12 @@ class Constraint:
     def edge_lengths(self, state, u, v):
         raise NotImplementedError(f"{type(self).__name__} does not yet provide geodesic lengths (only Sphere does)")
 
+    def cell_centroids(self, state, method: str):
+        """Each cell's position on the surface, ``(n_cells, 3)`` (device array): the centre of its
+        area (``method="area"``) or of its vertices (``"vertex"``), see
+        :func:`spherevm.shapes.cell_centroids`."""
+        raise NotImplementedError(f"{type(self).__name__} does not yet provide cell centroids")
+
     def cell_areas_np(self, state):
         return state.device.to_numpy(self.cell_geometry(state).area)
 
@@ -114,6 +186,39 @@ class Constraint:
         against ``total_area_np``: the metric's own (``cell_areas_np``) where they tile the surface
         exactly."""
         return self.cell_areas_np(state)
+
+    # ------------------------------------------------------------------ tiling checks (spherevm.simplicity)
+    def orientation_points(self, x, reference=None, size=None):
+        """Points ``x`` (..., 3) as 3-vectors whose triple products give orientations (``(a x b) . c``
+        the side of ``c`` from the arc or segment ``a b``), unwrapped to the images nearest
+        ``reference`` (with ``size`` per row) on a periodic surface where given. The crossing
+        tests of :mod:`spherevm.simplicity` and the fold rule run where a surface gives them."""
+        raise NotImplementedError(f"{type(self).__name__} does not yet provide orientation points")
+
+    def edge_points(self, state, sides):
+        """Each cell's edges as ``(start, stop)`` :meth:`orientation_points`, ``(corners, 3)`` each,
+        cell 0's corners first in slot order (``sides``: the cell sides, NumPy)."""
+        to_np = state.device.to_numpy
+        pos, cv = to_np(state.positions), to_np(state.cell_vertices)
+        col = np.arange(cv.shape[1])[None, :]
+        valid = col < sides[:, None]
+        nxt = np.where(col + 1 < sides[:, None], np.roll(cv, -1, axis=1), cv[:, :1])
+        unit = self.orientation_points(pos)
+        return unit[cv[valid]], unit[nxt[valid]]
+
+    def open_cells(self, state):
+        """Cells whose edges do not add up to zero and the slot of the edge that jumped (a periodic
+        surface's minimum image): ``(cells, slots)``, none on a surface without images."""
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+
+    def cover_error(self, state, areas, replica, total, surface) -> str:
+        """Why the cells' ``areas`` of ``replica`` add up to ``total``, not the surface's ``surface``."""
+        return (f"the cells cover an area {total:.12g}, but the surface's is {surface:.12g}; some cell is listed "
+                "clockwise, folded, overlaps another or is too large for the surface's metric")
+
+    def check_cell_areas(self, state, areas, surface):
+        """Raise ValueError naming a cell whose area this surface cannot measure (``surface``: each
+        replica's area); every cell passes here."""
 
     def missing(self, names) -> list:
         """Those of the method ``names`` this surface does not implement (still the base's)."""

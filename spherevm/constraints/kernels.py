@@ -32,12 +32,18 @@ KERNEL_SURFACES = tuple(SURFACE_DEFINES)
 _CELL_MEASURES = Path(__file__).parent.parent / "geometry" / "cell_measures.cu"
 
 
+def keeps_directions(constraint) -> bool:
+    """Whether the compiled Surface keeps each vertex's unit direction in shared memory
+    (``Surface::directions`` of geometry/surface.cuh: the sphere's, not the plane's)."""
+    return isinstance(constraint, GeodesicSphere)
+
+
 def surface_kernels(cu_file, state, defines=()):
     """``(module, size)``: the kernels of ``cu_file`` compiled for ``state``'s surface (and the macros
     ``defines``) and the State's per-replica size array they take (``radius`` on the sphere, ``box``
     on the plane)."""
     surface = next(d for cls, d in SURFACE_DEFINES.items() if isinstance(state.constraint, cls))
-    return load_module(cu_file, surface + tuple(defines)), getattr(state, state.constraint.size_name)
+    return load_module(cu_file, surface + tuple(defines)), state.size
 
 
 def cell_measures(state):

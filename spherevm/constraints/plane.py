@@ -19,6 +19,10 @@ def minimum_image(d, box):
     return d - box * xp.rint(d / box)
 
 
+#: Relative size of a cell's closing sum (the sum of its minimum-image edges) that counts as open.
+OPEN_TOLERANCE = 1e-9
+
+
 class PlaneGeometry(CellMeasures):
     """Per-cell area and perimeter, and the per-corner edge vectors that the gradient reuses.
 
@@ -40,7 +44,7 @@ class PlaneGeometry(CellMeasures):
 
 
 class PeriodicPlane(Constraint):
-    """A flat rectangular periodic box per replica (``State.box``, ``(n_replicas, 2)`` = (Lx, Ly)).
+    """A flat rectangular periodic box per replica (``State.size``, ``(n_replicas, 2)`` = (Lx, Ly)).
 
     Positions are stored wrapped into ``[0, Lx) x [0, Ly)`` with z = 0. Edges are minimum images, so
     a cell may straddle the boundary; perimeters are sums of Euclidean edge lengths and areas the
@@ -50,7 +54,10 @@ class PeriodicPlane(Constraint):
     """
 
     name = "periodic_plane"
-    size_name = "box"
+    size_shape = (2,)
+    size_names = ("Lx", "Ly")
+    drawing = "box"
+    rigid_motions = ("translations",)
     euler_characteristic = 0
 
     # ------------------------------------------------------------------ pointwise
@@ -85,6 +92,25 @@ class PeriodicPlane(Constraint):
         b = np.asarray(box, dtype=np.float64)
         return b[..., 0] * b[..., 1]
 
+    def draw_points(self, points, box):
+        """The points as they are: unwrapped about their cell, in the plane."""
+        return points
+
+    def replica_spacing(self, box, cell_width) -> float:
+        """1.1 of the widest box plus twice the widest cell: cells unwrapped across the box edge
+        reach out of it by up to a cell."""
+        return 1.1 * np.asarray(box)[:, 0].max() + 2 * cell_width
+
+    def hoomd_box(self, box):
+        """The largest replica's box in HOOMD's 2D convention (Lz = 0, centred on the origin)."""
+        lx, ly = np.asarray(box).max(axis=0)
+        return 2, np.array([lx, ly, 0.0, 0.0, 0.0, 0.0])
+
+    def particle_origin(self, box):
+        """Half the largest box: HOOMD's box is centred on the origin, the State's starts there."""
+        lx, ly = np.asarray(box).max(axis=0)
+        return np.array([lx / 2, ly / 2, 0.0])
+
     def length_scale(self, box):
         xp = array_module(box)
         return xp.sqrt(box[..., 0] * box[..., 1])
@@ -95,11 +121,53 @@ class PeriodicPlane(Constraint):
         out[..., 2] = x[..., 2]
         return out
 
+    def unwrap_path(self, centroids, box):
+        """Frame 0 as stored, then the cumulative sum of the minimum images of the frame-to-frame
+        displacements (``box`` per point, ``(n, 2)``)."""
+        out = np.array(centroids, dtype=np.float64, copy=True)
+        if len(out) > 1:
+            step = minimum_image(np.diff(out[..., :2], axis=0), box)
+            out[1:, :, :2] = out[0, :, :2] + np.cumsum(step, axis=0)
+        return out
+
+    def geodesic_distance(self, a, b, box):
+        """The straight distance ``|b - a|`` (of unwrapped points)."""
+        return np.linalg.norm(b - a, axis=-1)
+
     def triangle_area(self, a, b, c, box):
         """Half the z-component of ``(b - a) x (c - a)``, with ``b`` and ``c`` the images nearest ``a``."""
         u = minimum_image(b[..., :2] - a[..., :2], box)
         v = minimum_image(c[..., :2] - a[..., :2], box)
         return 0.5 * (u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0])
+
+    def orientation_points(self, x, reference=None, size=None):
+        """``(x, y, 1)``: ``(a x b) . c`` is twice the signed area of the triangle a, b, c."""
+        p = x if reference is None else self.unwrap(x, reference, size)
+        out = np.ones(p.shape[:-1] + (3,))
+        out[..., :2] = p[..., :2]
+        return out
+
+    def edge_points(self, state, sides):
+        """Each polygon unwrapped from its first vertex along its minimum-image edges."""
+        _, valid, e, r = self.unwrapped_cells(state)
+        valid, e, r = (state.device.to_numpy(a) for a in (valid, e, r))
+        return self.orientation_points(r[valid]), self.orientation_points(r[valid] + e[valid])
+
+    def open_cells(self, state):
+        """Cells whose minimum-image edges do not add up to zero: an edge of theirs reached half the
+        box, and its minimum image jumped to another image. For each the slot of its edge longest
+        along the box (relative to the box side), the one that jumped."""
+        _, valid, e, _ = self.unwrapped_cells(state)
+        e = state.device.to_numpy(e)
+        box = self.size_np(state)[state.cell_replica_np()]                          # (C, 2)
+        closing = np.abs(e.sum(axis=1)) / box                                         # (C, 2)
+        bad = np.flatnonzero((closing > OPEN_TOLERANCE).any(axis=1))
+        reach = (np.abs(e[bad]) / box[bad, None, :]).max(axis=2)                     # (bad, W)
+        return bad, np.argmax(reach, axis=1)
+
+    def cover_error(self, state, areas, replica, total, surface) -> str:
+        return (f"the cells cover an area {total:.12g}, but the box's is {surface:.12g}; some cell wraps around "
+                "the box or overlaps another")
 
     def outside_box(self, x, box):
         """Mask of the points not stored in ``[0, Lx) x [0, Ly)``."""
@@ -108,7 +176,7 @@ class PeriodicPlane(Constraint):
     def displacement(self, state, u, v):
         """Minimum-image in-plane vectors ``x[v] - x[u]``, (n, 2)."""
         pos = state.positions
-        return minimum_image(pos[v, :2] - pos[u, :2], state.box[state.vertex_replica[u]])
+        return minimum_image(pos[v, :2] - pos[u, :2], state.size[state.vertex_replica[u]])
 
     def edge_lengths(self, state, u, v):
         d = self.displacement(state, u, v)
@@ -124,7 +192,7 @@ class PeriodicPlane(Constraint):
         ``cells`` and ``cells_before`` (the cell before slot k, ``vertex_cells[v, k - 1]``) slot-major
         ``(3, V)``; ``slot`` ``(W, C)``: for slot j of cell c the corner ``k V + v`` (slot-major) owning
         the edge from vertex j to vertex j + 1, ``3 V`` (a zero edge) in padding; ``valid`` ``(C, W)``
-        the real slots; ``first`` ``(C, 1)`` the cells' first vertices. Rebuilt when ``state.box`` is
+        the real slots; ``first`` ``(C, 1)`` the cells' first vertices. Rebuilt when ``state.size`` is
         replaced (after editing it in place, call ``state.clear_cache()``)."""
         def build():
             xp = state.device.xp
@@ -132,15 +200,15 @@ class PeriodicPlane(Constraint):
             valid = xp.arange(cv.shape[1])[None, :] < sides[:, None]
             v = xp.where(valid, cv, 0)
             k = xp.argmax(vc[v] == xp.arange(state.n_cells)[:, None, None], axis=2)
-            one = bool((state.box == state.box[:1]).all())
-            box = state.box[0][:, None, None] if one else state.box[state.vertex_replica].T[:, None, :]
+            one = bool((state.size == state.size[:1]).all())
+            box = state.size[0][:, None, None] if one else state.size[state.vertex_replica].T[:, None, :]
             cells = xp.ascontiguousarray(vc.T)
             return dict(box=xp.ascontiguousarray(box), neighbors=xp.ascontiguousarray(state.vertex_neighbors.T),
                         cells=cells, cells_before=cells[[2, 0, 1]],
                         slot=xp.ascontiguousarray(xp.where(valid, k * nv + v, 3 * nv).T), valid=valid,
-                        first=cv[:, :1], source=state.box)
+                        first=cv[:, :1], source=state.size)
         tables = state.cached(("plane", "tables"), build, topology=True)
-        if tables["source"] is not state.box:
+        if tables["source"] is not state.size:
             state.clear_cache()
             tables = state.cached(("plane", "tables"), build, topology=True)
         return tables
@@ -194,11 +262,11 @@ class PeriodicPlane(Constraint):
         length = xp.sqrt(edge[0] * edge[0] + edge[1] * edge[1])
         perimeter = xp.concatenate([length.reshape(-1), xp.zeros(1)])[t["slot"]].sum(axis=0)
 
-        def center():       # the expression of shapes.planar_cell_centroids(method="vertex"), bit for bit
+        def center():       # the expression of cell_centroids(method="vertex"), bit for bit
             mean = (xp.where(t["valid"][..., None], r.transpose(2, 1, 0), 0.0).sum(axis=1)
                     / state.cell_sides[:, None].astype(xp.float64))
             out = xp.zeros((state.n_cells, 3))
-            out[:, :2] = _wrap(xp, state.positions[t["first"][:, 0], :2] + mean, state.box[state.cell_replica])
+            out[:, :2] = _wrap(xp, state.positions[t["first"][:, 0], :2] + mean, state.size[state.cell_replica])
             return out
 
         return PlaneGeometry(area=area, perimeter=perimeter, edge=edge, length=length, center=center)
@@ -206,6 +274,30 @@ class PeriodicPlane(Constraint):
     def cell_centers(self, state):
         """Vertex centroid of each cell (unwrapped, then wrapped into the box), ``(n_cells, 3)``."""
         return self.cell_geometry(state).center
+
+    def cell_centroids(self, state, method: str):
+        """Each polygon unwrapped edge by edge from its first vertex (vertex j at ``sum_{i<j} e_i``,
+        ``e_i`` the minimum-image edges, as for its area), so a cell straddling the boundary is whole.
+        ``method="area"``: the centroid of the polygon's area, ``sum_i (r_i + r_{i+1}) (r_i x r_{i+1}) / 6A``;
+        a cell of non-positive area falls back to the vertex centroid. ``"vertex"``: the mean of the
+        unwrapped vertices. The point is then wrapped back into ``[0, Lx) x [0, Ly)``, z = 0."""
+        xp = state.device.xp
+        pos, sides = state.positions[:, :2], state.cell_sides
+        box = state.size[state.cell_replica]
+        first, valid, e, r = self.unwrapped_cells(state)
+        mean = xp.where(valid[..., None], r, 0.0).sum(axis=1) / sides[:, None].astype(xp.float64)
+        centre = mean
+        if method == "area":
+            r1 = r + e                                                      # vertex j + 1
+            cross = r[..., 0] * r1[..., 1] - r[..., 1] * r1[..., 0]         # padding rows do not count
+            cross = xp.where(valid, cross, 0.0)
+            area = 0.5 * cross.sum(axis=1)
+            ok = area > 0
+            c = ((r + r1) * cross[..., None]).sum(axis=1) / (6.0 * xp.where(ok, area, 1.0))[:, None]
+            centre = xp.where(ok[:, None], c, mean)
+        out = xp.zeros((state.n_cells, 3))
+        out[:, :2] = _wrap(xp, pos[first[:, 0]] + centre, box)
+        return out
 
     def cell_normals(self, state):
         """``(0, 0, 1)`` for every cell."""

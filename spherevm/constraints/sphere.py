@@ -50,7 +50,7 @@ def _dot(a, b):
 
 
 class Sphere(Constraint):
-    """Sphere of radius R (per replica, stored in ``State.radius``) centred at the origin.
+    """Sphere of radius R (per replica, stored in ``State.size``) centred at the origin.
 
     Perimeters are sums of geodesic arcs ``R theta``; areas are fans of signed spherical triangles
     about the cell's first vertex, with the triple product taken of differences so that small
@@ -66,6 +66,8 @@ class Sphere(Constraint):
 
     name = "sphere"
     metric = "geodesic"
+    drawing = "ball"
+    rigid_motions = ("rotations",)
 
     def __new__(cls, *args, metric=None, **kwargs):
         if metric is not None and metric not in METRICS:
@@ -111,6 +113,36 @@ class Sphere(Constraint):
 
     def total_area_np(self, radius):
         return 4.0 * np.pi * np.asarray(radius, dtype=np.float64) ** 2
+
+    def orientation_points(self, x, reference=None, size=None):
+        """Unit vectors (a great circle's normal is ``a x b``)."""
+        return x / np.linalg.norm(x, axis=-1)[..., None]
+
+    def geodesic_distance(self, a, b, radius):
+        """``R`` times the angle between ``a`` and ``b`` (``2 atan2(|a^ - b^|, |a^ + b^|)``)."""
+        a = a / np.linalg.norm(a, axis=-1)[..., None]
+        b = b / np.linalg.norm(b, axis=-1)[..., None]
+        return radius * 2.0 * np.arctan2(np.linalg.norm(a - b, axis=-1), np.linalg.norm(a + b, axis=-1))
+
+    def cover_error(self, state, areas, replica, total, surface) -> str:
+        cells = np.flatnonzero(state.cell_replica_np() == replica)
+        if abs(total + surface) <= 1e-9 * surface:
+            return (f"cell {int(cells[0])} and every other cell is listed clockwise seen from outside (their areas "
+                    "add up to -4 pi R^2); list cell vertices counter-clockwise")
+        c = int(cells[np.argmin(areas[cells])])
+        return (f"the cell areas add up to {total:.12g}, not the sphere's 4 pi R^2 = {surface:.12g}: cell {c} "
+                f"(measured {areas[c]:.6g}) is larger than a hemisphere, which spherevm cannot measure (areas are "
+                "fans of spherical triangles: such a cell gets A - 4 pi R^2), or cells overlap; use more cells, so "
+                "that every cell is smaller than a hemisphere")
+
+    def check_cell_areas(self, state, areas, surface):
+        """A cell over a hemisphere is refused: its fan area would be A - 4 pi R^2."""
+        crep = state.cell_replica_np()
+        big = np.flatnonzero(areas > 0.5 * surface[crep])
+        if len(big):
+            c = int(big[0])
+            raise ValueError(f"cell {c} covers {areas[c] / surface[crep[c]]:.3g} of its sphere, more than a "
+                             "hemisphere: spherevm measures cells smaller than a hemisphere only; use more cells")
 
     # -------------------------------------------------------------- per-corner metric
     # Corner tables and vertex blocks: spherevm.constraints.corners.
@@ -180,8 +212,8 @@ class Sphere(Constraint):
             jobs = [job for pair in zip_longest(jobs, [(fan, rows) for rows in fan_rows(state)]) for job in pair if job]
         done = in_parallel(lambda job: job[0](job[1]), jobs, threads=len(index) > 1)
         parts = [part for (fn, _), part in zip(jobs, done) if fn is corners]
-        R = state.radius[state.cell_replica]
-        geometry = CellGeometry(area=None, perimeter=None, unit=u.T, radius=state.radius[state.vertex_replica],
+        R = state.size[state.cell_replica]
+        geometry = CellGeometry(area=None, perimeter=None, unit=u.T, radius=state.size[state.vertex_replica],
                                 corners=dict(index=index, parts=[p[0] for p in parts], u=u, rv=rv),
                                 center=lambda: self.cell_centers(state, u))
         if metric:
@@ -209,6 +241,36 @@ class Sphere(Constraint):
         corner_unit = xp.repeat(unit, 3, axis=1)
         summed = xp.stack([weighted_bincount(cells, weights=c, minlength=state.n_cells) for c in corner_unit])
         return (summed / xp.sqrt(_dot(summed, summed))).T
+
+    def cell_centroids(self, state, method: str):
+        """``method="area"``: the centre of mass of the spherical polygon, pushed radially onto the
+        sphere: ``integral of n dA = (R^2 / 2) sum_edges theta_e (a_e x b_e) / |a_e x b_e|`` over the
+        edges ``a_e -> b_e`` taken counter-clockwise (exact), normalised; a folded cell (area <= 0)
+        falls back to the vertex centroid. ``"vertex"``: ``R`` times :meth:`cell_centers`."""
+        xp = state.device.xp
+        pos = state.positions
+        unit = pos / xp.sqrt((pos * pos).sum(axis=1))[:, None]
+        cells = state.vertex_cells.reshape(-1)            # corner k of vertex v lies in cell vertex_cells[v, k]
+        n = state.n_cells
+
+        def per_cell(w):                                  # w: (V, 3 corners, 3 components)
+            return xp.stack([weighted_bincount(cells, weights=w[..., i].reshape(-1), minlength=n) for i in range(3)],
+                            axis=1)
+
+        vertex_centroid = self.cell_centers(state)
+        direction = vertex_centroid
+        if method == "area":
+            a = unit[:, None, :]
+            b = unit[state.vertex_neighbors]               # edge v -> vertex_neighbors[v, k] runs CCW in that cell
+            cr = xp.cross(a, b)
+            s = xp.sqrt((cr * cr).sum(axis=-1))
+            theta = xp.arctan2(s, (a * b).sum(axis=-1))
+            factor = xp.where(s > 0, theta / xp.where(s > 0, s, 1.0), 1.0)
+            area_vec = per_cell(cr * factor[..., None])    # = 2 * integral of n over the cell (unit sphere)
+            ok = (area_vec * vertex_centroid).sum(axis=1) > 0
+            direction = xp.where(ok[:, None], area_vec, vertex_centroid)
+        direction = direction / xp.sqrt((direction * direction).sum(axis=1))[:, None]
+        return state.size[state.cell_replica][:, None] * direction
 
     def cell_normals(self, state):
         """The cell centres: unit vectors, so their own normals."""
@@ -248,7 +310,7 @@ class Sphere(Constraint):
         """
         xp = state.device.xp
         g = geometry.corners
-        R = state.radius[state.cell_replica]
+        R = state.size[state.cell_replica]
         weights = None
         if d_area is not None or d_perimeter is not None:   # a missing one of the two: zero coefficients
             zero = xp.zeros(state.n_cells)
@@ -310,7 +372,7 @@ class Sphere(Constraint):
     def edge_lengths(self, state, u, v):
         """Geodesic lengths of the edges (u[i], v[i])."""
         pos = state.positions
-        return state.radius[state.vertex_replica[u]] * geo.geodesic_length(geo.normalize(pos[u]),
+        return state.size[state.vertex_replica[u]] * geo.geodesic_length(geo.normalize(pos[u]),
                                                                            geo.normalize(pos[v]))
 
 

@@ -223,7 +223,16 @@ class Force(Operation):
         """A :class:`ForceResult` of this force and ``other`` together (forces, energies and cell
         energies summed), where this force computes the pair in fewer passes than the two apart;
         None (the default) otherwise. :func:`compute_all` asks each pair of attached forces, both
-        ways round."""
+        ways round. A force that pairs here and has a fused stage gives :meth:`fused_combined` for
+        the same pairs (else the fused steps would sum the two forces apart, in other roundings)."""
+        return None
+
+    def fused_combined(self, other, simulation, minimizing: bool):
+        """This force's fused stage where :meth:`combined` computes it together with ``other``: a
+        :class:`~spherevm.plugins.fusion.FusedStage` with ``extra=True``, whose gradient ``other``'s
+        stage (one that ``takes_extra``) adds inside its vertex force, as the pair's general kernels
+        do; None (the default) where ``combined`` does not pair them. The fused steps ask each pair
+        of forces both ways round, in :func:`compute_all`'s order."""
         return None
 
     def energy(self, state):

@@ -10,12 +10,24 @@ plugin fusable").
 
 A stage's CUDA type, by role:
 
-* ``"force"``: ``void cell(double A, double P, long c, Surface::Size s, double* coef) const`` (only
-  where ``measures``: from the cell's area and perimeter, its ``cell_doubles`` coefficients into
-  its region ``coef``, indexed by the global cell index), and ``vec3 vertex(const double* pos,
-  const int* vn, const int* vc, long v, Surface::Size s, const double* coef, KeptNorm norm) const``
-  (the force on vertex ``v``, tangent to the surface). The forces of the stages are summed in the
-  order of ``sim.operations.forces``, as ``Simulation.compute_forces`` sums them.
+* ``"force"``: ``void cell(double A, double P, long c, Surface::Size s, double* coef, const double* pos,
+  const int* row, int n) const`` (only where ``measures``: from the cell's area and perimeter, or its
+  ``n`` vertices ``row`` at ``pos``, its ``cell_doubles`` coefficients into its region ``coef``,
+  indexed by the global cell index); where ``neighbour_doubles``, ``void neighbours(const double*
+  pos, const int* vc, const int* cell_vertices, const int* sides, int max_sides, long c,
+  Surface::Size s, const double* coef, double* more) const``, a second per-cell part, run once every
+  cell's ``cell`` is known everywhere (and after the pass's flips): it may read any cell's
+  coefficients (its neighbours') and writes its ``neighbour_doubles`` into its region ``more``; and
+  ``vec3 vertex(const double* pos, const int* vn, const int* vc, long v, Surface::Size s, const
+  double* coef, KeptNorm norm) const`` (the force on vertex ``v``, tangent to the surface; a stage
+  with ``neighbour_doubles`` takes ``more`` after ``coef``). The forces of the stages are summed in
+  the order of ``sim.operations.forces``, as ``Simulation.compute_forces`` sums them. Where
+  :meth:`Force.combined <spherevm.plugins.base.Force.combined>` computes two forces together,
+  :meth:`Force.fused_combined <spherevm.plugins.base.Force.fused_combined>` gives the pair's stage:
+  an ``extra`` stage, whose ``void add_gradient(vec3& g, const double* pos, const int* vn, const int*
+  vc, long v, vec3 x, const double* coef, const double* more) const`` the other force's stage (one
+  that ``takes_extra``: its ``vertex`` takes an ``Extra`` last, as the vertex model's) adds inside
+  its vertex force, as the general kernels of the pair do.
 * ``"move"``: a run's integrator (``minimizer = False``): ``vertex(next, F, v, vc, s, r, timestep)``
   and, where ``cell_phase``, ``cell(pos, cell_vertices, sides, max_sides, c, timestep)`` after every
   vertex moved; a minimiser (``minimizer = True``): its sums' ``terms``, ``control`` and ``vertex``
@@ -53,7 +65,15 @@ class FusedStage:
     cell_doubles : int
         A force's coefficients per cell in shared memory.
     measures : bool
-        A force's ``cell`` takes each cell's area and perimeter (False: it has no cell part).
+        A force has a cell part, ``cell``, which takes each cell's area and perimeter (False: none).
+    neighbour_doubles : int
+        A force's second per-cell part, ``neighbours``: its doubles per cell in shared memory (0: none).
+    takes_extra : bool
+        A force's ``vertex`` takes an ``Extra`` (``vertex_model.cuh``): a stage joined into it adds its
+        gradient there.
+    extra : bool
+        A force joined into another's vertex force (returned by ``Force.fused_combined``): it gives
+        ``add_gradient`` instead of ``vertex``.
     sums : int
         A minimiser's per-replica sums (FIRE: 3).
     vertex_doubles : int
@@ -70,6 +90,9 @@ class FusedStage:
     values: dict = field(default_factory=dict)
     cell_doubles: int = 0
     measures: bool = False
+    neighbour_doubles: int = 0
+    takes_extra: bool = False
+    extra: bool = False
     sums: int = 0
     vertex_doubles: int = 0
     finish: object = None

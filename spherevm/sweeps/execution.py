@@ -13,10 +13,9 @@ import numpy as np
 
 from ..progress import bar as progress_bar
 from ..validation import check_run_memory, integer
-from .spec import Chunk, RigiditySweep, plan_chunks, tiling_seed
+from .spec import Chunk, RigiditySweep, Sweep, tiling_seed
 from .states import chunk_state_gsd, save_chunk_state, state_path
-from .store import (CHUNK_DIR, RECORD_COLUMNS, merge_records, open_sweep_folder, scan_chunks, sorted_records,
-                    write_columns)
+from .store import CHUNK_DIR, merge_records, open_sweep_folder, scan_chunks, sorted_records, write_columns
 from .tables import summarize_records
 
 #: cells per batch on the CPU: the NumPy cost per cell and step is flat from ~500 cells up (and
@@ -104,10 +103,12 @@ class TilingPrefetch:
 
 
 def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu", state=None,
-              save_states=False) -> dict:
+              save_states=False, timing=False) -> dict:
     """Minimise one chunk; returns its per-replica records (a dict of lists, :data:`RECORD_COLUMNS`),
     with ``save_states`` also its minimised State as the bytes of a GSD file (key ``"state_gsd"``,
-    :func:`spherevm.sweeps.states.chunk_state_gsd`).
+    :func:`spherevm.sweeps.states.chunk_state_gsd`), with ``timing`` also when its stages ended
+    (key ``"timing"``: ``started``, ``built`` (tilings), ``minimized`` and ``ended`` as ``time.time()``,
+    and the worker's ``pid``).
 
     A plain module-level function of plain arguments, so any executor (process pool, Dask) can run
     it (``state``: the chunk's tilings when built elsewhere). The vertex model is given per cell:
@@ -119,10 +120,11 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     from ..plugins.updaters import T1
     from ..simulation import Simulation
 
-    t0 = time.perf_counter()
+    t0, started = time.perf_counter(), time.time()
     sweep = RigiditySweep.from_parameters(parameters)
     chunk = Chunk(int(n_cells), int(start), int(stop))
     state, p0, p0_index, replica, seeds = build_chunk_state(sweep, chunk, state)
+    built = time.time()
     mean_area = state.mean_cell_area                     # per replica (1 at the default radius)
     cell_rep = state.cell_replica_np()
     area = mean_area[cell_rep]
@@ -138,9 +140,12 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     res = sim.minimize(force_tol=sweep.force_tol, energy_tol=sweep.energy_tol, max_steps=sweep.max_steps,
                        check_every=sweep.check_every)
     flips = np.asarray(sim.log("t1_total_flips"))          # the loggable syncs the GPU counters
-    elapsed = time.perf_counter() - t0
+    elapsed, minimized = time.perf_counter() - t0, time.time()
     n = chunk.size
     extra = {"state_gsd": chunk_state_gsd(sim, p0, p0_index, replica)} if save_states else {}
+    if timing:
+        extra["timing"] = {"pid": os.getpid(), "started": started, "built": built, "minimized": minimized,
+                           "ended": time.time()}
     return {**extra, "n_cells": [chunk.n_cells] * n, "p0": p0.tolist(), "p0_index": list(p0_index), "replica": list(replica),
             "tiling_seed": list(seeds), "energy_per_cell": [float(e) for e in res.energy_per_cell],
             "max_force": [float(f) for f in res.max_force],
@@ -219,8 +224,9 @@ def _check_sweep_memory(sweep, batch_cells, device_name, workers):
     """Refuse (InsufficientMemory) a sweep whose largest chunk, in every worker at once, cannot fit
     on this machine, before the folder or any worker is made."""
     largest = max(sweep.cells)
-    chunk = max(min(max(1, batch_cells // n) * n, sweep.units_per_size * n) for n in sweep.cells)
-    copies = min(workers, sum(-(-sweep.units_per_size // max(1, batch_cells // n)) for n in sweep.cells))
+    chunks = sweep.plan(batch_cells)
+    chunk = max(c.size * c.n_cells for c in chunks)
+    copies = min(workers, len(chunks))
     check_run_memory(f"the sweep ({copies} worker(s), chunks of up to {chunk} cells)", chunk, largest,
                      gpu=device_name == "gpu", copies=copies,
                      advice="use smaller systems (cells), fewer workers or a smaller batch_cells")
@@ -232,7 +238,7 @@ class SweepProgress:
     """What a progress callback receives after every finished chunk (and once at the start)."""
     chunks_done: int
     chunks_total: int
-    units_done: int        # minimisations finished, including those found on disk
+    units_done: int        # minimisations (tissues) finished, including those found on disk
     units_total: int
     units_reused: int      # found on disk at the start
     elapsed: float
@@ -256,8 +262,8 @@ class TextProgress:
     default) draws it, None only on a terminal or in a notebook (silent in a log or a pipe), False
     never (see :func:`spherevm.progress.bar`)."""
 
-    def __init__(self, stream=None, label="rigidity", enabled=True):
-        self.stream, self.label, self.enabled = stream, label, enabled
+    def __init__(self, stream=None, label="rigidity", enabled=True, units="minimisations"):
+        self.stream, self.label, self.enabled, self.units = stream, label, enabled, units
         self.bar = None
 
     def __call__(self, p: SweepProgress):
@@ -267,7 +273,7 @@ class TextProgress:
                                     bar_format="{desc}: {percentage:5.1f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
         reused = f" ({p.units_reused} on disk)" if p.units_reused else ""
         self.bar.set_postfix_str(f"chunks {p.chunks_done}/{p.chunks_total}  "
-                                 f"minimisations {p.units_done}/{p.units_total}{reused}", refresh=False)
+                                 f"{self.units} {p.units_done}/{p.units_total}{reused}", refresh=False)
         self.bar.update(p.cells_done - self.bar.n)
         if p.chunks_done == p.chunks_total:
             self.bar.refresh()
@@ -282,14 +288,21 @@ class TextProgress:
 @dataclass
 class SweepResult:
     """What :func:`run_sweep` returns."""
-    sweep: RigiditySweep
+    sweep: Sweep
     out: str
-    records: dict                      # per-replica columns (NumPy), sorted by (N, p0, replica)
+    records: dict                      # per-replica columns (NumPy), sorted by sweep.columns.sort
     computed: list = field(default_factory=list)   # chunk ids computed in this call
     reused: int = 0                    # chunk files found finished on disk
     recomputed_bad: list = field(default_factory=list)  # unreadable chunk files that were recomputed
     elapsed: float = 0.0
     executor: str = ""
+    #: with ``timeline=True``, one dict per computed chunk: its ``chunk`` id, ``n_cells``, ``size`` and
+    #: when (``time.time()``) the sweep began waiting for its tilings (``asked``), had them and submitted
+    #: it (``submitted``), the worker started, built, minimised and ended it (:func:`run_chunk`'s
+    #: ``timing``, with the worker's ``pid``), and the sweep had its result (``received``) and wrote it
+    #: (``written``); ``started`` is when the sweep began
+    timeline: list = field(default_factory=list)
+    started: float = 0.0
 
     def summarize(self, zero_tol=None, **kwargs):
         """``(fractions, p0star, density)`` tables, see :func:`spherevm.analysis.rigidity.summarize`."""
@@ -311,9 +324,9 @@ def _drop_chunks_without_states(sweep, path, done, parts):
     return kept
 
 
-def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=None, batch_cells=None,
-              progress=None, save_states=False, prefetch=None) -> SweepResult:
-    """Run (or resume) a rigidity sweep, writing each chunk to ``<out>/chunks/`` as it finishes.
+def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, batch_cells=None,
+              progress=None, save_states=False, prefetch=None, timeline=False) -> SweepResult:
+    """Run (or resume) a sweep, writing each chunk to ``<out>/chunks/`` as it finishes.
 
     Everything is validated before the folder is created; a folder holding a sweep with other
     parameters raises ValueError. A chunk that fails stops the sweep (RuntimeError naming the
@@ -321,7 +334,9 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
 
     Parameters
     ----------
-    sweep : RigiditySweep
+    sweep : RigiditySweep or DynamicsSweep
+        Any :class:`~spherevm.sweeps.spec.Sweep`: it plans the chunks, names the function that
+        computes one and the columns of its records.
     out : str or path
         The output folder.
     executor : concurrent.futures.Executor or distributed.Client, optional
@@ -343,12 +358,15 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         Build the tilings in a process pool on this machine ahead of the workers
         (:class:`TilingPrefetch`); the results are the same. None: for GPU sweeps of at least
         :data:`PREFETCH_MIN_CELLS` cells on a machine of three or more cores.
+    timeline : bool
+        Record when each chunk's stages began and ended (:attr:`SweepResult.timeline`;
+        ``benchmarks/sweep_timeline.py`` draws it).
 
     Returns
     -------
     SweepResult"""
-    if not isinstance(sweep, RigiditySweep):
-        raise TypeError(f"sweep must be a RigiditySweep, got {type(sweep).__name__}")
+    if not isinstance(sweep, Sweep):
+        raise TypeError(f"sweep must be a RigiditySweep or a DynamicsSweep, got {type(sweep).__name__}")
     from ..device import DEVICE_NAMES, Device
     if not isinstance(device, Device) and (not isinstance(device, str) or device.lower() not in DEVICE_NAMES):
         raise ValueError(f"device must be one of {DEVICE_NAMES}, got {device!r}")
@@ -362,6 +380,11 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
 
     if prefetch is not None and not isinstance(prefetch, bool):
         raise TypeError(f"prefetch must be True, False or None, got {prefetch!r}")
+    for flag, name, allowed in ((prefetch, "prefetch", sweep.prefetch_tilings),
+                                (save_states, "save_states", sweep.keeps_states)):
+        if flag and not allowed:
+            raise ValueError(f"{name}=True is for rigidity sweeps; a {sweep.KIND} sweep does without")
+    run = sweep.chunk_function or run_chunk
 
     owned = False
     if executor is None:
@@ -386,7 +409,7 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         done, parts, bad = scan_chunks(sweep, path, clean=True)
         if save_states:
             parts = _drop_chunks_without_states(sweep, path, done, parts)
-        chunks = plan_chunks(sweep, batch_cells, done)
+        chunks = sweep.plan(batch_cells, done)
         reused_units = int(sum(d.sum() for d in done.values()))
         reused_cells = int(sum(n * d.sum() for n, d in done.items()))
         t0 = time.perf_counter()
@@ -397,13 +420,15 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         if progress is not None:
             progress(state)
         params = sweep.parameters()
-        states = {"save_states": True} if save_states else {}     # the call stays the same without them
+        # the call stays the same without these options
+        options = {**({"save_states": True} if save_states else {}), **({"timing": True} if timeline else {})}
+        events, started = {}, time.time()
         in_process = isinstance(executor, InProcessExecutor)
         slots = executor_slots(executor)
         todo = sorted(chunks, key=lambda c: -c.n_cells * c.size)        # largest N first
         cpus = os.cpu_count() or 1
         if prefetch is None:
-            prefetch = (device_name == "gpu" and cpus > 2 and len(todo) > 1
+            prefetch = (sweep.prefetch_tilings and device_name == "gpu" and cpus > 2 and len(todo) > 1
                         and sum(c.n_cells * c.size for c in todo) >= PREFETCH_MIN_CELLS)
         # bounded submission: the in-process executor runs at submit time (each chunk is written
         # before the next starts); with prefetched tilings two chunks per worker, so the pool works
@@ -417,9 +442,12 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
         while todo or pending:
             while todo and len(pending) < limit:
                 c = todo.pop(0)
+                asked = time.time()
                 built = () if prefetch is None else (prefetch.get(c),)
-                pending[executor.submit(run_chunk, params, c.n_cells, c.start, c.stop, device_name, *built,
-                                        **states)] = c
+                events[c.id] = {"chunk": c.id, "n_cells": c.n_cells, "size": c.size, "asked": asked,
+                                "submitted": time.time()}
+                pending[executor.submit(run, params, c.n_cells, c.start, c.stop, device_name, *built,
+                                        **options)] = c
             finished, _ = cf.wait(list(pending), return_when=cf.FIRST_COMPLETED)
             for fut in finished:
                 c = pending.pop(fut)
@@ -427,13 +455,16 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
                 if exc is not None:
                     for other in pending:
                         other.cancel()
-                    raise RuntimeError(f"chunk {c.id} ({c.size} minimisations of N = {c.n_cells}) failed: "
+                    raise RuntimeError(f"chunk {c.id} ({c.size} tilings of N = {c.n_cells}) failed: "
                                        f"{type(exc).__name__}: {exc}; finished chunks are kept in {folder}, "
                                        "rerun to resume") from exc
                 rec = fut.result()
+                events[c.id].update(rec.pop("timing", {}), received=time.time())
                 if save_states:                 # the state first: a chunk file then implies its state
                     save_chunk_state(path, c.id, rec.pop("state_gsd"))
-                write_columns(os.path.join(folder, c.id + ".csv"), rec, RECORD_COLUMNS)
+                sweep.write_extras(path, c, rec)
+                write_columns(os.path.join(folder, c.id + ".csv"), rec, sweep.columns.names)
+                events[c.id]["written"] = time.time()
                 parts.append(rec)
                 computed.append(c.id)
                 state.chunks_done += 1
@@ -454,6 +485,8 @@ def run_sweep(sweep: RigiditySweep, out, executor=None, device="auto", workers=N
             prefetch.close()
         if owned:
             executor.shutdown(wait=True)
-    return SweepResult(sweep=sweep, out=path, records=sorted_records(merge_records(parts)), computed=computed,
+    records = sorted_records(merge_records(parts, sweep.columns), sweep.columns)
+    return SweepResult(sweep=sweep, out=path, records=records, computed=computed,
                        reused=len(parts) - len(computed), recomputed_bad=[b for b, _ in bad],
-                       elapsed=time.perf_counter() - t0, executor=type(executor).__name__)
+                       elapsed=time.perf_counter() - t0, executor=type(executor).__name__,
+                       timeline=[events[c] for c in computed] if timeline else [], started=started)

@@ -1,4 +1,5 @@
-"""What a rigidity sweep computes: its parameters, the seed of every tiling, and its chunks."""
+"""What a rigidity sweep computes: its parameters, the seed of every tiling, and its chunks; and
+:class:`Sweep`, what every sweep kind tells the store and :func:`~spherevm.sweeps.execution.run_sweep`."""
 from __future__ import annotations
 
 import math
@@ -9,10 +10,43 @@ import numpy as np
 from ..init_plane import MIN_PLANAR_CELLS
 from ..plugins.updaters.t1 import PRESETS
 from ..validation import SHAPE_INDEX_MAX, ParameterError, integer, positive, real
+from .store import FORMAT, RIGIDITY_COLUMNS
+
+
+class Sweep:
+    """What a sweep kind provides to the store and to :func:`~spherevm.sweeps.execution.run_sweep`.
+
+    A sweep is a grid of units, ``units_per_size`` per size N in ``cells`` (unit
+    ``u = point * replicas + replica``); a chunk (:class:`Chunk`) is a run of units of one N computed
+    by one call of the kind's ``chunk_function(parameters, n_cells, start, stop, device)``, which
+    returns its records (a dict of lists, ``columns``) and may add entries that
+    :meth:`write_extras` writes beside the chunk file."""
+    KIND = ""               # the word in messages: "rigidity", "dynamics"
+    FORMAT = ""             # the manifest's "format"
+    UNIT = "point"          # what the unit's first index counts, for the manifest's layout note
+    columns = None          # the records' store.Columns
+    chunk_function = None   # None: spherevm.sweeps.execution.run_chunk (the rigidity sweep's)
+    prefetch_tilings = False   # run_sweep may build the chunks' tilings ahead (TilingPrefetch)
+    keeps_states = False    # run_sweep(save_states=True) is allowed
+
+    def plan(self, batch_cells: int, done=None) -> list:
+        """The chunks that cover every unit not in ``done`` (N -> bool array over units)."""
+        raise NotImplementedError
+
+    def chunk_units(self, records: dict) -> np.ndarray:
+        """The units a chunk file's records cover (ValueError when they do not belong to this sweep)."""
+        raise NotImplementedError
+
+    def write_extras(self, path: str, chunk, records: dict):
+        """Pop and write what a chunk returned besides its records (before the chunk file)."""
+
+    @property
+    def total_units(self) -> int:
+        return len(self.cells) * self.units_per_size
 
 
 @dataclass(frozen=True)
-class RigiditySweep:
+class RigiditySweep(Sweep):
     """What to compute: every (N in ``cells``, p0 in ``p0``, replica < ``replicas``) minimised.
 
     The energy is ``E = sum_c kr/<A> (A_c - <A>)^2 + (P_c - p0 sqrt(<A>))^2`` per tiling (kP = 1), so
@@ -63,6 +97,9 @@ class RigiditySweep:
     t1_length_factor: float = None
     surface: str = "sphere"
     forces: tuple = ()
+
+    KIND, FORMAT, UNIT, columns = "rigidity", FORMAT, "p0_index", RIGIDITY_COLUMNS
+    prefetch_tilings = keeps_states = True
 
     def __post_init__(self):
         set_ = object.__setattr__
@@ -148,13 +185,21 @@ class RigiditySweep:
         """(p0, replica) pairs per N."""
         return len(self.p0) * self.replicas
 
-    @property
-    def total_units(self) -> int:
-        return len(self.cells) * self.units_per_size
-
     def unit(self, u: int):
         """``(p0_index, replica)`` of unit ``u`` (p0-major order)."""
         return divmod(int(u), self.replicas)
+
+    def plan(self, batch_cells: int, done=None) -> list:
+        """:func:`plan_chunks`."""
+        return plan_chunks(self, batch_cells, done)
+
+    def chunk_units(self, records: dict) -> np.ndarray:
+        k, r = np.asarray(records["p0_index"]), np.asarray(records["replica"])
+        if np.any(k < 0) or np.any(k >= len(self.p0)) or np.any(r < 0) or np.any(r >= self.replicas):
+            raise ValueError("unit outside this sweep")
+        if not np.allclose(np.asarray(self.p0)[k], records["p0"], rtol=0, atol=1e-12):
+            raise ValueError("p0 values do not match the grid")
+        return k * self.replicas + r
 
 
 #: the surfaces a sweep can run on
@@ -233,7 +278,7 @@ class Chunk:
         return self.stop - self.start
 
 
-def plan_chunks(sweep: RigiditySweep, batch_cells: int, done=None) -> list:
+def plan_chunks(sweep: Sweep, batch_cells: int, done=None) -> list:
     """Chunks covering every unit not in ``done`` (a dict N -> bool array over units).
 
     Each maximal run of missing units of one N is cut into chunks of ``max(1, batch_cells // N)``

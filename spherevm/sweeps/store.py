@@ -1,5 +1,7 @@
 """A sweep on disk: ``manifest.json`` (the parameters), ``chunks/*.csv`` (one row per replica),
-written atomically, checked against the requested sweep, and scanned to resume."""
+written atomically, checked against the requested sweep, and scanned to resume. The same store
+serves every sweep kind (:class:`spherevm.sweeps.spec.Sweep`): each names its manifest format and
+its record :class:`Columns`."""
 from __future__ import annotations
 
 import csv
@@ -7,11 +9,11 @@ import json
 import os
 import time
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..provenance import source_fingerprint
-from .spec import RigiditySweep
 
 FORMAT = "spherevm-rigidity-sweep"
 FORMAT_VERSION = 1
@@ -22,6 +24,31 @@ RECORD_COLUMNS = ("n_cells", "p0", "p0_index", "replica", "tiling_seed", "energy
                   "mean_shape_index", "steps", "reason", "t1_flips", "chunk", "chunk_seconds")
 _INT_COLUMNS = {"n_cells", "p0_index", "replica", "tiling_seed", "steps", "t1_flips"}
 _STR_COLUMNS = {"reason", "chunk"}
+
+
+@dataclass(frozen=True)
+class Columns:
+    """The record columns of a sweep kind: their order, which are integers and which strings (the
+    rest are floats), and the columns records are sorted by, most significant first."""
+    names: tuple
+    ints: frozenset
+    strs: frozenset
+    sort: tuple
+
+
+#: the rigidity sweep's records, one row per minimised tiling
+RIGIDITY_COLUMNS = Columns(RECORD_COLUMNS, frozenset(_INT_COLUMNS), frozenset(_STR_COLUMNS),
+                           ("n_cells", "p0_index", "replica"))
+#: the dynamics sweep's records, one row per tissue (tau_alpha NaN: Q_s stayed above 1/e)
+DYNAMICS_COLUMNS = Columns(
+    ("n_cells", "point", "T", "p0", "B", "replica", "tiling_seed", "noise_seed", "tau_alpha", "msd_end",
+     "overlap_end", "t1_flips", "chunk", "chunk_seconds"),
+    frozenset({"n_cells", "point", "replica", "tiling_seed", "noise_seed", "t1_flips"}), frozenset({"chunk"}),
+    ("n_cells", "point", "replica"))
+#: a dynamics chunk's MSD and Q_s, averaged over its ``tissues``, one row per lag
+CURVE_COLUMNS = ("n_cells", "point", "tissues", "time", "msd", "self_overlap")
+#: where a dynamics sweep keeps each chunk's averaged curves
+CURVE_DIR = "curves"
 
 
 def _format(value):
@@ -53,36 +80,36 @@ def write_columns(path, columns: dict, order=None):
     os.replace(tmp, path)
 
 
-def read_records(path) -> dict:
+def read_records(path, columns: Columns = RIGIDITY_COLUMNS) -> dict:
     """Read a chunk (or replicas.csv) file back into typed columns (lists)."""
     with open(path, newline="") as fh:
         rows = list(csv.reader(fh))
-    if not rows or tuple(rows[0]) != RECORD_COLUMNS:
+    if not rows or tuple(rows[0]) != columns.names:
         raise ValueError(f"{path}: not a sweep record file (header {rows[0] if rows else 'missing'})")
-    out = {c: [] for c in RECORD_COLUMNS}
+    out = {c: [] for c in columns.names}
     for row in rows[1:]:
-        if len(row) != len(RECORD_COLUMNS):
+        if len(row) != len(columns.names):
             raise ValueError(f"{path}: malformed row {row}")
-        for c, v in zip(RECORD_COLUMNS, row):
-            out[c].append(v if c in _STR_COLUMNS else int(v) if c in _INT_COLUMNS else float(v))
+        for c, v in zip(columns.names, row):
+            out[c].append(v if c in columns.strs else int(v) if c in columns.ints else float(v))
     return out
 
 
-def merge_records(parts) -> dict:
+def merge_records(parts, columns: Columns = RIGIDITY_COLUMNS) -> dict:
     """One dict of record columns from several (chunk order kept)."""
-    out = {c: [] for c in RECORD_COLUMNS}
+    out = {c: [] for c in columns.names}
     for p in parts:
-        for c in RECORD_COLUMNS:
+        for c in columns.names:
             out[c].extend(p[c])
     return out
 
 
-def sorted_records(records: dict) -> dict:
-    """Records as NumPy columns, sorted by (N, p0 index, replica)."""
-    cols = {c: np.asarray(records[c]) for c in RECORD_COLUMNS}
-    if len(cols["n_cells"]) == 0:
+def sorted_records(records: dict, columns: Columns = RIGIDITY_COLUMNS) -> dict:
+    """Records as NumPy columns, sorted by ``columns.sort`` (rigidity: N, p0 index, replica)."""
+    cols = {c: np.asarray(records[c]) for c in columns.names}
+    if len(cols[columns.sort[0]]) == 0:
         return cols
-    order = np.lexsort((cols["replica"], cols["p0_index"], cols["n_cells"]))
+    order = np.lexsort(tuple(cols[c] for c in columns.sort[::-1]))
     return {c: v[order] for c, v in cols.items()}
 
 
@@ -119,7 +146,7 @@ def _manifest_mismatch(old: dict, new: dict):
     return diffs
 
 
-def open_sweep_folder(sweep: RigiditySweep, out, create: bool = True) -> str:
+def open_sweep_folder(sweep, out, create: bool = True) -> str:
     """Check ``out`` against ``sweep`` (ValueError on a mismatch) and write its manifest.
 
     A new or empty folder gets ``manifest.json``; a folder with a manifest must hold the same
@@ -128,17 +155,18 @@ def open_sweep_folder(sweep: RigiditySweep, out, create: bool = True) -> str:
     path = check_out_folder(out)
     manifest_path = os.path.join(path, MANIFEST)
     params = sweep.parameters()
+    form = sweep.FORMAT
     if os.path.isdir(path) and os.listdir(path):
         if not os.path.exists(manifest_path):
-            raise ValueError(f"output folder {out!r} is not empty and holds no {MANIFEST}: not a rigidity sweep "
+            raise ValueError(f"output folder {out!r} is not empty and holds no {MANIFEST}: not a {sweep.KIND} sweep "
                              "folder; choose a new or empty folder")
         try:
             with open(manifest_path) as fh:
                 manifest = json.load(fh)
         except (OSError, json.JSONDecodeError) as exc:
             raise ValueError(f"cannot read {manifest_path}: {exc}") from None
-        if manifest.get("format") != FORMAT:
-            raise ValueError(f"{manifest_path} is not a {FORMAT} manifest")
+        if manifest.get("format") != form:
+            raise ValueError(f"{manifest_path} is not a {form} manifest (it holds a {manifest.get('format')})")
         if manifest.get("version") != FORMAT_VERSION:
             raise ValueError(f"{manifest_path} has format version {manifest.get('version')}, "
                              f"this spherevm writes {FORMAT_VERSION}")
@@ -162,10 +190,10 @@ def open_sweep_folder(sweep: RigiditySweep, out, create: bool = True) -> str:
         return path
     from .. import __version__
     os.makedirs(os.path.join(path, CHUNK_DIR), exist_ok=True)
-    manifest = {"format": FORMAT, "version": FORMAT_VERSION, "spherevm": __version__, "code": source_fingerprint(),
+    manifest = {"format": form, "version": FORMAT_VERSION, "spherevm": __version__, "code": source_fingerprint(),
                 "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "parameters": params,
                 "layout": {"chunks": f"{CHUNK_DIR}/N<cells>_u<first unit>-<end unit>.csv, one row per replica; "
-                                     "unit u = p0_index * replicas + replica"}}
+                                     f"unit u = {sweep.UNIT} * replicas + replica"}}
     tmp = manifest_path + f".tmp{os.getpid()}"
     with open(tmp, "w") as fh:
         json.dump(manifest, fh, indent=2)
@@ -174,7 +202,7 @@ def open_sweep_folder(sweep: RigiditySweep, out, create: bool = True) -> str:
     return path
 
 
-def scan_chunks(sweep: RigiditySweep, path: str, clean: bool = False):
+def scan_chunks(sweep, path: str, clean: bool = False):
     """Finished chunk files of a sweep folder: ``(done, records, bad)``.
 
     ``done`` maps N to a bool array over its units; ``records`` lists the parsed files; ``bad``
@@ -198,17 +226,12 @@ def scan_chunks(sweep: RigiditySweep, path: str, clean: bool = False):
         if not name.endswith(".csv"):
             continue
         try:
-            rec = read_records(full)
+            rec = read_records(full, sweep.columns)
             n = set(rec["n_cells"])
             if len(n) != 1 or next(iter(n)) not in done or not rec["n_cells"]:
                 raise ValueError("size not in this sweep")
             n = next(iter(n))
-            u = np.asarray(rec["p0_index"]) * sweep.replicas + np.asarray(rec["replica"])
-            k = np.asarray(rec["p0_index"])
-            if np.any(k < 0) or np.any(k >= len(sweep.p0)) or np.any(np.asarray(rec["replica"]) >= sweep.replicas):
-                raise ValueError("unit outside this sweep")
-            if not np.allclose(np.asarray(sweep.p0)[k], rec["p0"], rtol=0, atol=1e-12):
-                raise ValueError("p0 values do not match the grid")
+            u = sweep.chunk_units(rec)
             if np.any(done[n][u]):
                 raise ValueError("units already covered by another chunk file")
         except (ValueError, OSError) as exc:
@@ -217,3 +240,42 @@ def scan_chunks(sweep: RigiditySweep, path: str, clean: bool = False):
         done[n][u] = True
         records.append(rec)
     return done, records, bad
+
+
+def read_curves(out, records: dict) -> dict:
+    """The MSD and Q_s of every point, averaged over its tissues (each chunk's curve weighed by its
+    tissues, chunks in the order of their first tissue): columns ``n_cells, point, T, p0, B, time,
+    msd, self_overlap``, sorted by (N, point, time)."""
+    folder = os.path.join(os.fspath(out), CURVE_DIR)
+    chunks = {}
+    for i, c in enumerate(records["chunk"]):
+        chunks.setdefault(c, i)
+    points = {}
+    for cid in sorted(chunks, key=lambda c: (int(records["n_cells"][chunks[c]]), int(records["point"][chunks[c]]),
+                                             int(records["replica"][chunks[c]]))):
+        path = os.path.join(folder, cid + ".csv")
+        try:
+            with open(path, newline="") as fh:
+                rows = list(csv.reader(fh))
+        except OSError:
+            raise ValueError(f"{path} is missing: the chunk's curves were lost; remove chunks/{cid}.csv "
+                             "and rerun the sweep to recompute it") from None
+        cols = {c: np.array([float(r[j]) for r in rows[1:]]) for j, c in enumerate(rows[0])}
+        i = chunks[cid]
+        key = (int(records["n_cells"][i]), int(records["point"][i]))
+        w = cols["tissues"][0]
+        total = points.setdefault(key, [i, cols["time"], np.zeros(len(cols["time"])), np.zeros(len(cols["time"])), 0.0])
+        total[2] = total[2] + w * cols["msd"]
+        total[3] = total[3] + w * cols["self_overlap"]
+        total[4] += w
+    out_cols = {c: [] for c in ("n_cells", "point", "T", "p0", "B", "time", "msd", "self_overlap")}
+    for (n, k), (i, lag, msd, overlap, w) in sorted(points.items()):
+        m = len(lag)
+        for c in ("T", "p0", "B"):
+            out_cols[c].extend([float(records[c][i])] * m)
+        out_cols["n_cells"].extend([n] * m)
+        out_cols["point"].extend([k] * m)
+        out_cols["time"].extend(lag.tolist())
+        out_cols["msd"].extend((msd / w).tolist())
+        out_cols["self_overlap"].extend((overlap / w).tolist())
+    return out_cols

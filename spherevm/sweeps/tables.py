@@ -6,8 +6,10 @@ import json
 import math
 import os
 
+import numpy as np
+
 from ..analysis import rigidity
-from .store import MANIFEST, RECORD_COLUMNS, sorted_records, write_columns
+from .store import DYNAMICS_COLUMNS, MANIFEST, RECORD_COLUMNS, read_curves, sorted_records, write_columns
 
 
 def summarize_records(records: dict, zero_tol=None, sigma=None, resamples: int = 400, surface: str = "sphere"):
@@ -95,8 +97,80 @@ def format_p0star_table(p0star) -> str:
                      f"{p0star['std'][i]:.4f}", f"{p0star['p0_half'][i]:.4f}", f"{pent:.4f}", f"{p - pent:+.4f}",
                      str(int(p0star["n_replicas"][i])), str(int(p0star["n_unconverged"][i])),
                      _note(p0star, i)))
+    return _text_table(head, rows)
+
+
+def _text_table(head, rows) -> str:
+    """Right-aligned columns, the last one left as it is (a note)."""
     widths = [max(len(h), *(len(r[j]) for r in rows)) if rows else len(h) for j, h in enumerate(head)]
     lines = ["  ".join(h.rjust(w) for h, w in zip(head, widths)).rstrip()]
     lines += ["  ".join(v.rjust(w) if j < len(head) - 1 else v for j, (v, w) in enumerate(zip(r, widths))).rstrip()
               for r in rows]
     return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------- dynamics
+TAU_COLUMNS = ("n_cells", "T", "p0", "B", "tissues", "relaxed", "tau_alpha", "tau_alpha_err", "tau_alpha_curve")
+
+
+def summarize_dynamics(records: dict, curves: dict) -> dict:
+    """tau_alpha per point (N, T, p0, B) from per-tissue records (:data:`DYNAMICS_COLUMNS`) and the
+    points' averaged curves (:func:`spherevm.sweeps.dynamics.read_curves`): ``tissues``, ``relaxed``
+    (tissues whose Q_s reached 1/e), ``tau_alpha`` (the mean over the tissues; NaN unless every
+    tissue relaxed, since a mean over the relaxed ones only is biased low), ``tau_alpha_err`` (its
+    standard error; NaN below two tissues) and ``tau_alpha_curve`` (where the point's averaged Q_s
+    reaches 1/e, NaN if it does not)."""
+    from ..analysis.dynamics import tau_alpha
+    records = sorted_records(records, DYNAMICS_COLUMNS)
+    out = {c: [] for c in TAU_COLUMNS}
+    curve = {c: np.asarray(v) for c, v in curves.items()}
+    for n, k in sorted(set(zip(records["n_cells"].tolist(), records["point"].tolist()))):
+        mine = (records["n_cells"] == n) & (records["point"] == k)
+        sel = (curve["n_cells"] == n) & (curve["point"] == k)
+        tau = records["tau_alpha"][mine]
+        every = bool(np.isfinite(tau).all())
+        mean = float(np.mean(tau)) if every else math.nan
+        err = float(np.std(tau, ddof=1) / math.sqrt(len(tau))) if every and len(tau) > 1 else math.nan
+        row = (int(n), *(float(records[c][mine][0]) for c in ("T", "p0", "B")), len(tau),
+               int(np.isfinite(tau).sum()), mean, err,
+               float(tau_alpha(curve["time"][sel], curve["self_overlap"][sel], warn=False)))
+        for c, v in zip(TAU_COLUMNS, row):
+            out[c].append(v)
+    return out
+
+
+def write_dynamics_tables(out, records: dict) -> dict:
+    """Write ``tissues.csv`` (every tissue's record), ``curves.csv`` (each point's MSD and Q_s,
+    averaged over its tissues) and ``tau_alpha.csv`` (:func:`summarize_dynamics`) to the sweep folder.
+
+    Parameters
+    ----------
+    out : str or path
+        The sweep's folder (its ``curves/`` are read).
+    records : dict
+        The per-tissue records, such as :attr:`SweepResult.records` of a dynamics sweep.
+
+    Returns
+    -------
+    dict
+        ``tau_alpha`` and ``curves`` (the tables, dicts of columns) and the ``files`` written."""
+    path = os.path.abspath(os.fspath(out))
+    records = sorted_records(records, DYNAMICS_COLUMNS)
+    curves = read_curves(path, records)
+    tau = summarize_dynamics(records, curves)
+    files = []
+    for name, table, order in (("tissues.csv", records, DYNAMICS_COLUMNS.names), ("curves.csv", curves, None),
+                               ("tau_alpha.csv", tau, TAU_COLUMNS)):
+        write_columns(os.path.join(path, name), table, order)
+        files.append(os.path.join(path, name))
+    return {"tau_alpha": tau, "curves": curves, "files": files}
+
+
+def format_tau_table(tau: dict) -> str:
+    """tau_alpha per point as plain text."""
+    head = ("N", "T", "p0", "B", "tau_alpha", "+-", "relaxed", "tau(<Q_s>)")
+    rows = [(str(tau["n_cells"][i]), f"{tau['T'][i]:g}", f"{tau['p0'][i]:g}", f"{tau['B'][i]:g}",
+             f"{tau['tau_alpha'][i]:.5g}", f"{tau['tau_alpha_err'][i]:.2g}",
+             f"{tau['relaxed'][i]}/{tau['tissues'][i]}", f"{tau['tau_alpha_curve'][i]:.5g}")
+            for i in range(len(tau["n_cells"]))]
+    return _text_table(head, rows)

@@ -3,17 +3,11 @@
 // Alone: three kernels (normals per cell; energy and dE/da per cell over its neighbours; forces per
 // vertex). With the vertex model (Bending.combined): its two kernels with the terms below fused in
 // (vertex_model.cuh), and the per-cell kernel between them adding to its energies and summing both.
-#include "plugins/forces/vertex_model.cuh"
+#include "plugins/forces/bending.cuh"
 
-// What bending adds to the vertex model's kernels (vertex_model.cuh), and what its own kernels run.
-// cell: the doubled area vector A = 2 a = sum over the corners (x_b - x_0) x (x_d - x_b), x_0 the
-// cell's first vertex (the same terms as Sphere.cell_geometry's corners; the closing corner adds
-// (x_{n-1} - x_0) x (x_0 - x_{n-1}) = 0), its unit normal and 1/|A|.
-// add_gradient: the gradient of the energy through the area vectors of the vertex's three cells. a_c
-// moves with x_v by (x_next - x_prev) x / 2 per corner; with w_c = (dE/da_c) / 2 and e_j =
-// x_{n_j} - x_v the sum over the corners is G = sum_j e_j x (w[slot j] - w[slot j-1]) (as
-// Sphere.shape_gradient), added as |x| G to the vertex model's unit-sphere terms (which are
-// multiplied by 1/|x| at the end).
+// What bending adds to the vertex model's kernels (vertex_model.cuh), and what its own kernels run
+// (bending.cuh's functions): cell, the cell's unit normal and 1/|2a| (bending_cell_normal);
+// add_gradient, the gradient through the area vectors of the vertex's three cells (bending_gradient).
 struct BendingTerms {
     static constexpr bool sums_energy = true;   // the bending cell kernel sums both forces' cell energies
     double* normal;
@@ -21,28 +15,14 @@ struct BendingTerms {
     const double* w;
     __device__ __forceinline__ void cell(const double* __restrict__ pos, const int* __restrict__ row, int n,
                                          long c) const {
-        vec3 x0 = load3(pos, row[0]);
-        vec3 xb = x0, A = v3(0.0, 0.0, 0.0);
-        for (int i = 1; i < n; ++i) {
-            vec3 xd = load3(pos, row[i]);
-            A = A + cross3(xb - x0, xd - xb);
-            xb = xd;
-        }
-        double s = rsqrt(dot3(A, A));
-        store3(normal, c, s * A);
-        inv_area[c] = s;
+        vec3 m;
+        bending_cell_normal(pos, row, n, &m, inv_area + c);
+        store3(normal, c, m);
     }
     __device__ __forceinline__ void add_gradient(vec3& g, const double* __restrict__ pos,
                                                  const int* __restrict__ vertex_neighbors,
                                                  const int* __restrict__ vertex_cells, long v, vec3 x) const {
-        // each cell's w loaded once (a loop over j loads each twice: 18 us more at 1e6 cells on an H200)
-        const int* vc = vertex_cells + 3 * v;
-        const int* vn = vertex_neighbors + 3 * v;
-        vec3 w0 = load3(w, vc[0]), w1 = load3(w, vc[1]), w2 = load3(w, vc[2]);
-        vec3 G = cross3(load3(pos, vn[0]) - x, w0 - w2);
-        G = G + cross3(load3(pos, vn[1]) - x, w1 - w0);
-        G = G + cross3(load3(pos, vn[2]) - x, w2 - w1);
-        g = g + norm3(x) * G;
+        bending_gradient(g, pos, vertex_neighbors, vertex_cells, v, x, w);
     }
 };
 
@@ -57,26 +37,10 @@ extern "C" __global__ void bending_cell_normals(
     terms.cell(pos, cell_vertices + c * (long)max_sides, cell_sides[c], c);
 }
 
-// The cell across the edge that leaves vertex v of cell c (counter-clockwise): corner (v, s) with
-// vertex_cells[v, s] == c runs along that edge, which borders vertex_cells[v, s - 1] (the three
-// loaded at once).
-__device__ __forceinline__ int cell_across(const int* __restrict__ vertex_cells, int v, long c)
-{
-    const int* vc = vertex_cells + 3 * (long)v;
-    int c0 = vc[0], c1 = vc[1], c2 = vc[2];
-    return c0 == c ? c2 : (c1 == c ? c0 : c1);
-}
-
-// Cells with at most this many sides keep their neighbours in registers (the loops unrolled), so
-// that a neighbour across two edges is found without walking the edges again; larger cells do.
-#define BENDING_REGISTER_SIDES 12
-
-// One thread per cell, over its neighbours, found by walking its edges (from the State's arrays, so
-// nothing to rebuild after T1 flips; a neighbour across two edges counts once, as in bending.py's
-// pair list): the cell's energy (half of each pair, B/4 |n_i - n_j|^2), the per-replica sum, and
-// w_i = (dE/da_i) / 2 = B (s - (s.n_i) n_i) / |2 a_i| with s = sum_j (n_i - n_j). ADD (fused): the
-// energy is added to what the vertex model's cell kernel wrote and the sum is of both (that kernel
-// leaves it here: one sum, not two, saves 30 us at 1e6 cells on an H200), else it is stored.
+// One thread per cell, over its neighbours (bending_neighbour_sum): the cell's energy (half of each
+// pair, B/4 |n_i - n_j|^2), the per-replica sum, and w_i = (dE/da_i) / 2 (bending_w). ADD (fused):
+// the energy is added to what the vertex model's cell kernel wrote and the sum is of both (that
+// kernel leaves it here: one sum, not two, saves 30 us at 1e6 cells on an H200), else it is stored.
 template <bool ADD>
 __device__ __forceinline__ void bending_cell_terms_body(
     const double* __restrict__ normal, const double* __restrict__ inv_area, const int* __restrict__ cell_vertices,
@@ -90,37 +54,14 @@ __device__ __forceinline__ void bending_cell_terms_body(
     if (c < n_cells) {
         rep = cell_replica[c];
         double Br = B[rep];
-        const int* row = cell_vertices + c * (long)max_sides;
-        int n = cell_sides[c];
         vec3 ni = load3(normal, c);
-        vec3 s = v3(0.0, 0.0, 0.0);
-        double sq = 0.0;
-        auto add = [&](int j) { vec3 d = ni - load3(normal, j); sq += dot3(d, d); s = s + d; };
-        if (n <= BENDING_REGISTER_SIDES) {
-            int js[BENDING_REGISTER_SIDES];
-#pragma unroll
-            for (int k = 0; k < BENDING_REGISTER_SIDES; ++k) {
-                if (k < n) {
-                    int j = js[k] = cell_across(vertex_cells, row[k], c);
-                    bool counted = j == c;
-#pragma unroll
-                    for (int i = 0; i < k; ++i) counted = counted || js[i] == j;
-                    if (!counted) add(j);
-                }
-            }
-        } else {
-            for (int k = 0; k < n; ++k) {
-                int j = cell_across(vertex_cells, row[k], c);
-                bool counted = j == c;
-                for (int i = 0; i < k && !counted; ++i) counted = cell_across(vertex_cells, row[i], c) == j;
-                if (!counted) add(j);
-            }
-        }
+        double sq;
+        vec3 s = bending_neighbour_sum([&](int j) { return load3(normal, j); }, cell_vertices + c * (long)max_sides,
+                                       cell_sides[c], vertex_cells, c, ni, &sq);
         e = 0.25 * Br * sq;
         if (ADD) e += cell_energy[c];
         cell_energy[c] = e;
-        vec3 t = s - dot3(s, ni) * ni;
-        store3(w, c, (Br * inv_area[c]) * t);
+        store3(w, c, bending_w(s, ni, Br, inv_area[c]));
     }
     segment_sum(e, rep, sums, replica_energy);
 }
@@ -150,14 +91,7 @@ extern "C" __global__ void bending_vertex_forces(
 {
     long v = (long)blockIdx.x * blockDim.x + threadIdx.x;
     if (v >= n_vertices) return;
-    vec3 x = load3(pos, v);
-    double inv_rn = rsqrt(dot3(x, x));
-    vec3 u = inv_rn * x;
-    vec3 g = v3(0.0, 0.0, 0.0);
-    BendingTerms terms = {nullptr, nullptr, w};
-    terms.add_gradient(g, pos, vertex_neighbors, vertex_cells, v, x);
-    g = g - dot3(g, u) * u;
-    store3(forces, v, -(inv_rn * g));
+    store3(forces, v, bending_vertex_force(pos, vertex_neighbors, vertex_cells, v, w));
 }
 
 // The vertex model's kernels with the bending terms fused in (Bending.combined).

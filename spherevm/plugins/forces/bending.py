@@ -15,11 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ...constraints import Sphere
+from ...constraints.kernels import GeodesicSphere
 from ...constraints.cell_rows import cell_blocks, fold, row_table
 from ...constraints.corners import in_parallel
 from ...device import array_module, launch, load_module, segment_sums, weighted_bincount
+from ...kernel_struct import KernelStruct
 from ..base import Force, ForceResult
+from ..fusion import FusedStage, overrides
 from ..parameters import Parameter
 from .vertex_model import VertexModel
 
@@ -157,7 +159,7 @@ class Bending(Force):
         Not used (forces are evaluated whenever the integrator needs them)."""
 
     narrowable = True
-    gpu_surfaces = (Sphere,)
+    gpu_surfaces = (GeodesicSphere,)
     surface_needs = ("cell_geometry", "shape_gradient")
 
     B = Parameter(_bending_stiffness)
@@ -218,6 +220,30 @@ class Bending(Force):
             return None
         return self.implementation("combined", state)(other, state)
 
+    #: the fused stage's arguments (bending_stage.cuh): B per cell on the device
+    FUSED_ARGS = KernelStruct("BendingArgs", [("B", "const double*")])
+
+    def fused_stage(self, simulation, minimizing):
+        """bending_stage.cuh, alone: each cell's normal, each cell's term over its neighbours (the
+        stage's second per-cell part) and each vertex's force, bending.cuh's functions as
+        bending.cu's kernels call them. None off the sphere, or for a subclass that computes
+        something else."""
+        return self._stage(simulation, extra=False)
+
+    def fused_combined(self, other, simulation, minimizing):
+        """With a :class:`VertexModel` (where :meth:`combined` pairs them): the same stage as an extra
+        of the vertex model's, its gradient added inside the vertex model's vertex force, as
+        vm_bending_vertex_forces adds it."""
+        return self._stage(simulation, extra=True) if type(other) is VertexModel else None
+
+    def _stage(self, simulation, extra):
+        if not isinstance(simulation.state.constraint, self.gpu_surfaces) or \
+                overrides(self, Bending, ("compute", "_compute_gpu", "combined", "_combined_gpu")):
+            return None
+        return FusedStage("force", "BendingStage", '#include "plugins/forces/bending_stage.cuh"', self.FUSED_ARGS,
+                          dict(B=self._device_B(simulation.state)[1]), cell_doubles=4, measures=True,
+                          neighbour_doubles=3, extra=extra)
+
     def _compute_cpu(self, state) -> ForceResult:
         geometry = state.constraint.cell_geometry(state, area_vectors=True, metric=False)
         cell_energy, d_area_vector = _cell_terms(state, self._device_B(state)[1], geometry.area_vector)
@@ -263,12 +289,12 @@ class Bending(Force):
         coef, cell_energy, energy = cp.empty((nc, 2)), cp.empty(nc), cp.empty(state.n_replicas)
         normal, inv_area = cp.empty((nc, 3)), cp.empty(nc)
         launch(module.get_function("vm_bending_cell_geometry"), nc,
-               (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, state.radius,
+               (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, state.size,
                 np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, cell_energy, normal, inv_area))
         w = self._cell_terms_gpu(state, module, normal, inv_area, cell_energy, energy, "bending_cell_terms_add")
         forces = cp.empty_like(state.positions)
         launch(module.get_function("vm_bending_vertex_forces"), nv,
-               (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, state.radius,
+               (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, state.size,
                 np.int32(nv), coef, w, forces))
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
 

@@ -211,12 +211,14 @@ class VertexModel(Force):
 
     def fused_stage(self, simulation, minimizing):
         """vertex_model_stage.cuh: each cell's two coefficients and each vertex's force, the general
-        kernels' functions. None for a subclass that computes something else."""
+        kernels' functions; its vertex force takes another force's gradient (``takes_extra``: the
+        bending force's, Bending.fused_combined). None for a subclass that computes something else."""
         if overrides(self, VertexModel, ("compute", "_compute_gpu", "cell_terms", "parameters")):
             return None
         kA, kP, A0, P0 = self.device_parameters(simulation.state)
         return FusedStage("force", "VertexModelStage", '#include "plugins/forces/vertex_model_stage.cuh"',
-                          self.FUSED_ARGS, dict(kA=kA, kP=kP, A0=A0, P0=P0), cell_doubles=2, measures=True)
+                          self.FUSED_ARGS, dict(kA=kA, kP=kP, A0=A0, P0=P0), cell_doubles=2, measures=True,
+                          takes_extra=True)
 
     def _compute_gpu(self, state) -> ForceResult:
         """Two fused kernels (vertex_model.cu, compiled for the State's surface): cell geometry and

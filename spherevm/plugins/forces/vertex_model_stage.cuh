@@ -2,7 +2,10 @@
 // VertexModel.fused_stage): a cell's two coefficients from its area and perimeter (vm_cell_terms)
 // and a vertex's force from its cells' coefficients (Surface::vertex_force), the functions of the
 // general kernels (vertex_model.cu), so the fused forces are theirs bit for bit. VertexModelArgs is
-// declared from its Python definition (VertexModel.FUSED_ARGS): the per-cell kA, kP, A0, P0.
+// declared from its Python definition (VertexModel.FUSED_ARGS): the per-cell kA, kP, A0, P0. Its vertex
+// part takes an extra (FusedStage.takes_extra): a force joined into it (Force.fused_combined, the
+// bending force's stage) adds its gradient before the projection, as in the general kernels that
+// Force.combined runs.
 #pragma once
 #include "plugins/forces/vertex_model.cuh"
 
@@ -11,14 +14,16 @@ struct VertexModelStage {
     static constexpr bool measures = true;     // takes each cell's area and perimeter
     VertexModelArgs a;
 
-    __device__ __forceinline__ void cell(double A, double P, long c, Surface::Size s, double* coef) const
+    __device__ __forceinline__ void cell(double A, double P, long c, Surface::Size s, double* coef, const double*,
+                                         const int*, int) const
     {
         vm_cell_terms(A, P, c, s, a.kA, a.kP, a.A0, a.P0, coef);
     }
 
+    template <class Extra = NoExtra>
     __device__ __forceinline__ vec3 vertex(const double* pos, const int* vn, const int* vc, long v, Surface::Size s,
-                                           const double* coef, KeptNorm norm) const
+                                           const double* coef, KeptNorm norm, const Extra& extra = Extra()) const
     {
-        return Surface::vertex_force(pos, vn, vc, v, s, coef, NoExtra(), norm);
+        return Surface::vertex_force(pos, vn, vc, v, s, coef, extra, norm);
     }
 };

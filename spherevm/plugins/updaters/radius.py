@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...constraints import Sphere
 from ..base import Updater
 from ..parameters import Parameter
 from ..rows import saved_field
@@ -63,8 +62,10 @@ class RadiusSchedule(Updater):
 
     def attach(self, simulation):
         super().attach(simulation)
-        if not isinstance(simulation.state.constraint, Sphere):
-            raise ValueError(f"RadiusSchedule needs a Sphere, got {simulation.state.constraint!r}")
+        con = simulation.state.constraint
+        if con.size_key != "radius":
+            raise ValueError(f"RadiusSchedule needs a surface sized by one radius per replica (a Sphere), got {con!r} "
+                             f"sized by {', '.join(con.size_names)}")
         state = simulation.state
         self.target_area = (np.full(state.n_replicas, self.area) if self.area is not None
                             else np.array(state.mean_cell_area, dtype=np.float64))

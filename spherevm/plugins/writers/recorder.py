@@ -42,15 +42,19 @@ class Recording:
     """Cell centroids recorded over time: what a :class:`Recorder` holds and its CSV file stores.
 
     timesteps : (T,) int64; centroids : (T, n_cells, 3) float64; cell_replica : (n_cells,) replica
-    of each cell; radius : (n_replicas,) sphere radius of each replica (None on the periodic plane);
-    box : (n_replicas, 2) periodic box (Lx, Ly) of each replica on the plane (None on a sphere), what
-    the analysis needs to unwrap the centroids across the boundary.
+    of each cell; radius : (n_replicas,) sphere radius of each replica (None on other surfaces);
+    box : (n_replicas, 2) periodic box (Lx, Ly) of each replica on the plane (None on other
+    surfaces); constraint, size : the surface and each replica's size (``State.size``), what the
+    analysis needs to measure on the surface and unwrap the centroids across a periodic boundary
+    (None where only a radius or a box was read, from a CSV).
     """
     timesteps: np.ndarray
     centroids: np.ndarray
     cell_replica: np.ndarray
     radius: np.ndarray
     box: np.ndarray = None
+    constraint: object = None
+    size: np.ndarray = None
 
 
 class Recorder(Writer):
@@ -85,7 +89,7 @@ class Recorder(Writer):
         self.csv = None if csv is None else os.fspath(csv)
         self.method = method
         self._times, self._centroids = [], []
-        self._cell_replica = self._radius = self._box = self._cell_start = None
+        self._cell_replica = self._surface = self._cell_start = None
         self._file = None
 
     @classmethod
@@ -108,9 +112,7 @@ class Recorder(Writer):
         if self._cell_start is None:
             self._cell_start = np.array(state.cell_start, copy=True)
             self._cell_replica = state.cell_replica_np().copy()
-            box = state.box_np()      # a periodic plane stores its box (for unwrapping), a sphere its radius
-            self._radius = None if box is not None else state.radius_np().copy()
-            self._box = None if box is None else box.copy()
+            self._surface = (state.constraint, state.size_np(), state.radius_np(), state.box_np())   # host copies
         elif not np.array_equal(self._cell_start, state.cell_start):
             raise ValueError(f"Recorder: the state at timestep {timestep} has {state.n_cells} cells in "
                              f"{state.n_replicas} replicas, not the {int(self._cell_start[-1])} cells recorded "
@@ -165,9 +167,10 @@ class Recorder(Writer):
         """The centroids recorded so far (copies)."""
         if not self._times:
             raise RuntimeError("Recorder has recorded nothing yet: append it to sim.operations.writers and run")
+        constraint, size, radius, box = self._surface
         return Recording(self.timesteps, np.stack(self._centroids), self._cell_replica.copy(),
-                         None if self._radius is None else self._radius.copy(),
-                         None if self._box is None else self._box.copy())
+                         None if radius is None else radius.copy(), None if box is None else box.copy(),
+                         constraint, size.copy())
 
     @staticmethod
     def read_csv(path, box=None) -> Recording:

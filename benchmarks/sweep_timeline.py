@@ -1,0 +1,112 @@
+"""Where a rigidity sweep's time goes on one or several GPUs: a per-chunk timeline.
+
+    python benchmarks/sweep_timeline.py --gpus 1 2 --replicas 100 --out /tmp/timeline
+
+For each ``--gpus`` value (alternated ``--repeat`` times) it starts the cluster (timed), runs the
+sweep into a fresh folder with ``run_sweep(..., timeline=True)`` and prints: the cluster's start,
+the sweep's wall time, per worker its busy share (tilings built in the worker, minimisation) and its
+first start and last end, how long the sweep waited for prefetched tilings, the delay between
+submitting a chunk and its worker starting it (queue and transfer), and the tail (the last worker's
+end after the first worker ran out of work). It writes each run's timeline as CSV (one row a chunk,
+seconds from the sweep's start) and checks that every run gave the same tables. Needs dask-cuda;
+``--cpu-workers N`` times a LocalCluster of N processes on the CPU instead (``--gpus`` ignored).
+"""
+import argparse
+import csv
+import hashlib
+import os
+import shutil
+import statistics
+import time
+
+from spherevm.sweeps import RigiditySweep, cluster, parse_p0_grid, run_sweep, write_tables
+
+PAPER_CELLS = (32, 48, 64, 96, 128, 192, 256, 512, 1024)
+
+
+def summarize(result, cluster_start):
+    """One run's figures (seconds) from its timeline."""
+    t0, rows = result.started, result.timeline
+    workers = {}
+    for r in rows:
+        workers.setdefault(r["pid"], []).append(r)
+    end = max(r["written"] for r in rows) - t0
+    busy = {pid: sum(r["ended"] - r["started"] for r in rs) for pid, rs in workers.items()}
+    last_ends = sorted(max(r["ended"] for r in rs) - t0 for rs in workers.values())
+    return {
+        "cluster_start": cluster_start, "sweep": result.elapsed, "chunks": len(rows), "workers": len(workers),
+        "busy_share": statistics.mean(b / end for b in busy.values()),
+        "minimize_share": statistics.mean(sum(r["minimized"] - r["built"] for r in rs) / end for rs in workers.values()),
+        "build_in_worker": sum(r["built"] - r["started"] for r in rows),
+        "first_start": min(r["started"] for r in rows) - t0,
+        "waiting_for_tilings": sum(r["submitted"] - r["asked"] for r in rows),
+        "submit_to_start_median": statistics.median(r["started"] - r["submitted"] for r in rows),
+        "result_lag_median": statistics.median(r["received"] - r["ended"] for r in rows),
+        "tail": last_ends[-1] - last_ends[0],
+    }
+
+
+def write_timeline(path, result):
+    keys = ["chunk", "n_cells", "size", "pid", "asked", "submitted", "started", "built", "minimized", "ended",
+            "received", "written"]
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(keys)
+        for r in result.timeline:
+            w.writerow([r[k] if k in ("chunk", "n_cells", "size", "pid") else f"{r[k] - result.started:.4f}"
+                        for k in keys])
+
+
+def tables_digest(folder):
+    h = hashlib.sha256()
+    for name in ("fraction.csv", "p0star.csv"):
+        with open(os.path.join(folder, name), "rb") as f:
+            h.update(f.read())
+    return h.hexdigest()[:12]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
+                                 allow_abbrev=False)
+    ap.add_argument("--gpus", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--cells", type=int, nargs="+", default=list(PAPER_CELLS))
+    ap.add_argument("--p0", default="3.60:3.95:0.01")
+    ap.add_argument("--replicas", type=int, default=100)
+    ap.add_argument("--batch-cells", type=int, default=None)
+    ap.add_argument("--prefetch", choices=("auto", "yes", "no"), default="auto")
+    ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument("--cpu-workers", type=int, default=None)
+    ap.add_argument("--out", default="sweep_timeline")
+    args = ap.parse_args()
+    sweep = RigiditySweep(cells=args.cells, p0=parse_p0_grid([args.p0]), replicas=args.replicas, kr=0.0)
+    prefetch = {"auto": None, "yes": True, "no": False}[args.prefetch]
+    os.makedirs(args.out, exist_ok=True)
+    digests, figures = set(), {}
+    device = "gpu" if args.cpu_workers is None else "cpu"
+    for rep in range(args.repeat):
+        for g in (args.gpus if device == "gpu" else [args.cpu_workers]):
+            folder = os.path.join(args.out, f"gpus{g}_run{rep}")
+            shutil.rmtree(folder, ignore_errors=True)
+            t = time.perf_counter()
+            client = cluster.client(gpus=g) if device == "gpu" else cluster.client(scheduler="local", workers=g)
+            started = time.perf_counter() - t
+            try:
+                result = run_sweep(sweep, folder, executor=client, device=device, batch_cells=args.batch_cells,
+                                   prefetch=prefetch, timeline=True)
+            finally:
+                client.close()
+            write_tables(folder, result.records, plots=False)
+            digests.add(tables_digest(folder))
+            write_timeline(os.path.join(args.out, f"timeline_gpus{g}_run{rep}.csv"), result)
+            s = summarize(result, started)
+            figures.setdefault(g, []).append(s)
+            print(f"gpus={g} run {rep}: " + ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
+                                                      for k, v in s.items()), flush=True)
+    for g, runs in figures.items():
+        print(f"gpus={g}: sweep median {statistics.median(r['sweep'] for r in runs):.2f} s over {len(runs)} run(s); "
+              f"cluster start median {statistics.median(r['cluster_start'] for r in runs):.2f} s")
+    print(f"tables identical across runs: {len(digests) == 1} ({sorted(digests)})")
+
+
+if __name__ == "__main__":
+    main()

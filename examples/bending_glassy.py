@@ -21,11 +21,9 @@ import time
 
 import numpy as np
 
-import spherevm as svm
-from spherevm.plugins.forces import Bending, VertexModel
-from spherevm.plugins.integrators import FIRE
-from spherevm.plugins.updaters import T1
-from spherevm.protocols import glassy_dynamics
+from spherevm.plugins.forces import Bending
+from spherevm.progress import StageLines
+from spherevm.protocols import glassy_dynamics, inherent_states
 
 SMALL = dict(cells=[128], T=[0.015, 0.02, 0.025, 0.03, 0.04], replicas=2, steps=4000, relax=500, dt=0.05)
 # --full at dt = 0.05 stopped at production step 10,618: a step at T = 0.04 exceeded Brownian's
@@ -83,31 +81,6 @@ def analyse(n, B, temps, tau, lag, msd, seconds):
     return row
 
 
-def inherent_states(n, replicas, relax, device, seed):
-    """Random tilings relaxed by FIRE + T1 without bending (at most ``relax`` steps): the bending
-    force of a random Voronoi tiling's smallest cells is stiff enough (B = 1) to make FIRE's first
-    steps from it explode, so bending is switched on from these (glassy_dynamics relaxes again with it)."""
-    sim = svm.Simulation(device=device, seed=seed)
-    sim.state = svm.init.random_tiling(n, replicas=replicas, seed=seed)
-    sim.operations.forces.append(VertexModel.dimensionless(kr=0.0, p0=3.775))
-    sim.operations.updaters.append(T1())
-    sim.operations.integrator = FIRE(dt=0.02)
-    sim.minimize(force_tol=1e-8, max_steps=relax)
-    return sim.state
-
-
-def progress_printer(n, started):
-    """``progress(stage, done, total)`` for glassy_dynamics: a line per stage and per tenth of it."""
-    last = {}
-
-    def report(stage, done, total):
-        tenth = int(10 * done / max(total, 1))
-        if last.get(stage) != tenth:
-            last[stage] = tenth
-            print(f"  N={n} {stage}: {done}/{total} steps, {time.perf_counter() - started:.0f} s", flush=True)
-    return report
-
-
 def plot(results, path):
     try:
         import matplotlib
@@ -163,10 +136,10 @@ def main(argv=None):
     results = []
     for n in cells:
         t0 = time.perf_counter()
-        start = inherent_states(n, len(T_all), relax, args.device, seed=12)
+        start = inherent_states(n, len(T_all), 3.775, 0.0, steps=relax, seed=12, device=args.device)
         res = glassy_dynamics(None, 3.775, 0.0, T_all, dt=dt, steps=steps, seed=12, initial_state=start,
                               device=args.device, relax_steps=relax, extra_forces=[Bending(B_all)],
-                              progress=progress_printer(n, t0))
+                              progress=StageLines(f"N={n}"))
         seconds = time.perf_counter() - t0
         print(f"N={n}: {seconds:.0f} s on {res.simulation.device.name}", flush=True)
         tau = res.tau_alpha_per_replica.reshape(len(Bs), len(temps), reps)

@@ -169,3 +169,20 @@ class StageBars(_Bar):
             self.stage = stage
             self._bar = bar(total, f"{self.desc} {stage}", " steps", self.stream, self.enabled)
         _advance(self._bar, done)
+
+
+class StageLines:
+    """``progress(stage, done, total)`` of :func:`spherevm.protocols.glassy_dynamics` as plain lines,
+    for logs: one line per stage at its start and at each further tenth, with the seconds since this
+    object was made (``stream``: standard output by default)."""
+
+    def __init__(self, desc="dynamics", stream=None):
+        self.desc, self.stream = desc, stream
+        self.started, self.last = time.perf_counter(), {}
+
+    def __call__(self, stage, done, total):
+        tenth = int(10 * done / max(total, 1))
+        if self.last.get(stage) != tenth:
+            self.last[stage] = tenth
+            print(f"  {self.desc} {stage}: {done}/{total} steps, {time.perf_counter() - self.started:.0f} s",
+                  file=self.stream or sys.stdout, flush=True)

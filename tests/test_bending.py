@@ -324,10 +324,17 @@ def test_gpu_vertex_model_with_bending_fused_matches_numpy(n_cells, replicas):
 
 
 @pytest.mark.gpu
-def test_gpu_refuses_the_plane():
+@pytest.mark.parametrize("surface", ["plane", "flat sphere"])
+def test_gpu_refuses_surfaces_without_bending_kernels(surface):
+    """The plane, and the sphere measured with the flat metric: the kernels compute the geodesic sphere's."""
     sim = svm.Simulation(device="gpu")
-    sim.state = svm.init.random_planar_tiling(64, seed=3, device="gpu")
-    with pytest.raises(ValueError, match="Bending on the GPU supports Sphere"):
+    if surface == "plane":
+        sim.state = svm.init.random_planar_tiling(64, seed=3, device="gpu")
+    else:
+        state = svm.init.random_tiling(64, seed=3, device="gpu")
+        state.constraint = svm.constraints.Sphere(metric="flat")
+        sim.state = state
+    with pytest.raises(ValueError, match="Bending on the GPU supports GeodesicSphere surfaces only"):
         sim.operations.forces.append(Bending(1.0))
 
 

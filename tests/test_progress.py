@@ -186,3 +186,14 @@ def test_commands_draw_bars_on_a_terminal_not_in_a_log_and_not_with_quiet(argv, 
     assert expect not in log and "\r" not in log, log     # a log: the start and summary lines only
     assert run(Terminal(), "--quiet") == ""
     capsys.readouterr()
+
+
+def test_stage_lines_print_a_line_per_stage_and_tenth():
+    out = io.StringIO()
+    lines = progress.StageLines("N=32", stream=out)
+    for done in range(0, 1001, 50):
+        lines("production", done, 1000)
+    lines("relax", 0, 10)
+    text = out.getvalue().splitlines()
+    assert len(text) == 12 and text[0].startswith("  N=32 production: 0/1000 steps, ")
+    assert text[10].startswith("  N=32 production: 1000/1000 steps") and text[11].startswith("  N=32 relax: 0/10")

@@ -315,3 +315,67 @@ def tau_alpha(times, q_s=None, level: float = 1 / math.e, interpolation: str = "
                           "tau_alpha lies before the data, NaN; sample earlier times",
                           NoRelaxationWarning, stacklevel=_stacklevel)
     return float(out[0]) if q.ndim == 1 else out
+
+
+# ======================================================================================== Arrhenius plots
+@dataclass(eq=False)
+class ArrheniusFit:
+    """``log tau = a + b/T + c/T^2`` fitted to the mean over tissues of ``log tau_alpha`` at each
+    temperature; ``c`` is the curvature of the Arrhenius plot (< 0: the barrier
+    ``d log tau / d(1/T) = b + 2c/T`` falls on cooling, sub-Arrhenius; > 0: super-Arrhenius).
+
+    T : the temperatures used (those at which every tissue relaxed); log_tau, log_tau_se : the mean
+    of log tau_alpha over the tissues there and its standard error; coef : (a, b, c);
+    c_err : the standard deviation of c over bootstrap resamplings of the tissues at each T;
+    c_samples : those resampled c."""
+    T: np.ndarray
+    log_tau: np.ndarray
+    log_tau_se: np.ndarray
+    coef: np.ndarray
+    c_err: float
+    c_samples: np.ndarray
+
+    @property
+    def c(self) -> float:
+        return float(self.coef[2])
+
+    def verdict(self) -> str:
+        """"sub-Arrhenius", "super-Arrhenius" (|c| at least 2 c_err) or "consistent with Arrhenius"."""
+        if not abs(self.c) >= 2 * self.c_err:
+            return f"consistent with Arrhenius (c = {self.c:.3g} +- {self.c_err:.2g})"
+        kind = "sub-Arrhenius" if self.c < 0 else "super-Arrhenius"
+        return f"{kind} (c = {self.c:.3g} +- {self.c_err:.2g}, {abs(self.c) / self.c_err:.1f} sigma)"
+
+
+def arrhenius_fit(T, tau, n_boot: int = 1000, seed: int = 0):
+    """Fit ``log tau = a + b/T + c/T^2`` (the curvature ``c``, errors by bootstrap over tissues).
+
+    Parameters
+    ----------
+    T : array (n_T,)
+        Temperatures.
+    tau : array (n_T, n_tissues)
+        tau_alpha of each tissue at each T; a temperature with a NaN (a tissue that did not
+        relax) is left out.
+    n_boot : int
+        Bootstrap resamplings: at each T the tissues are drawn with replacement and the fit repeated.
+    seed : int
+
+    Returns
+    -------
+    ArrheniusFit, or None when fewer than 4 temperatures have every tissue relaxed."""
+    T = np.asarray(T, dtype=np.float64).reshape(-1)
+    tau = np.asarray(tau, dtype=np.float64).reshape(len(T), -1)
+    ok = np.all(np.isfinite(tau) & (tau > 0), axis=1)
+    if ok.sum() < 4:
+        return None
+    x, logs = 1.0 / T[ok], np.log(tau[ok])
+    design = np.stack((np.ones_like(x), x, x * x), axis=1)
+    solve = np.linalg.pinv(design)                       # the same least squares for every resampling
+    k = logs.shape[1]
+    pick = np.random.default_rng(seed).integers(0, k, size=(n_boot,) + logs.shape)
+    boot = np.take_along_axis(np.broadcast_to(logs, pick.shape), pick, axis=2).mean(axis=2)   # (n_boot, n_T)
+    c_samples = boot @ solve[2]
+    se = logs.std(axis=1, ddof=1) / np.sqrt(k) if k > 1 else np.full(len(x), np.nan)
+    return ArrheniusFit(T=T[ok], log_tau=logs.mean(axis=1), log_tau_se=se, coef=solve @ logs.mean(axis=1),
+                        c_err=float(c_samples.std(ddof=1)), c_samples=c_samples)

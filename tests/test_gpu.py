@@ -8,6 +8,7 @@ from conftest import (assert_gpu_force_matches_numpy, dynamics_simulation, kick_
                       t1_simulations)
 
 import spherevm as svm
+from spherevm.constraints.plane import minimum_image
 from spherevm.plugins.forces import VertexModel
 from spherevm.plugins.integrators import FIRE, Active, Brownian
 from spherevm.plugins.updaters import T1
@@ -146,6 +147,58 @@ def test_brownian_with_t1_matches_numpy_for_1000_steps(graphs):
     assert flips.sum() > 0 and np.array_equal(gpu.log("t1_total_flips"), flips)
     assert np.array_equal(_table(gpu.state), _table(cpu.state))
     assert np.array_equal(gpu.state.vertex_neighbors.get(), cpu.state.vertex_neighbors)
+    assert np.abs(gpu.state.positions.get() - cpu.state.positions).max() <= 1e-9
+
+
+@pytest.mark.parametrize("surface", ["sphere", "plane"])
+def test_untangling_matches_numpy_flip_for_flip(surface):
+    """T1(untangle=True): kicks that cross edges, then a pass (short and crossed edges) and
+    untangle_pass (crossed edges alone), many times: the GPU (t1_detect's bow-tie test) makes
+    NumPy's flips and refusals, tables and positions."""
+    from spherevm import folding
+    rng = np.random.default_rng(4)
+    make = svm.init.random_tiling if surface == "sphere" else svm.init.random_planar_tiling
+    state = make(300, replicas=3, seed=16)
+    sims = t1_simulations(state, untangle=True, max_flip_backs=10 ** 6)
+    crossed = untangled = 0
+    for _ in range(30):
+        kick = rng.normal(scale=0.04, size=state.positions.shape)
+        for sim in sims.values():
+            kick_on_surface(sim, kick)
+        crossed += len(folding.inverted_edges(sims["cpu"].state)[0])
+        made = {dev: (sim.run_updaters(), sim.operations.updaters[0].untangle_pass(sim))[1]
+                for dev, sim in sims.items()}
+        c, g = sims["cpu"], sims["gpu"]
+        assert made["gpu"] == made["cpu"]
+        untangled += made["cpu"]
+        assert np.array_equal(g.log("t1_flips"), c.log("t1_flips"))       # the pass's and untangle_pass's
+        assert np.array_equal(g.log("t1_refused"), c.log("t1_refused"))
+        assert np.array_equal(_table(g.state), _table(c.state))
+        assert np.array_equal(g.state.vertex_cells.get(), c.state.vertex_cells)
+        gap = g.state.positions.get() - c.state.positions
+        if surface == "plane":      # a vertex within round-off of the boundary may be on either side
+            gap = minimum_image(gap[:, :2], c.state.box_np()[c.state.vertex_replica_np()])
+        assert np.abs(gap).max() <= 1e-12
+    assert crossed > 100 and untangled > 10
+    assert np.array_equal(sims["gpu"].log("t1_total_flips"), sims["cpu"].log("t1_total_flips"))
+
+
+@pytest.mark.parametrize("executor", [dict(graphs=False, fused=False), dict(graphs=True, fused=False),
+                                      dict(fused=True)])
+def test_hot_brownian_with_untangling_matches_numpy(executor):
+    """Hot Brownian dynamics with T1(untangle=True): the step-by-step pass, the CUDA graphs and the
+    fused small-tissue steps (t1_stage.cuh) flip what NumPy flips, and leave no crossed edge that
+    an untangle_pass would flip."""
+    state = svm.init.random_tiling(64, replicas=2, seed=12)
+    sims = {dev: dynamics_simulation(state, dev, Brownian(dt=0.02, T=0.05)) for dev in ("cpu", "gpu")}
+    for sim in sims.values():
+        sim.operations.updaters[0].untangle = True
+    sims["cpu"].run(200)
+    sims["gpu"].run(200, **executor)
+    cpu, gpu = sims["cpu"], sims["gpu"]
+    flips = cpu.log("t1_total_flips")
+    assert flips.sum() > 50 and np.array_equal(gpu.log("t1_total_flips"), flips)
+    assert np.array_equal(_table(gpu.state), _table(cpu.state))
     assert np.abs(gpu.state.positions.get() - cpu.state.positions).max() <= 1e-9
 
 

@@ -331,25 +331,14 @@ def test_untangling_flips_the_crossed_edges_and_changes_that_trajectory():
     assert sims[True][1].total_flips.sum() > sims[False][1].total_flips.sum()
 
 
-def test_untangle_is_a_flag_and_runs_on_the_cpu_only(device):
+def test_untangle_is_a_flag_and_untangles_on_both_devices(device):
+    from spherevm import folding
     with pytest.raises(ValueError, match="untangle must be True or False, got 1"):
         T1(untangle=1)
-    if device == "gpu":   # refused when it attaches to the GPU State
-        with pytest.raises(ValueError, match=r"T1\(untangle=True\) runs on the CPU \(NumPy\) only"):
-            _brownian(True, T=1e-3, device=device)
-    else:
-        _brownian(True, T=1e-3, device=device)[0].run(1)
-
-
-def test_untangle_set_mid_run_takes_effect_at_the_next_step(device, tmp_path):
-    """The rule of tests/test_parameters.py (NumPy only: on a GPU State the change is refused)."""
-    from test_parameters import DYNAMICS, _changed_run, _restarted_run, _simulation
-    if device == "gpu":
-        sim = _simulation(DYNAMICS, device)
-        sim.run(1)
-        with pytest.raises(ValueError, match=r"T1.untangle = True refused: T1\(untangle=True\) runs on the CPU"):
-            sim.operations.updaters[0].untangle = True
-        return
-    changed, path = _changed_run(DYNAMICS, device, T1, "untangle", True, tmp_path)
-    assert changed == _restarted_run(DYNAMICS, device, path, {"T1": {"untangle": True}})
-    assert changed != _restarted_run(DYNAMICS, device, path, {})
+    sim, t1 = _brownian(True, T=0.1, device=device)
+    sim.run(10)
+    crossed = len(folding.inverted_edges(sim.state)[0])
+    step = int(to_numpy(sim.log("t1_flips")).sum())
+    made = t1.untangle_pass(sim)
+    assert crossed > 0 and made > 0 and len(folding.inverted_edges(sim.state)[0]) < crossed
+    assert int(to_numpy(sim.log("t1_flips")).sum()) == step + made     # added to the step's count

@@ -249,3 +249,22 @@ def test_t1_kernels_compile(tmp_path, flags):
                            str(tmp_path / "t1.ptx")], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert pathlib.Path(tmp_path / "t1.ptx").stat().st_size > 0
+
+
+@pytest.mark.parametrize("surface, n_cells, seed, kick", [("sphere", 60, 5, 0.3), ("sphere", 200, 6, 0.2),
+                                                          ("plane", 60, 5, 0.3), ("plane", 200, 6, 0.2)])
+def test_cuda_bow_tie_test_agrees_with_numpy(fold_header, surface, n_cells, seed, kick):
+    """t1_bow_tie (t1_detect's untangling candidates), built for the host, against
+    folding.inverted_edges on every edge of tilings kicked hard enough to cross many."""
+    state = kicked(n_cells, seed, kick, replicas=3) if surface == "sphere" else kicked_plane(n_cells, seed, kick)
+    vn, vc = state.vertex_neighbors, state.vertex_cells
+    corner = np.flatnonzero((np.arange(state.n_vertices)[:, None] < vn).reshape(-1))
+    u, slot = corner // 3, corner % 3
+    cand = np.ascontiguousarray(np.stack([u, *topology.t1_cells(vn, vc, u, slot)], axis=1)[:, :10], dtype=np.int32)
+    size = np.ascontiguousarray(state.constraint.size_np(state)[state.vertex_replica_np()[u]], dtype=np.float64)
+    host = np.empty(len(u), dtype=np.int32)
+    fold_header[surface].h_t1_bow_tie(ctypes.c_long(len(u)), _p(np.ascontiguousarray(state.positions)), _p(cand),
+                                      _p(size), _p(host))
+    iu, islot = folding.inverted_edges(state)
+    assert len(iu) > 10
+    assert np.array_equal(corner[host == 1], np.sort(3 * iu + islot))

@@ -22,6 +22,8 @@
 //   triangle_area(a, b, c, s) the sign-carrying area of a triangle, half_area(s) half the surface's
 //                             in the same unit, delta(a, b, s) the vector a -> b (T1's fold rule,
 //                             plugins/updaters/t1_fold.cuh)
+//   crossing_point(p, ref, s) p as a 3-vector whose triple products give orientations, the image
+//                             nearest ref on the plane (simplicity.points; T1's untangling)
 #pragma once
 
 #include "geometry/plane.cuh"
@@ -161,6 +163,11 @@ struct SphereSurface {
     }
     __device__ static double half_area(Size) { return 6.283185307179586; }   // 2 pi, as NumPy's float64
     __device__ static vec3 delta(vec3 a, vec3 b, Size) { return b - a; }
+    // the unit vector p / |p|, |p|^2 summed as NumPy sums a row, without fused multiply-adds
+    __device__ static vec3 crossing_point(vec3 p, vec3, Size) {
+        double n = sqrt(__dadd_rn(__dadd_rn(__dmul_rn(p.x, p.x), __dmul_rn(p.y, p.y)), __dmul_rn(p.z, p.z)));
+        return v3(__ddiv_rn(p.x, n), __ddiv_rn(p.y, n), __ddiv_rn(p.z, n));
+    }
 
     // The edge u-v rotated by 90 degrees about the normal at its midpoint, its ends at geodesic
     // distance `full` apart (exact geodesic offsets); a zero-length edge turns towards the side of
@@ -230,6 +237,13 @@ struct PlaneSurface {
     }
     __device__ static double half_area(Size box) { return 0.5 * (box.x * box.y); }
     __device__ static vec3 delta(vec3 a, vec3 b, Size box) { return minimum_image(b - a, box); }
+    // (x, y, 1) of p's image nearest ref, as PeriodicPlane.unwrap forms it (no fused multiply-adds)
+    __device__ static vec3 crossing_point(vec3 p, vec3 ref, Size box) {
+        double dx = __dsub_rn(p.x, ref.x), dy = __dsub_rn(p.y, ref.y);
+        dx = __dsub_rn(dx, __dmul_rn(box.x, rint(__ddiv_rn(dx, box.x))));
+        dy = __dsub_rn(dy, __dmul_rn(box.y, rint(__ddiv_rn(dy, box.y))));
+        return v3(__dadd_rn(ref.x, dx), __dadd_rn(ref.y, dy), 1.0);
+    }
 
     // topology.t1_flip on the plane: v, a, b, c, d unwrapped about u; the midpoint wrapped into the
     // box; the edge turned by +90 degrees about z (-90 with `turn`); each end `full` / 2 from the

@@ -3,8 +3,8 @@
  *
  * Include this before the headers. It supplies only what they take from CUDA: the function
  * qualifiers (empty or plain inline on the host), the vector types uint2/uint4 and their make_*
- * constructors, rsqrt and the rounded intrinsics __fma_rn, __dmul_rn, __dadd_rn. Nothing here
- * changes a formula; the headers are included unmodified.
+ * constructors, rsqrt and the rounded intrinsics __fma_rn, __dmul_rn, __dadd_rn, __dsub_rn and
+ * __ddiv_rn. Nothing here changes a formula; the headers are included unmodified.
  *
  * rsqrt: CUDA's double rsqrt(x) is 1/sqrt(x) to about 1 ulp (not correctly rounded). The host
  * stand-in 1.0 / sqrt(x) is two correctly rounded operations, also within 1 ulp; the two may differ
@@ -44,5 +44,7 @@ static inline double rsqrt(double x) { return 1.0 / sqrt(x); }
 static inline double __fma_rn(double a, double b, double c) { return fma(a, b, c); }
 static inline double __dmul_rn(double a, double b) { return a * b; }
 static inline double __dadd_rn(double a, double b) { return a + b; }
+static inline double __dsub_rn(double a, double b) { return a - b; }
+static inline double __ddiv_rn(double a, double b) { return a / b; }
 
 #endif /* SPHEREVM_TESTS_CUDA_HOST_H */

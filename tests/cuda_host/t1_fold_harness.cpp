@@ -1,5 +1,6 @@
 // tests/cuda_host/t1_fold_harness.cpp -- extern "C" wrappers that run spherevm/plugins/updaters/t1_fold.cuh
-// and Surface::t1_positions (geometry/surface.cuh), as t1_detect uses them, on the CPU. Built and
+// (its fold rule and its bow-tie test) and Surface::t1_positions (geometry/surface.cuh), as t1_detect
+// uses them, on the CPU. Built and
 // loaded by tests/test_t1_fold.py as harness.cpp is by tests/test_cuda_headers.py, once per surface
 // (t1_fold_harness_plane.cpp defines SVM_SURFACE_PLANE first).
 #include "cuda_host.h"
@@ -31,6 +32,16 @@ void h_t1_fold_level(long n, const double* pos, const int* vn, const int* cell_v
         const int* e = cand + 10 * i;
         level[i] = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, e[0], e[1], e[2], e[3], e[4], e[5], e[6],
                                  e[7], e[8], e[9], load3(px, i), load3(py, i), Surface::size(size, i));
+    }
+}
+
+// -> crossed (n,): t1_bow_tie of each candidate's edge u v, 1 where it is turned past zero length
+void h_t1_bow_tie(long n, const double* pos, const int* cand, const double* size, int* crossed)
+{
+    for (long i = 0; i < n; ++i) {
+        const int* e = cand + 10 * i;
+        crossed[i] = t1_bow_tie(pos, load3(pos, e[0]), load3(pos, e[1]), e[2], e[3], e[4], e[5],
+                                Surface::size(size, i)) ? 1 : 0;
     }
 }
 

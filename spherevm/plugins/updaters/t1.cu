@@ -1,6 +1,7 @@
 // T1 neighbour exchanges on the device: the CUDA path of t1.py, same rules and same geometry.
 // A pass is three kernels: t1_detect (one thread per vertex, its edges to higher-numbered
-// neighbours) lists the short edges; t1_check (one thread per listed edge) applies the refusal
+// neighbours) lists the short edges (with `untangle` also those turned past zero length,
+// t1_fold.cuh's t1_bow_tie); t1_check (one thread per listed edge) applies the refusal
 // rules and lets each remaining candidate claim its four cells (lowest edge index wins); after one
 // small read-back of the counters, t1_apply (one thread per candidate) flips the winners and gives
 // back the cells each candidate holds. Their bodies are t1_pass.cuh's (shared with the fused
@@ -22,15 +23,16 @@
 extern "C" __global__ void t1_detect(
     const double* __restrict__ pos, const int* __restrict__ vn, const int* __restrict__ vc,
     const int* __restrict__ vertex_replica, const double* __restrict__ size, const double* __restrict__ chord2,
-    const bool* __restrict__ active, int n_vertices, int* __restrict__ counters, int* __restrict__ cand,
-    double* __restrict__ cand_len, int capacity, int* __restrict__ log_pass)
+    const bool* __restrict__ active, int untangle, int n_vertices, int* __restrict__ counters,
+    int* __restrict__ cand, double* __restrict__ cand_len, int capacity, int* __restrict__ log_pass)
 {
     int u = blockIdx.x * blockDim.x + threadIdx.x;
     if (u == 0) *log_pass += 1;
     if (u >= n_vertices) return;
     int r = vertex_replica[u];
     if (!active[r]) return;
-    t1_detect_vertex(pos, vn, vc, Surface::size(size, r), chord2[r], r, u, counters, cand, cand_len, capacity);
+    t1_detect_vertex(pos, vn, vc, Surface::size(size, r), chord2[r], untangle != 0, r, u, counters, cand, cand_len,
+                     capacity);
 }
 
 // One thread per slot (n_slots: the room; the candidate count is read here, counters[0]):

@@ -82,9 +82,9 @@ class T1(DevicePass, Updater):
     untangle : bool
         Also flip the edges that a step turned past zero length (a bow tie: the edges before and
         after one cross, :func:`spherevm.folding.inverted_edges`), by the same rules, so that cells
-        stay simple polygons; where no edge is crossed the pass is the same to the bit. NumPy only
-        for now (refused on a GPU State). :meth:`untangle_pass` flips them alone, for a call after
-        the integrator's step. Default False; see docs/validation.md."""
+        stay simple polygons; where no edge is crossed the pass is the same to the bit. Both devices
+        make the same flips. :meth:`untangle_pass` flips them alone, for a call after the
+        integrator's step. Default False; see docs/validation.md."""
 
     preset = Parameter(_preset)
     threshold = Parameter(positive)
@@ -114,10 +114,7 @@ class T1(DevicePass, Updater):
         self._reset_counters(0)
 
     def check_parameters(self):
-        """Exactly one of new_length (> threshold) and length_factor (> 1); untangling on the CPU."""
-        simulation = self.__dict__.get("_simulation")
-        if simulation is not None:
-            self._check_untangle(simulation.state)
+        """Exactly one of new_length (> threshold) and length_factor (> 1)."""
         if self.length_factor is not None:
             if self.length_factor <= 1:
                 raise ValueError(f"length_factor must be > 1 (a shorter new edge is short again and flips "
@@ -127,11 +124,6 @@ class T1(DevicePass, Updater):
         elif self.new_length <= self.threshold:
             raise ValueError(f"new_length must be finite and > threshold={self.threshold} "
                              f"(else the new edge flips straight back), got {self.new_length!r}")
-
-    def _check_untangle(self, state):
-        if self.untangle and state.device.is_gpu:
-            raise ValueError("T1(untangle=True) runs on the CPU (NumPy) only for now; use device='cpu' or "
-                             "untangle=False")
 
     def parameters_changed(self, name):
         """A preset sets threshold, new_length and length_factor; setting one of those leaves the
@@ -171,7 +163,6 @@ class T1(DevicePass, Updater):
                 raise ValueError(f"T1 needs at least {MIN_T1_PLANAR_CELLS} cells per replica on a periodic plane, but "
                                  f"replica {smallest} has {int(state.cells_per_replica[smallest])}: in a smaller box "
                                  "edges reach half the box under T1 and cells stop closing (docs/plane.md)")
-        self._check_untangle(state)
         super().attach(simulation)
         self._update = self.implementation("update", simulation.state)
         self._gpu = None
@@ -275,15 +266,27 @@ class T1(DevicePass, Updater):
         by this updater's rules, adding to this step's counts, again while a round flips some (at
         most ``rounds``: edges of one cell wait for the next round): a call right after the
         integrator's step leaves what writers and checks see simple. Nothing happens where no edge
-        is crossed. Returns the flips made."""
-        before = int(self.total_flips.sum())
-        empty = np.zeros(0, dtype=np.int64)
+        is crossed. On the GPU each round is the device pass on the crossed edges (one small
+        read-back), the same flips. Returns the flips made."""
+        gpu = simulation.state.device.is_gpu
+        before = self._flips_so_far(simulation.state)
         for _ in range(rounds):
-            made = int(self.total_flips.sum())
-            self._flip_pass(simulation, *self._with_inverted(simulation.state, empty, empty, np.zeros(0)))
-            if int(self.total_flips.sum()) == made:
+            if not (self._update_gpu(simulation, crossed_only=True) if gpu else self._untangle_round(simulation)):
                 break
-        return int(self.total_flips.sum()) - before
+        return self._flips_so_far(simulation.state) - before
+
+    def _flips_so_far(self, state):
+        """All flips made, on the host or (one small read-back) the device."""
+        if state.device.is_gpu:
+            return int(self._gpu_buffers(state)["total_flips"].sum())
+        return int(self.total_flips.sum())
+
+    def _untangle_round(self, simulation):
+        """One pass on the crossed edges alone (NumPy); whether it flipped any."""
+        made = int(self.total_flips.sum())
+        empty = np.zeros(0, dtype=np.int64)
+        self._flip_pass(simulation, *self._with_inverted(simulation.state, empty, empty, np.zeros(0)))
+        return int(self.total_flips.sum()) != made
 
     def _with_inverted(self, state, u, slot, lengths):
         """The candidates ``(u, slot, lengths)`` joined by the inverted edges, in edge index order."""

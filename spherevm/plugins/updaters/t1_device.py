@@ -64,22 +64,25 @@ class DevicePass:
         total = getattr(self, name)
         return total.astype(np.uint64) if len(total) == n_replicas else np.zeros(n_replicas, np.uint64)
 
-    def _detect(self, simulation, buf):
-        """Zero the pass counters, list the short edges (t1_detect) and apply the refusal rules to them
-        (t1_check, over the whole room: the count is read on the device); returns what t1_apply
-        takes besides."""
+    def _detect(self, simulation, buf, crossed_only=False):
+        """Zero the pass counters, list the short edges (t1_detect; with ``untangle`` also the crossed
+        ones) and apply the refusal rules to them (t1_check, over the whole room: the count is read on
+        the device); returns what t1_apply takes besides. ``crossed_only``: list the crossed edges
+        alone (:meth:`untangle_pass`), the per-replica flip and refusal counts kept (added to)."""
         import cupy as cp
         state = simulation.state
         chord2, new_length = self._device_lengths(state)
+        if crossed_only:           # no chord is shorter than 0: no short edge
+            chord2 = state.cached((self, "no_chord"), lambda: cp.zeros(state.n_replicas))
         module, size = surface_kernels(_KERNELS, state)
         integrator = simulation.operations.integrator
         active = integrator.active_on_device() if integrator is not None else buf["all_active"]
-        scratch = buf["scratch"]
-        cp.cuda.runtime.memsetAsync(scratch.data.ptr, 0, scratch.nbytes, cp.cuda.get_current_stream().ptr)
+        zeroed = buf["counters"] if crossed_only else buf["scratch"]
+        cp.cuda.runtime.memsetAsync(zeroed.data.ptr, 0, zeroed.nbytes, cp.cuda.get_current_stream().ptr)
         launch(module.get_function("t1_detect"), state.n_vertices,
                (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, size, chord2,
-                active, np.int32(state.n_vertices), buf["counters"], buf["cand"], buf["cand_len"],
-                np.int32(buf["capacity"]), buf["log_pass"]))
+                active, np.int32(self.untangle or crossed_only), np.int32(state.n_vertices), buf["counters"],
+                buf["cand"], buf["cand_len"], np.int32(buf["capacity"]), buf["log_pass"]))
         launch(module.get_function("t1_check"), buf["capacity"],
                (state.positions, state.vertex_neighbors, state.cell_sides, state.cell_vertices, size, new_length,
                 np.float64(self.length_factor or 0.0), np.int32(state.max_sides), buf["claim"], buf["refused"],
@@ -104,9 +107,10 @@ class DevicePass:
             integrator.reset_vertices(moved)
         simulation.state_changed()
 
-    def _update_gpu(self, simulation):
+    def _update_gpu(self, simulation, crossed_only=False):
         """Detect and check, one small read-back (candidates, full rows, claimants), apply:
-        see t1.cu.
+        see t1.cu. Returns whether a candidate claimed its cells (then at least one flipped).
+        ``crossed_only``: the crossed edges alone (:meth:`_detect`).
         Inside a CUDA graph: no read-back, see :meth:`capture_ready`."""
         import cupy as cp
         state = simulation.state
@@ -114,21 +118,23 @@ class DevicePass:
         if simulation.capturing:
             module, size, new_length = self._detect(simulation, buf)
             self._apply(simulation, buf, module, size, new_length, buf["capacity"], self.counting(simulation), True)
-            return
+            return True
         if buf["width_host"] != state.max_sides:
             buf["width"].fill(state.max_sides)
             buf["width_host"] = state.max_sides
+        kept = buf["refused"].copy() if crossed_only else 0   # the refusals before this pass
         while True:
-            module, size, new_length = self._detect(simulation, buf)
+            module, size, new_length = self._detect(simulation, buf, crossed_only)
             n_cand, widen, n_claim = (int(x) for x in buf["counters"].get())   # the one read-back
             if n_cand <= buf["capacity"]:
                 break
             cap = 2 * n_cand   # rare: more candidates than room; undo this pass's claims, grow, redo
             buf["claim"].fill(np.iinfo(np.int32).max)
-            buf["total_refused"] -= buf["refused"].astype(cp.uint64)
+            buf["total_refused"] -= (buf["refused"] - kept).astype(cp.uint64)
+            buf["refused"][...] = kept
             self._gpu_buffers(state, cap)
         if n_claim == 0:        # no candidate, or every one refused: nothing claimed, nothing flips
-            return
+            return False
         if widen:
             pad = cp.full((state.n_cells, 1), -1, dtype=cp.int32)
             state.cell_vertices = cp.ascontiguousarray(cp.concatenate([state.cell_vertices, pad], axis=1))
@@ -142,6 +148,7 @@ class DevicePass:
         buf["log_bound"] += n_claim if counting else 0
         self._apply(simulation, buf, module, size, new_length, n_cand, counting, False)
         state.topology_version += 1
+        return True
 
     # ------------------------------------------------------------------ CUDA graphs
     def capture_ready(self, simulation, steps):
@@ -192,14 +199,14 @@ class DevicePass:
         ("chord2", "const double*"), ("new_length", "const double*"), ("length_factor", "double"), ("cand", "int*"),
         ("cand_len", "double*"), ("flips", "int*"), ("refused", "int*"), ("total_flips", "unsigned long long*"),
         ("total_refused", "unsigned long long*"), ("log_count", "int*"), ("log", "int*"), ("logging", "int"),
-        ("log_pass", "const int*"), ("reset_vertices", "int")])
+        ("log_pass", "const int*"), ("reset_vertices", "int"), ("untangle", "int")])
 
     def fused_stage(self, simulation, minimizing):
         """t1_stage.cuh: the pass (after :meth:`capture_ready`, which made the candidate room and
-        padded the cell table): squared threshold chords, new lengths, the candidate room, the
-        per-pass counters and totals, the flip log (with whether this pass logs, :meth:`counting`)
-        and its pass count, and whether the integrator forgets the flipped vertices' motion; after
-        each launch, ``t1_steps_finish`` advances the table's width and the log's pass count as
+        padded the cell table): squared threshold chords, new lengths, whether it untangles, the
+        candidate room, the per-pass counters and totals, the flip log (with whether this pass logs,
+        :meth:`counting`) and its pass count, and whether the integrator forgets the flipped
+        vertices' motion; after each launch, ``t1_steps_finish`` advances the table's width and the log's pass count as
         t1_detect and t1_apply would have."""
         state = simulation.state
         buf = self._gpu_buffers(state, 3 * state.n_vertices // 2)
@@ -208,7 +215,7 @@ class DevicePass:
                       cand=buf["cand"], cand_len=buf["cand_len"], flips=buf["flips"], refused=buf["refused"],
                       total_flips=buf["total_flips"], total_refused=buf["total_refused"], log_count=buf["log_count"],
                       log=buf["log"], logging=int(self.counting(simulation)), log_pass=buf["log_pass"],
-                      reset_vertices=int(self.reset_velocities))
+                      reset_vertices=int(self.reset_velocities), untangle=int(self.untangle))
 
         def finish(module, step_need, steps):
             module.get_function("t1_steps_finish")((1,), (1,), (buf["width"], step_need, np.int32(steps),

@@ -1,7 +1,8 @@
 // Whether a T1 flip would fold the network, for t1_detect (t1.cu): the CUDA twin of
-// spherevm.folding.t1_fold_level, the same arithmetic in the same order on the surface the module is
-// compiled for (geometry/surface.cuh; compiled on the CPU for both surfaces and compared with
-// NumPy by tests/test_t1_fold.py). Names as in topology.t1_cells:
+// spherevm.folding.t1_fold_level (and of folding.inverted_edges: t1_bow_tie), the same arithmetic in
+// the same order on the surface the module is compiled for (geometry/surface.cuh; compiled on the
+// CPU for both surfaces and compared with NumPy by tests/test_t1_fold.py). Names as in
+// topology.t1_cells:
 // C1 = (.., a, u, v, d, ..), C2 = (.., c, v, u, b, ..), C3 = (.., b, u, a, ..), C4 = (.., d, v, c, ..);
 // after the flip X = v sits at px on the C1 side with row (Y, d, a), Y = u at py with row (X, b, c).
 #pragma once
@@ -130,4 +131,33 @@ __device__ __forceinline__ int t1_fold_level(const double* pos, const int* vn, c
         }
     }
     return t1_fold_verdict(n, after, new_inverted, inverted, s);
+}
+
+// (x cross y) . z as simplicity.arcs_cross forms it, without fused multiply-adds.
+__device__ __forceinline__ double t1_triple(vec3 x, vec3 y, vec3 z)
+{
+    double p = __dmul_rn(__dsub_rn(__dmul_rn(x.y, y.z), __dmul_rn(x.z, y.y)), z.x);
+    double q = __dmul_rn(__dsub_rn(__dmul_rn(x.z, y.x), __dmul_rn(x.x, y.z)), z.y);
+    double r = __dmul_rn(__dsub_rn(__dmul_rn(x.x, y.y), __dmul_rn(x.y, y.x)), z.z);
+    return __dadd_rn(__dadd_rn(p, q), r);
+}
+
+// simplicity.arcs_cross: the arc a b crosses c d properly (Surface::crossing_point coordinates).
+__device__ __forceinline__ bool t1_arcs_cross(vec3 a, vec3 b, vec3 c, vec3 d)
+{
+    double s1 = t1_triple(a, b, c), s2 = t1_triple(a, b, d), s3 = t1_triple(c, d, a), s4 = t1_triple(c, d, b);
+    return s1 * s2 < 0.0 && s3 * s4 < 0.0 && s2 * s3 > 0.0;
+}
+
+// folding.inverted_edges for the edge u v (neighbours a, b, c, d as t1_cells names them): the
+// edges a u and v d cross, or c v and u b (a bow tie; never in a triangle, where they share a vertex).
+__device__ __forceinline__ bool t1_bow_tie(const double* pos, vec3 pu, vec3 pv, int a, int b, int c, int d,
+                                           Surface::Size s)
+{
+    vec3 U = Surface::crossing_point(pu, pu, s), V = Surface::crossing_point(pv, pu, s);
+    if (a != d && t1_arcs_cross(Surface::crossing_point(load3(pos, a), pu, s), U, V,
+                                Surface::crossing_point(load3(pos, d), pu, s)))
+        return true;
+    return b != c && t1_arcs_cross(Surface::crossing_point(load3(pos, c), pu, s), V, U,
+                                   Surface::crossing_point(load3(pos, b), pu, s));
 }

@@ -12,10 +12,11 @@
 #define LOG_INTS 6     // a flip in the flip log: pass, C1, C2, C3, C4, replica
 
 // Vertex u of replica r: list its edges to higher-numbered neighbours shorter than the chord
-// threshold (chord2, squared). *count is the pass's candidate count (a slot each, atomically);
-// slots from capacity on are counted but not written.
+// threshold (chord2, squared), and with `untangle` those turned past zero length (t1_bow_tie,
+// T1(untangle=True)). *count is the pass's candidate count (a slot each, atomically); slots from
+// capacity on are counted but not written.
 __device__ __forceinline__ void t1_detect_vertex(const double* pos, const int* vn, const int* vc, Surface::Size s,
-                                                 double chord2, int r, int u, int* count, int* cand,
+                                                 double chord2, bool untangle, int r, int u, int* count, int* cand,
                                                  double* cand_len, int capacity)
 {
     vec3 pu = load3(pos, u);
@@ -23,14 +24,16 @@ __device__ __forceinline__ void t1_detect_vertex(const double* pos, const int* v
         int v = vn[3 * u + k];
         if (v <= u) continue;
         vec3 pv = load3(pos, v);
-        if (!(Surface::chord2(pu, pv, s) < chord2)) continue;   // chord test: no trigonometry for the many long edges
-        int i = atomicAdd(count, 1);
-        if (i >= capacity) continue;
+        bool short_edge = Surface::chord2(pu, pv, s) < chord2;   // chord test: no trigonometry for the many long edges
+        if (!short_edge && !untangle) continue;
         int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
         int j = vn[3 * v] == u ? 0 : (vn[3 * v + 1] == u ? 1 : 2);
+        int a = vn[3 * u + k1], b = vn[3 * u + k2], c = vn[3 * v + (j + 1) % 3], d = vn[3 * v + (j + 2) % 3];
+        if (!short_edge && !t1_bow_tie(pos, pu, pv, a, b, c, d, s)) continue;
+        int i = atomicAdd(count, 1);
+        if (i >= capacity) continue;
         int* e = cand + (long)i * CAND_INTS;
-        e[0] = u; e[1] = k; e[2] = v; e[3] = vn[3 * u + k1]; e[4] = vn[3 * u + k2];
-        e[5] = vn[3 * v + (j + 1) % 3]; e[6] = vn[3 * v + (j + 2) % 3];
+        e[0] = u; e[1] = k; e[2] = v; e[3] = a; e[4] = b; e[5] = c; e[6] = d;
         e[7] = vc[3 * u + k]; e[8] = vc[3 * u + k2]; e[9] = vc[3 * u + k1]; e[10] = vc[3 * v + (j + 1) % 3];
         e[11] = r; e[12] = 0;
         cand_len[i] = Surface::edge_length(pu, pv, s);

@@ -1,11 +1,11 @@
 // T1's stage of the fused small-tissue steps (spherevm/tissue_steps.cu, T1.fused_stage): a tissue's
 // pass in two parts with a barrier between, t1_pass.cuh's functions on the general kernels' global
 // indices, so the flips are the general path's. T1StageArgs is declared from its Python definition
-// (T1.FUSED_ARGS): the parameters (chord2, new_length, length_factor), the candidate room (a slot
-// per edge, the tissue's from 3 vertex_start[r] / 2 on), the per-pass counters (flips, refused: the
-// last pass's are left, as t1_apply leaves them) and running totals, the flip log (logging; log_pass:
-// its pass count before the launch) and whether the integrator forgets the flipped vertices' motion
-// (reset_vertices).
+// (T1.FUSED_ARGS): the parameters (chord2, new_length, length_factor, untangle), the candidate room
+// (a slot per edge, the tissue's from 3 vertex_start[r] / 2 on), the per-pass counters (flips,
+// refused: the last pass's are left, as t1_apply leaves them) and running totals, the flip log
+// (logging; log_pass: its pass count before the launch) and whether the integrator forgets the
+// flipped vertices' motion (reset_vertices).
 #pragma once
 #include "plugins/updaters/t1_pass.cuh"
 
@@ -30,8 +30,8 @@ struct T1Stage {
         if (settling && threadIdx.x == 0) { a.flips[r] = 0; a.refused[r] = 0; }
         if (flipping)
             for (int u = vb0 + threadIdx.x; u < vb1; u += blockDim.x)
-                t1_detect_vertex(P, vn, vc, s, a.chord2[r], r, u, n_cand, a.cand + (long)room0 * CAND_INTS,
-                                 a.cand_len + room0, room);
+                t1_detect_vertex(P, vn, vc, s, a.chord2[r], a.untangle != 0, r, u, n_cand,
+                                 a.cand + (long)room0 * CAND_INTS, a.cand_len + room0, room);
     }
 
     // The candidates checked and claimed (a warp a candidate: t1_check_candidate_warp) and applied,

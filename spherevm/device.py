@@ -276,10 +276,10 @@ def weighted_bincount(index, weights, minlength):
 
 
 _REPLICA_SUMMARY = r"""
-// out (n_replicas + n_replicas + 1 words, zeroed before): per replica the largest |F_v| (its bits:
+// out (n_replicas + n_replicas + 2 words, zeroed before): per replica the largest |F_v| (its bits:
 // non-negative doubles order as their bits, and a NaN norm, above +inf, wins as in a max that
 // propagates NaN), the energy's bits, then n_vertices - v for the first vertex v whose position is
-// not finite (0: none). |F|^2 summed as NumPy sums a row, without fused multiply-adds.
+// not finite (0: none), then a word the caller's own check may set (not written here). |F|^2 summed as NumPy sums a row, without fused multiply-adds.
 extern "C" __global__ void replica_summary(const double* forces, const double* pos, const int* vertex_replica,
                                            const double* energy, int n_vertices, int n_replicas,
                                            unsigned long long* out)
@@ -302,13 +302,14 @@ def replica_summary(positions, vertex_replica, n_replicas, forces=None, energy=N
     """What a convergence check reads, in one array on the positions' device (one read-back on
     the GPU instead of one per quantity): per replica the largest vertex force norm ``max |F_v|``
     (0 for a replica without vertices) and the ``energy``, then the first vertex whose position is
-    not finite. ``forces`` and ``energy`` may be None (only the positions are looked at).
+    not finite, then one word (0) for a check of the caller's to set on the device before the read
+    (``summary[-1:]``; Simulation's closed-cell flag). ``forces`` and ``energy`` may be None (only the positions are looked at).
     :func:`read_replica_summary` unpacks it; ``summary[:n_replicas].view(float64)`` is the
     maximum force on the device. Maximum and finiteness are exact, so both paths give the same
     bits for the same forces (the norm is summed in NumPy's order, without fused multiply-adds)."""
     nv, nr = len(positions), n_replicas
     if isinstance(positions, np.ndarray):
-        out = np.zeros(2 * nr + 1, dtype=np.uint64)
+        out = np.zeros(2 * nr + 2, dtype=np.uint64)
         if forces is not None:
             fmax = np.zeros(nr)
             with np.errstate(invalid="ignore"):   # a NaN force is what a check is there to report
@@ -322,7 +323,7 @@ def replica_summary(positions, vertex_replica, n_replicas, forces=None, energy=N
     import cupy
     if "replica_summary" not in _MODULES:
         _MODULES["replica_summary"] = cupy.RawKernel(_REPLICA_SUMMARY, "replica_summary")
-    out = cupy.zeros(2 * nr + 1, dtype=cupy.uint64)
+    out = cupy.zeros(2 * nr + 2, dtype=cupy.uint64)
     null = np.uintp(0)
     launch(_MODULES["replica_summary"], max(nv, nr),
            (null if forces is None else forces, positions, vertex_replica, null if energy is None else energy,
@@ -331,9 +332,11 @@ def replica_summary(positions, vertex_replica, n_replicas, forces=None, energy=N
 
 
 def read_replica_summary(summary, n_vertices, n_replicas):
-    """``(max_force, energy, first_bad_vertex)`` in NumPy from :func:`replica_summary`'s array (one
-    device-to-host copy); ``first_bad_vertex`` is -1 when every position is finite."""
+    """``(max_force, energy, first_bad_vertex, flag)`` in NumPy from :func:`replica_summary`'s array
+    (one device-to-host copy); ``first_bad_vertex`` is -1 when every position is finite, ``flag``
+    the caller's word."""
     host = summary.get() if not isinstance(summary, np.ndarray) else summary
     nr = n_replicas
     last = int(host[2 * nr])
-    return host[:nr].view(np.float64).copy(), host[nr:2 * nr].view(np.float64).copy(), n_vertices - last if last else -1
+    return (host[:nr].view(np.float64).copy(), host[nr:2 * nr].view(np.float64).copy(),
+            n_vertices - last if last else -1, int(host[2 * nr + 1]))

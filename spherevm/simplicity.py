@@ -11,7 +11,8 @@ area (degree 1) means every point is covered exactly once. So crossings between 
 search: a vertex pushed into a neighbour leaves some cell crossed, inverted or the sum wrong.
 
 All tests here are vectorised NumPy over the corners and the pairs of edges of every cell (no
-loop over cells); the tables live on the host.
+loop over cells); the tables live on the host. The closed-cell test also runs on the device
+(:func:`flag_open_cells`), where the run's checks look at it every check.
 """
 from __future__ import annotations
 
@@ -94,6 +95,16 @@ def counts(state, areas=None):
     surface = con.total_area_np(con.size_np(state))
     return dict(crossed=crossed, open=opened, inverted=np.bincount(crep[areas <= 0], minlength=n),
                 uncovered=(np.abs(total - surface) > con.cover_tolerance * surface).astype(np.int64))
+
+
+def flag_open_cells(state, word):
+    """On a GPU State on a periodic surface, set ``word`` (a one-element uint64 device array, such as
+    the replica summary's last) to 1 if a cell is open (:func:`open_cells`), on the device: the
+    run's checks read it with the rest of the summary and call :func:`check_closed` only then.
+    Nothing elsewhere (the CPU calls :func:`check_closed` itself)."""
+    if state.device.is_gpu and hasattr(state.constraint, "unwrapped_cells") and state.n_cells:
+        from .constraints.kernels import flag_open_cells as launch_flag
+        launch_flag(state, word, OPEN_TOLERANCE)
 
 
 def check_closed(state):

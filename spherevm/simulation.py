@@ -149,8 +149,9 @@ class Simulation(Checkpoints, RunRecords):
 
         Returns
         -------
-        (max_force, energy, first_bad_vertex)
-            Per replica: the largest vertex force, the energy, the first non-finite vertex (-1: none)."""
+        (max_force, energy, first_bad_vertex, open_flag)
+            Per replica: the largest vertex force, the energy; the first non-finite vertex (-1: none),
+            and 1 if the device found an open cell (GPU, periodic plane; else 0)."""
         summary = self._summary()
         if self._cache.summary_host is None:
             self._cache.summary_host = read_replica_summary(summary, self._state.n_vertices, self._state.n_replicas)
@@ -161,9 +162,15 @@ class Simulation(Checkpoints, RunRecords):
         forces, energy = self.compute_forces()
         if self._cache.summary is None:
             state = self._state
-            self._cache.summary = replica_summary(state.positions, state.vertex_replica, state.n_replicas, forces,
-                                                  energy)
+            self._cache.summary = self._with_open_flag(
+                replica_summary(state.positions, state.vertex_replica, state.n_replicas, forces, energy))
         return self._cache.summary
+
+    def _with_open_flag(self, summary):
+        """The summary with its last word set on the device if a cell is open (GPU, periodic plane:
+        :func:`spherevm.simplicity.flag_open_cells`), read back with the rest at a check."""
+        simplicity.flag_open_cells(self._state, summary[-1:])
+        return summary
 
     @property
     def loggables(self) -> dict:
@@ -339,21 +346,23 @@ class Simulation(Checkpoints, RunRecords):
 
     def check_finite(self):
         """Raise FloatingPointError naming the first vertex with a non-finite position (or the
-        integrator's own error, such as an exploding step flagged on the GPU), and, on the CPU,
-        ValueError naming the edge of a cell that no longer closes (:func:`spherevm.simplicity.check_closed`)."""
+        integrator's own error, such as an exploding step flagged on the GPU), and ValueError naming
+        the edge of a cell that no longer closes (:func:`spherevm.simplicity.check_closed`; on the
+        GPU flagged by the device in the summary this check reads anyway, and named on the host only
+        then)."""
         if self.operations.integrator is not None:
             self.operations.integrator.check(self)
         state = self._state
         if self._cache is not None and self._cache.summary is not None:   # read with the forces already (a check)
-            v = self.replica_summary()[2]
+            v, opened = self.replica_summary()[2:]
         else:
-            v = read_replica_summary(replica_summary(state.positions, state.vertex_replica, state.n_replicas),
-                                     state.n_vertices, state.n_replicas)[2]
+            v, opened = read_replica_summary(self._with_open_flag(replica_summary(
+                state.positions, state.vertex_replica, state.n_replicas)), state.n_vertices, state.n_replicas)[2:]
         if v >= 0:
             r = int(state.vertex_replica_np()[v])
             raise FloatingPointError(f"non-finite position at timestep {self.timestep}: replica {r}, vertex {v}; "
                                      "reduce dt or check the forces (the last good frame is on disk)")
-        if not state.device.is_gpu:   # cells that no longer close on a periodic surface (nothing elsewhere)
+        if opened or not state.device.is_gpu:   # cells that no longer close on a periodic surface
             try:
                 simplicity.check_closed(state)
             except ValueError as exc:

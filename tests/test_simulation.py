@@ -90,9 +90,9 @@ def test_replica_summary_reads_the_largest_force_energy_and_first_bad_vertex(dev
     forces, energy = (sim.device.to_numpy(a) for a in sim.compute_forces())
     norm = np.sqrt((forces * forces).sum(axis=1))
     rep = sim.state.vertex_replica_np()
-    fmax, e, bad = sim.replica_summary()
+    fmax, e, bad, opened = sim.replica_summary()
     assert fmax.tolist() == [norm[rep == r].max() for r in range(3)]      # the same bits on both devices
-    assert e.tobytes() == energy.tobytes() and bad == -1
+    assert e.tobytes() == energy.tobytes() and bad == -1 and opened == 0
     assert sim.device.to_numpy(sim.max_force()).tobytes() == fmax.tobytes()
     pos = sim.device.to_numpy(sim.state.positions)
     pos[[130, 77], [2, 0]] = np.inf, np.nan                  # two bad vertices: the first is named
@@ -116,9 +116,9 @@ def test_replica_summary_of_nan_forces_and_empty_replicas(device):
     rep = np.array([0, 0, 2, 3], dtype=np.int32)
     summary = svm.device.replica_summary(xp.asarray(positions), xp.asarray(rep), 4, xp.asarray(forces),
                                          xp.asarray(np.arange(4.0)))
-    fmax, energy, bad = svm.device.read_replica_summary(summary, 4, 4)
+    fmax, energy, bad, flag = svm.device.read_replica_summary(summary, 4, 4)
     assert fmax[[0, 1, 3]].tolist() == [5.0, 0.0, 3.0] and np.isnan(fmax[2])
-    assert energy.tolist() == [0.0, 1.0, 2.0, 3.0] and bad == -1
+    assert energy.tolist() == [0.0, 1.0, 2.0, 3.0] and bad == -1 and flag == 0
     positions[3, 1] = -np.inf
     only = svm.device.read_replica_summary(svm.device.replica_summary(xp.asarray(positions), xp.asarray(rep), 4), 4, 4)
     assert only[0].tolist() == [0.0] * 4 and only[2] == 3

@@ -133,7 +133,9 @@ def test_a_vertex_pushed_into_its_neighbour_is_caught(surface):
         state.validate()
 
 
-def test_an_edge_reaching_half_the_box_is_named():
+def _opened():
+    """A 16-cell planar tiling whose longest edge along x is pushed past half the box: the State and
+    the edge's two vertices."""
     state = svm.init.random_planar_tiling(16, seed=0)
     box = state.box[0]
     u = np.repeat(np.arange(state.n_vertices), 3)
@@ -143,9 +145,43 @@ def test_an_edge_reaching_half_the_box_is_named():
     pos = state.positions.copy()                    # b pushed along the edge until it passes half the box
     pos[b, 0] = (pos[b, 0] + np.sign(d[k, 0]) * (0.5 * box[0] - abs(d[k, 0]) + 0.05)) % box[0]
     state.positions = pos
+    return state, a, b
+
+
+def test_an_edge_reaching_half_the_box_is_named():
+    state, a, b = _opened()
     with pytest.raises(ValueError, match=r"^replica 0: edge \d+ -> \d+ of cell \d+ reached half the box "
                                          r"\[4\.0, 4\.0\]: its minimum image jumped") as info:
         state.validate(orientation=False)
     named = {int(x) for x in re.match(r"replica 0: edge (\d+) -> (\d+)", str(info.value)).groups()}
     assert named == {a, b}
     assert simplicity.counts(state)["open"].sum() == 2      # the two cells on its sides
+
+
+def test_the_runs_check_catches_an_open_cell_on_both_devices(device):
+    """Simulation.check_finite (every check of a run) finds the open cell on either device, with
+    State.validate's message: on the GPU the device flags it in the replica summary that the check
+    reads anyway, and the host names it then. A closed tiling raises nothing."""
+    from spherevm.plugins.forces import VertexModel
+    from spherevm.plugins.integrators import Brownian
+    state = _opened()[0]
+    with pytest.raises(ValueError) as expected:
+        state.validate(orientation=False)
+    sim = svm.Simulation(device=device)
+    sim.state = state
+    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
+    for with_forces in (False, True):       # the summary from the positions alone, or read with the forces
+        if with_forces:
+            assert sim.replica_summary()[3] == (1 if device == "gpu" else 0)
+        with pytest.raises(ValueError) as found:
+            sim.check_finite()
+        assert str(found.value) == f"at timestep 0: {expected.value}"
+    sim.operations.integrator = Brownian(dt=1e-4, T=0.0)
+    with pytest.raises(ValueError, match=r"^at timestep 1: replica 0: edge \d+ -> \d+ of cell \d+ reached half"):
+        sim.run(1)
+    closed = svm.Simulation(device=device)
+    closed.state = svm.init.random_planar_tiling(16, seed=0)
+    closed.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
+    closed.operations.integrator = Brownian(dt=1e-4, T=0.0)
+    closed.run(2)
+    assert closed.replica_summary()[3] == 0

@@ -1,8 +1,8 @@
-"""Which CUDA surface a constraint is compiled as (geometry/surface.cuh), and the one kernel of the
-geometry layer: every cell's area and perimeter in one launch (geometry/cell_measures.cu), which
+"""Which CUDA surface a constraint is compiled as (geometry/surface.cuh), and the kernels of the
+geometry layer (geometry/cell_measures.cu): every cell's area and perimeter in one launch, which
 :func:`spherevm.shapes.cell_shapes` uses on the GPU instead of the per-corner array arithmetic of
 ``cell_geometry`` (a few dozen CuPy launches: 2.3 ms for 1,024 x 32 cells on an H200, where this
-kernel takes microseconds)."""
+kernel takes microseconds), and the run's closed-cell check on the periodic plane."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -57,3 +57,14 @@ def cell_measures(state):
            (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, size,
             xp.int32(state.n_cells), xp.int32(state.max_sides), area, perimeter))
     return area, perimeter
+
+
+def flag_open_cells(state, word, tolerance):
+    """Set ``word`` (a one-element uint64 CuPy array) to 1 if a cell of a GPU State on the periodic
+    plane does not close under the minimum image: its minimum-image edges add up to more than
+    ``tolerance`` times its box side (geometry/cell_measures.cu's ``open_cells``, one thread a cell)."""
+    xp = state.device.xp
+    module, size = surface_kernels(_CELL_MEASURES, state)
+    launch(module.get_function("open_cells"), state.n_cells,
+           (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, size,
+            xp.int32(state.n_cells), xp.int32(state.max_sides), xp.float64(tolerance), word))

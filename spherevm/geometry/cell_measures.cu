@@ -12,3 +12,24 @@ extern "C" __global__ void cell_measures(const double* __restrict__ pos, const i
     Surface::cell_measures(pos, cell_vertices + c * max_sides, cell_sides[c], Surface::size(size, cell_replica[c]),
                            area + c, perimeter + c);
 }
+
+#ifdef SVM_SURFACE_PLANE
+// Sets *open (a word of the replica summary, spherevm.simplicity.flag_open_cells) if a cell's
+// minimum-image edges do not add up to zero, relative to its box side, within `tolerance`
+// (simplicity.open_cells): an edge of it reached half the box. One thread a cell.
+extern "C" __global__ void open_cells(const double* __restrict__ pos, const int* __restrict__ cell_vertices,
+                                      const int* __restrict__ cell_sides, const int* __restrict__ cell_replica,
+                                      const double* __restrict__ size, int n_cells, int max_sides, double tolerance,
+                                      unsigned long long* __restrict__ open)
+{
+    long c = (long)blockIdx.x * blockDim.x + threadIdx.x;
+    if (c >= n_cells) return;
+    const int* row = cell_vertices + c * max_sides;
+    int n = cell_sides[c];
+    box2 b = Surface::size(size, cell_replica[c]);
+    vec3 sum = v3(0.0, 0.0, 0.0);
+    for (int j = 0; j < n; ++j)
+        sum = sum + plane_edge(load3(pos, row[j]), load3(pos, row[j + 1 < n ? j + 1 : 0]), b);
+    if (fabs(sum.x) / b.x > tolerance || fabs(sum.y) / b.y > tolerance) *open = 1ull;
+}
+#endif

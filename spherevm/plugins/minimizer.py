@@ -112,7 +112,7 @@ class Minimizer(Integrator):
         """Stop the replicas that reached a tolerance now, or that an operation halts."""
         self.checked_at = self.iteration
         state = simulation.state
-        fmax, energy, _ = simulation.replica_summary()     # one read-back
+        fmax, energy = simulation.replica_summary()[:2]     # one read-back
         epc = energy / state.cells_per_replica
         forces = tuple(simulation.operations.forces)
         if self._units is None or self._units[0] is not state or self._units[1] != forces:

@@ -16,14 +16,16 @@ def t1_placement(state, u, slot, new_length):
     (:func:`spherevm.topology.t1_new_positions`) if it is clean (:func:`t1_fold_level`), else the
     edge rotated the other way round (``turn``) if that is clean, else the usual one if it only
     keeps corners that were inverted already (an edge the dynamics pushed through zero length,
-    which no placement cures), else refused: a flip never folds the network."""
+    which no placement cures), else the turned one if that only keeps such corners, else refused:
+    a flip never folds the network. Where no corner is inverted the last two never arise."""
     new_length = np.broadcast_to(np.asarray(new_length, dtype=np.float64), np.shape(u))
     usual = t1_fold_level(state, u, slot, new_length)
-    turn = np.zeros(len(u), dtype=bool)
+    turned = np.full(len(u), CLEAN)
     again = np.flatnonzero(usual != CLEAN)
     if len(again):
-        turn[again] = t1_fold_level(state, u[again], slot[again], new_length[again],
-                                    turn=np.ones(len(again), dtype=bool)) == CLEAN
+        turned[again] = t1_fold_level(state, u[again], slot[again], new_length[again],
+                                      turn=np.ones(len(again), dtype=bool))
+    turn = (usual != CLEAN) & ((turned == CLEAN) | ((usual == FOLDS) & (turned == INVERTED)))
     return (usual == FOLDS) & ~turn, turn
 
 

@@ -1,7 +1,8 @@
 """T1 flips never fold the network (issue 13, item 7): a flip must leave its four cells with positive
 signed area (as the forces will measure it) adding up to what they did, and must not invert a
 corner (turn the three edges at one of its six vertices clockwise) that was not inverted; where the
-usual placement would, the edge is rotated the other way round if that is clean, else refused.
+usual placement would, the edge is rotated the other way round if that is clean (or, where the
+usual one folds, if it only keeps corners inverted already), else refused.
 
 Checked here: the rule (spherevm.folding.t1_fold_level) against flipping a copy and measuring it
 with code written here; constructed flips that fold, on the sphere and the plane, and an edge
@@ -182,6 +183,22 @@ def test_ordinary_minimisations_refuse_nothing_that_does_not_fold():
     assert res.all_converged and len(checked) > 10 and all(checked)
 
 
+def test_a_flip_that_folds_turns_where_turned_it_only_keeps_inverted_corners():
+    """Where the usual placement folds and the turned one only keeps corners inverted already, the
+    flip turns rather than being refused (t1_pass.cuh's t1_placement_refused decides the same): a
+    crossed edge beside a fold is flipped, which untangling needs (else the edges next to it flip
+    back and forth, docs/validation.md)."""
+    state = kicked(40, 6, 0.15, replicas=3)
+    u, slot, new = candidates(state, 0.6)
+    usual = folding.t1_fold_level(state, u, slot, new)
+    turned = folding.t1_fold_level(state, u, slot, new, turn=np.ones(len(u), dtype=bool))
+    pick = np.flatnonzero((usual == 2) & (turned == 1))
+    assert len(pick) > 0
+    refused, turn = folding.t1_placement(state, u[pick], slot[pick], new[pick])
+    assert turn.all() and not refused.any()
+    assert (level_when_flipped(state, u[pick], slot[pick], new[pick], turn=turn) == 1).all()
+
+
 # ------------------------------------------------------------------ the CUDA header on the CPU
 @pytest.fixture(scope="module")
 def fold_header(tmp_path_factory):
@@ -236,7 +253,8 @@ def test_cuda_header_agrees_with_numpy(fold_header, surface, n_cells, seed, kick
         assert np.array_equal(host, rule), np.flatnonzero(host != rule)
         levels[turn] = rule
     refused, turned = folding.t1_placement(state, u, slot, new)   # what t1_detect decides from the two levels
-    assert np.array_equal(turned, (levels[False] != 0) & (levels[True] == 0))
+    keeps = (levels[False] == 2) & (levels[True] == 1)          # usual folds, turned only keeps inverted corners
+    assert np.array_equal(turned, (levels[False] != 0) & ((levels[True] == 0) | keeps))
     assert np.array_equal(refused, (levels[False] == 2) & ~turned)
     assert n > 20 and (levels[False] == 2).any() and (levels[False] == 0).any(), (n, np.bincount(levels[False]))
 

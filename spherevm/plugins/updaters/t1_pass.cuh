@@ -69,16 +69,16 @@ __device__ __forceinline__ void t1_claim(int* claim, int* e, bool turn)
 
 // folding.t1_placement from the fold levels of the usual and the turned placement: whether the
 // candidate is refused, and whether it turns (usual if clean, else turned if clean, else usual
-// unless it folds).
+// unless it folds, else turned unless it folds).
 __device__ __forceinline__ bool t1_placement_refused(int usual, int turned, bool* turn)
 {
-    *turn = usual != T1_CLEAN && turned == T1_CLEAN;
+    *turn = usual != T1_CLEAN && (turned == T1_CLEAN || (usual == T1_FOLDS && turned == T1_INVERTED));
     return usual == T1_FOLDS && !*turn;
 }
 
 // Candidate e (full: its new length): the rules of T1.select (t1_check, one thread a candidate).
 // Refuse a flip by its topology (t1_refused_by_topology), place it as folding.t1_placement does
-// (usual, else turned, else refused if it folds); false if refused. Otherwise it claims its four
+// (t1_placement_refused; refused if both fold); false if refused. Otherwise it claims its four
 // cells (t1_claim).
 __device__ __forceinline__ bool t1_check_candidate(const double* pos, const int* vn, const int* sides,
                                                    const int* cell_vertices, int max_sides, Surface::Size s,

@@ -363,6 +363,8 @@ class Simulation(Checkpoints, RunRecords):
             raise FloatingPointError(f"non-finite position at timestep {self.timestep}: replica {r}, vertex {v}; "
                                      "reduce dt or check the forces (the last good frame is on disk)")
         if opened or not state.device.is_gpu:   # cells that no longer close on a periodic surface
+            if opened:           # T1 passes inside CUDA graphs edit the tables without the host's caches knowing
+                state.topology_changed()
             try:
                 simplicity.check_closed(state)
             except ValueError as exc:

@@ -5,8 +5,8 @@
     python benchmarks/crossings.py --cost                            # ms per check, N = 1,000 and 65,536
 
 For each case: random tilings relaxed with FIRE + T1 (at most ``--relax`` iterations, as the paper's
-protocol does), then ``--steps`` Brownian steps (dt = 0.05, as examples/fig3_relaxation.py) with the
-default T1 rule, checked every ``--every`` steps with :func:`spherevm.simplicity.counts`. Printed per
+protocol does), then ``--steps`` Brownian steps (``--dt``, default 0.05 as examples/fig3_relaxation.py)
+with the default T1 rule, checked every ``--every`` steps with :func:`spherevm.simplicity.counts`. Printed per
 case: checks, cells that crossed themselves (summed over the checks), checks with at least one, the
 largest number in one check, inverted cells (signed area <= 0), open cells, replicas whose areas
 do not add up to the surface's, the flips, and (``--untangle``) the crossings the untangling pass
@@ -32,7 +32,7 @@ CASES = [("fig3", 3.775, 0.0, 0.004), ("fig3", 3.775, 0.0, 0.01), ("fig3", 3.775
          ("inset", 3.75, 1.0, 5e-4), ("hot", 3.775, 0.0, 0.05), ("hot", 3.8, 1.0, 0.05)]
 
 
-def measure(surface, n_cells, replicas, p0, kr, T, steps, every, relax, seed=0, untangle=False):
+def measure(surface, n_cells, replicas, p0, kr, T, steps, every, relax, seed=0, untangle=False, dt=0.05):
     """Counts of :func:`spherevm.simplicity.counts` summed over the checks, the checks with any
     crossing, the largest count in one check and the flips. ``untangle``: T1(untangle=True), and
     its :meth:`~spherevm.plugins.updaters.T1.untangle_pass` before each check (as if run after
@@ -47,7 +47,7 @@ def measure(surface, n_cells, replicas, p0, kr, T, steps, every, relax, seed=0, 
     if relax:
         sim.operations.integrator = FIRE(dt=0.02)
         sim.minimize(force_tol=1e-8, max_steps=relax)
-    sim.operations.integrator = Brownian(dt=0.05, T=T)
+    sim.operations.integrator = Brownian(dt=dt, T=T)
     out = dict(checks=0, crossed=0, checks_crossed=0, worst=0, inverted=0, open=0, uncovered=0, crossed_before=0)
     out["exploded"] = ""
     for _ in range(steps // every):
@@ -110,6 +110,7 @@ def main(argv=None):
     ap.add_argument("--p0", type=float, help="one case of this p0 (with --kr and --T) instead of the table")
     ap.add_argument("--kr", type=float, default=0.0)
     ap.add_argument("--T", type=float, default=0.05)
+    ap.add_argument("--dt", type=float, default=0.05, help="Brownian time step (hot runs explode at 0.05)")
     ap.add_argument("--untangle", action="store_true", help="T1(untangle=True), untangled before each check")
     ap.add_argument("--cost", action="store_true", help="time the checks instead (N = 1,000 and 65,536)")
     args = ap.parse_args(argv)
@@ -117,7 +118,7 @@ def main(argv=None):
         return cost()
     cases = CASES if args.p0 is None else [("given", args.p0, args.kr, args.T)]
     print(f"# {datetime.date.today()} {platform.machine()} {os.cpu_count()} cores, NumPy, {args.replicas} replicas, "
-          f"{args.steps} steps, dt 0.05, checked every {args.every}, relaxed <= {args.relax} FIRE iterations, "
+          f"{args.steps} steps, dt {args.dt}, checked every {args.every}, relaxed <= {args.relax} FIRE iterations, "
           f"untangle={args.untangle}")
     print(f"{'surface':<7} {'N':>4} {'case':<6} {'p0':>6} {'kr':>3} {'T':>7} {'checks':>6} {'crossed':>7} "
           f"{'w/ any':>6} {'worst':>5} {'invert':>6} {'open':>4} {'cover':>5} {'flips':>6} {'before':>6} {'s':>5}")
@@ -126,7 +127,7 @@ def main(argv=None):
             for label, p0, kr, T in cases:
                 t0 = time.time()
                 r = measure(surface, n, args.replicas, p0, kr, T, args.steps, args.every, args.relax,
-                            untangle=args.untangle)
+                            untangle=args.untangle, dt=args.dt)
                 print(f"{surface:<7} {n:>4} {label:<6} {p0:>6} {kr:>3g} {T:>7g} {r['checks']:>6} {r['crossed']:>7} "
                       f"{r['checks_crossed']:>6} {r['worst']:>5} {r['inverted']:>6} {r['open']:>4} "
                       f"{r['uncovered']:>5} {r['flips']:>6} {r['crossed_before']:>6} {time.time() - t0:>5.0f} {r['exploded']}",

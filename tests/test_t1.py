@@ -345,34 +345,3 @@ def test_untangle_is_a_flag_and_untangles_on_both_devices(device):
             break
     assert made > 0 and len(folding.inverted_edges(sim.state)[0]) < crossed
     assert int(to_numpy(sim.log("t1_flips")).sum()) == step + made     # added to the step's count
-
-
-def test_untangle_pass_flips_an_edge_once_per_call(monkeypatch):
-    """An edge one round of untangle_pass flipped is not taken again by a later round of the same
-    call (where the flip did not uncross it, it would turn back and forth and keep the crossed
-    edges beside it from their turn): kicks that cross many edges, each followed by a pass and an
-    untangle_pass whose flips are recorded round by round."""
-    from conftest import kick_on_surface
-    rounds = []
-    flip = topology.t1_flip
-
-    def recorded(state, u, slot, new_length, turn=None):
-        rounds.append(set(zip(np.asarray(u).tolist(), state.vertex_neighbors[u, slot].tolist())))
-        return flip(state, u, slot, new_length, turn=turn)
-
-    monkeypatch.setattr(topology, "t1_flip", recorded)
-    rng = np.random.default_rng(4)
-    sim = svm.Simulation(device="cpu")
-    sim.state = svm.init.random_planar_tiling(300, replicas=3, seed=16)
-    t1 = T1(untangle=True, max_flip_backs=10 ** 6)
-    sim.operations.updaters.append(t1)
-    later = 0
-    for _ in range(30):
-        kick_on_surface(sim, rng.normal(scale=0.04, size=sim.state.positions.shape))
-        sim.run_updaters()
-        rounds.clear()
-        t1.untangle_pass(sim)
-        flipped = [edge for r in rounds for edge in r]
-        assert len(flipped) == len(set(flipped))
-        later += len(rounds) > 1
-    assert later > 3

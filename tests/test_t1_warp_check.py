@@ -22,9 +22,7 @@ extern "C" __global__ void list_edges(const double* pos, const int* vn, const in
                                       int* count, int* cand, double* len, int capacity)
 {
     int u = blockIdx.x * blockDim.x + threadIdx.x;
-    if (u < nv)
-        t1_detect_vertex(pos, vn, vc, Surface::size(size, 0), 1e300, false, nullptr, 0, 0, u, count, cand, len,
-                         capacity);
+    if (u < nv) t1_detect_vertex(pos, vn, vc, Surface::size(size, 0), 1e300, false, 0, u, count, cand, len, capacity);
 }
 
 // Each candidate's check at the new length `full`: verdict[i] = 0 refused, 1 kept usual, 2 kept turned.

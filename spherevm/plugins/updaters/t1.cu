@@ -19,23 +19,20 @@
 // spare columns beyond it, max_sides is the stride). size: the State's radius or box.
 // A candidate's entry: u, k, v, a, b, c, d, C1, C2, C3, C4, replica, and (set by t1_check) turn.
 // log_pass: the pass's number in the flip log, counted since the log was last replayed (here, so
-// that every thread of t1_apply, a later kernel, reads the same one). skip: skip_width neighbours
-// per vertex u whose edges are not taken (T1.untangle_pass: edges flipped by its earlier rounds;
-// -1: none; width 0 and nullptr outside it).
+// that every thread of t1_apply, a later kernel, reads the same one).
 extern "C" __global__ void t1_detect(
     const double* __restrict__ pos, const int* __restrict__ vn, const int* __restrict__ vc,
     const int* __restrict__ vertex_replica, const double* __restrict__ size, const double* __restrict__ chord2,
-    const bool* __restrict__ active, int untangle, const int* __restrict__ skip, int skip_width, int n_vertices,
-    int* __restrict__ counters, int* __restrict__ cand, double* __restrict__ cand_len, int capacity,
-    int* __restrict__ log_pass)
+    const bool* __restrict__ active, int untangle, int n_vertices, int* __restrict__ counters,
+    int* __restrict__ cand, double* __restrict__ cand_len, int capacity, int* __restrict__ log_pass)
 {
     int u = blockIdx.x * blockDim.x + threadIdx.x;
     if (u == 0) *log_pass += 1;
     if (u >= n_vertices) return;
     int r = vertex_replica[u];
     if (!active[r]) return;
-    t1_detect_vertex(pos, vn, vc, Surface::size(size, r), chord2[r], untangle != 0, skip, skip_width, r, u,
-                     counters, cand, cand_len, capacity);
+    t1_detect_vertex(pos, vn, vc, Surface::size(size, r), chord2[r], untangle != 0, r, u, counters, cand, cand_len,
+                     capacity);
 }
 
 // One thread per slot (n_slots: the room; the candidate count is read here, counters[0]):

@@ -266,19 +266,14 @@ class T1(DevicePass, Updater):
         by this updater's rules, adding to this step's counts, again while a round flips some (at
         most ``rounds``: edges of one cell wait for the next round): a call right after the
         integrator's step leaves what writers and checks see simple. Nothing happens where no edge
-        is crossed. An edge one round flipped is not taken again by a later one: where the flip did
-        not uncross it, it would turn back and forth and, holding the lowest index, keep the crossed
-        edges beside it from their turn. On the GPU each round is the device pass on the crossed
-        edges (one small read-back), the same flips. Returns the flips made."""
-        state = simulation.state
-        xp = state.device.xp
-        skip = xp.full((state.n_vertices, rounds), -1, dtype=xp.int32)   # [u, round]: v of the edge it flipped
-        before = self._flips_so_far(state)
-        one_round = self._update_gpu if state.device.is_gpu else self._untangle_round
-        for k in range(rounds):
-            if not one_round(simulation, skip, k):
+        is crossed. On the GPU each round is the device pass on the crossed edges (one small
+        read-back), the same flips. Returns the flips made."""
+        gpu = simulation.state.device.is_gpu
+        before = self._flips_so_far(simulation.state)
+        for _ in range(rounds):
+            if not (self._update_gpu(simulation, crossed_only=True) if gpu else self._untangle_round(simulation)):
                 break
-        return self._flips_so_far(state) - before
+        return self._flips_so_far(simulation.state) - before
 
     def _flips_so_far(self, state):
         """All flips made, on the host or (one small read-back) the device."""
@@ -286,17 +281,12 @@ class T1(DevicePass, Updater):
             return int(self._gpu_buffers(state)["total_flips"].sum())
         return int(self.total_flips.sum())
 
-    def _untangle_round(self, simulation, skip, round_):
-        """Round ``round_`` of :meth:`untangle_pass` (NumPy): a pass on the crossed edges alone but
-        the edges ``u -> skip[u, j]``, recording those it flips in ``skip[:, round_]``; whether it
-        flipped any."""
-        state = simulation.state
+    def _untangle_round(self, simulation):
+        """One pass on the crossed edges alone (NumPy); whether it flipped any."""
+        made = int(self.total_flips.sum())
         empty = np.zeros(0, dtype=np.int64)
-        u, slot, lengths = self._with_inverted(state, empty, empty, np.zeros(0))
-        keep = ~(skip[u] == state.vertex_neighbors[u, slot][:, None]).any(axis=1)
-        u, v = self._flip_pass(simulation, u[keep], slot[keep], lengths[keep])
-        skip[u, round_] = v
-        return len(u) > 0
+        self._flip_pass(simulation, *self._with_inverted(simulation.state, empty, empty, np.zeros(0)))
+        return int(self.total_flips.sum()) != made
 
     def _with_inverted(self, state, u, slot, lengths):
         """The candidates ``(u, slot, lengths)`` joined by the inverted edges, in edge index order."""
@@ -314,26 +304,23 @@ class T1(DevicePass, Updater):
                 np.concatenate([lengths, ilen])[order])
 
     def _flip_pass(self, simulation, u, slot, lengths):
-        """Flip the candidates ``(u, slot, lengths)`` of active replicas by the rules, counting;
-        returns the flipped edges ``(u, v)``."""
+        """Flip the candidates ``(u, slot, lengths)`` of active replicas by the rules, counting."""
         state = simulation.state
         n_rep = state.n_replicas
         integrator = simulation.operations.integrator
-        none = (np.zeros(0, dtype=np.int64),) * 2
         if len(u) and integrator is not None:
             keep = integrator.active[state.vertex_replica_np()[u]]
             u, slot, lengths = u[keep], slot[keep], lengths[keep]
         if len(u) == 0:
-            return none
+            return
         flip, refused, cells, turn = self.select(state, u, slot, lengths)
         rep = state.vertex_replica_np()[u]
         refusals = np.bincount(rep[refused], minlength=n_rep)
         self.last_refused = self.last_refused + refusals
         self.total_refused += refusals
         if not flip.any():
-            return none
+            return
         u, slot, lengths, cells, rep = u[flip], slot[flip], lengths[flip], cells[flip], rep[flip]
-        v = state.vertex_neighbors[u, slot]
         new = self.new_lengths(state, u, lengths)
         if self.counting(simulation):
             self._count_flip_backs(state, cells, rep)
@@ -344,7 +331,6 @@ class T1(DevicePass, Updater):
         if self.reset_velocities and integrator is not None:
             integrator.reset_vertices(state.device.asarray(moved))
         simulation.state_changed()
-        return u, v
 
     def _count_flip_backs(self, state, cells, rep, n_cells=None, passes=None):
         """Count re-joins: a flip making two cells neighbours again that an earlier flip separated.

@@ -64,16 +64,14 @@ class DevicePass:
         total = getattr(self, name)
         return total.astype(np.uint64) if len(total) == n_replicas else np.zeros(n_replicas, np.uint64)
 
-    def _detect(self, simulation, buf, skip=None):
+    def _detect(self, simulation, buf, crossed_only=False):
         """Zero the pass counters, list the short edges (t1_detect; with ``untangle`` also the crossed
         ones) and apply the refusal rules to them (t1_check, over the whole room: the count is read on
-        the device); returns what t1_apply takes besides. ``skip`` (a round of :meth:`untangle_pass`):
-        list the crossed edges alone, but not the edges ``u -> skip[u, j]`` (int32 (V, rounds), -1:
-        none), the per-replica flip and refusal counts kept (added to)."""
+        the device); returns what t1_apply takes besides. ``crossed_only``: list the crossed edges
+        alone (:meth:`untangle_pass`), the per-replica flip and refusal counts kept (added to)."""
         import cupy as cp
         state = simulation.state
         chord2, new_length = self._device_lengths(state)
-        crossed_only = skip is not None
         if crossed_only:           # no chord is shorter than 0: no short edge
             chord2 = state.cached((self, "no_chord"), lambda: cp.zeros(state.n_replicas))
         module, size = surface_kernels(_KERNELS, state)
@@ -83,8 +81,7 @@ class DevicePass:
         cp.cuda.runtime.memsetAsync(zeroed.data.ptr, 0, zeroed.nbytes, cp.cuda.get_current_stream().ptr)
         launch(module.get_function("t1_detect"), state.n_vertices,
                (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, size, chord2,
-                active, np.int32(self.untangle or crossed_only), np.uintp(0) if skip is None else skip,
-                np.int32(0 if skip is None else skip.shape[1]), np.int32(state.n_vertices), buf["counters"],
+                active, np.int32(self.untangle or crossed_only), np.int32(state.n_vertices), buf["counters"],
                 buf["cand"], buf["cand_len"], np.int32(buf["capacity"]), buf["log_pass"]))
         launch(module.get_function("t1_check"), buf["capacity"],
                (state.positions, state.vertex_neighbors, state.cell_sides, state.cell_vertices, size, new_length,
@@ -110,11 +107,10 @@ class DevicePass:
             integrator.reset_vertices(moved)
         simulation.state_changed()
 
-    def _update_gpu(self, simulation, skip=None, round_=0):
+    def _update_gpu(self, simulation, crossed_only=False):
         """Detect and check, one small read-back (candidates, full rows, claimants), apply:
         see t1.cu. Returns whether a candidate claimed its cells (then at least one flipped).
-        ``skip``: round ``round_`` of :meth:`untangle_pass` (:meth:`_detect`), which records each
-        flip's edge in it (``skip[u, round_] = v``).
+        ``crossed_only``: the crossed edges alone (:meth:`_detect`).
         Inside a CUDA graph: no read-back, see :meth:`capture_ready`."""
         import cupy as cp
         state = simulation.state
@@ -126,9 +122,9 @@ class DevicePass:
         if buf["width_host"] != state.max_sides:
             buf["width"].fill(state.max_sides)
             buf["width_host"] = state.max_sides
-        kept = buf["refused"].copy() if skip is not None else 0   # the refusals before this pass
+        kept = buf["refused"].copy() if crossed_only else 0   # the refusals before this pass
         while True:
-            module, size, new_length = self._detect(simulation, buf, skip)
+            module, size, new_length = self._detect(simulation, buf, crossed_only)
             n_cand, widen, n_claim = (int(x) for x in buf["counters"].get())   # the one read-back
             if n_cand <= buf["capacity"]:
                 break
@@ -152,10 +148,6 @@ class DevicePass:
         buf["log_bound"] += n_claim if counting else 0
         self._apply(simulation, buf, module, size, new_length, n_cand, counting, False)
         state.topology_version += 1
-        if skip is not None:        # the flipped edges (u, v), u < v, from the moved vertices
-            pairs = buf["moved"][:2 * n_cand].reshape(-1, 2)
-            pairs = pairs[pairs[:, 0] >= 0]
-            skip[pairs[:, 0], round_] = pairs[:, 1]
         return True
 
     # ------------------------------------------------------------------ CUDA graphs

@@ -13,19 +13,16 @@
 
 // Vertex u of replica r: list its edges to higher-numbered neighbours shorter than the chord
 // threshold (chord2, squared), and with `untangle` those turned past zero length (t1_bow_tie,
-// T1(untangle=True)). skip (or nullptr), skip_width per vertex: the edges u -> skip[u, j] are not
-// taken (T1.untangle_pass: edges flipped by its earlier rounds). *count is the pass's candidate
-// count (a slot each, atomically); slots from capacity on are counted but not written.
+// T1(untangle=True)). *count is the pass's candidate count (a slot each, atomically); slots from
+// capacity on are counted but not written.
 __device__ __forceinline__ void t1_detect_vertex(const double* pos, const int* vn, const int* vc, Surface::Size s,
-                                                 double chord2, bool untangle, const int* skip, int skip_width,
-                                                 int r, int u, int* count, int* cand, double* cand_len, int capacity)
+                                                 double chord2, bool untangle, int r, int u, int* count, int* cand,
+                                                 double* cand_len, int capacity)
 {
     vec3 pu = load3(pos, u);
     for (int k = 0; k < 3; ++k) {
         int v = vn[3 * u + k];
-        bool skipped = v <= u;
-        for (int j = 0; j < skip_width && !skipped; ++j) skipped = skip[(long)u * skip_width + j] == v;
-        if (skipped) continue;
+        if (v <= u) continue;
         vec3 pv = load3(pos, v);
         bool short_edge = Surface::chord2(pu, pv, s) < chord2;   // chord test: no trigonometry for the many long edges
         if (!short_edge && !untangle) continue;

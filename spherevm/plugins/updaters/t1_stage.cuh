@@ -30,7 +30,7 @@ struct T1Stage {
         if (settling && threadIdx.x == 0) { a.flips[r] = 0; a.refused[r] = 0; }
         if (flipping)
             for (int u = vb0 + threadIdx.x; u < vb1; u += blockDim.x)
-                t1_detect_vertex(P, vn, vc, s, a.chord2[r], a.untangle != 0, nullptr, 0, r, u, n_cand,
+                t1_detect_vertex(P, vn, vc, s, a.chord2[r], a.untangle != 0, r, u, n_cand,
                                  a.cand + (long)room0 * CAND_INTS, a.cand_len + room0, room);
     }
 

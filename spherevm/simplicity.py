@@ -97,13 +97,21 @@ def counts(state, areas=None):
                 uncovered=(np.abs(total - surface) > con.cover_tolerance * surface).astype(np.int64))
 
 
+def closed_on_device(state) -> bool:
+    """Whether :func:`flag_open_cells` tests the cells on the device: a GPU State on the periodic
+    plane (elsewhere the caller runs :func:`check_closed`, which costs nothing on a surface without
+    images)."""
+    from .constraints.plane import PeriodicPlane
+    return state.device.is_gpu and isinstance(state.constraint, PeriodicPlane)
+
+
 def flag_open_cells(state, word):
-    """On a GPU State on a periodic surface, set ``word`` (a one-element uint64 device array, such as
-    the replica summary's last) to 1 if a cell is open (:func:`open_cells`), on the device: the
-    run's checks read it with the rest of the summary and call :func:`check_closed` only then.
-    Nothing elsewhere (the CPU calls :func:`check_closed` itself)."""
-    if state.device.is_gpu and hasattr(state.constraint, "unwrapped_cells") and state.n_cells:
+    """Where :func:`closed_on_device`, set ``word`` (a one-element uint64 device array, such as the
+    replica summary's last) to 1 if a cell is open (:func:`open_cells`), on the device: the run's
+    checks read it with the rest of the summary and call :func:`check_closed` only then."""
+    if closed_on_device(state) and state.n_cells:
         from .constraints.kernels import flag_open_cells as launch_flag
+        from .constraints.plane import OPEN_TOLERANCE
         launch_flag(state, word, OPEN_TOLERANCE)
 
 

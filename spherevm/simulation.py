@@ -362,7 +362,7 @@ class Simulation(Checkpoints, RunRecords):
             r = int(state.vertex_replica_np()[v])
             raise FloatingPointError(f"non-finite position at timestep {self.timestep}: replica {r}, vertex {v}; "
                                      "reduce dt or check the forces (the last good frame is on disk)")
-        if opened or not state.device.is_gpu:   # cells that no longer close on a periodic surface
+        if opened or not simplicity.closed_on_device(state):   # cells that no longer close (periodic surfaces)
             if opened:           # T1 passes inside CUDA graphs edit the tables without the host's caches knowing
                 state.topology_changed()
             try:

@@ -11,13 +11,14 @@ from .topology import t1_cells, t1_new_positions
 CLEAN, INVERTED, FOLDS = 0, 1, 2    # fold levels of a placement, see t1_fold_level
 
 
-def t1_placement(state, u, slot, new_length):
+def t1_placement(state, u, slot, new_length, untangle=False):
     """``(refused, turn)`` masks over the candidate flips. The usual placement
     (:func:`spherevm.topology.t1_new_positions`) if it is clean (:func:`t1_fold_level`), else the
     edge rotated the other way round (``turn``) if that is clean, else the usual one if it only
     keeps corners that were inverted already (an edge the dynamics pushed through zero length,
-    which no placement cures), else the turned one if that only keeps such corners, else refused:
-    a flip never folds the network. Where no corner is inverted the last two never arise."""
+    which no placement cures), else (with ``untangle``, as ``T1(untangle=True)`` places its flips)
+    the turned one if that only keeps such corners, else refused: a flip never folds the network.
+    Where no corner is inverted the last two never arise."""
     new_length = np.broadcast_to(np.asarray(new_length, dtype=np.float64), np.shape(u))
     usual = t1_fold_level(state, u, slot, new_length)
     turned = np.full(len(u), CLEAN)
@@ -25,7 +26,7 @@ def t1_placement(state, u, slot, new_length):
     if len(again):
         turned[again] = t1_fold_level(state, u[again], slot[again], new_length[again],
                                       turn=np.ones(len(again), dtype=bool))
-    turn = (usual != CLEAN) & ((turned == CLEAN) | ((usual == FOLDS) & (turned == INVERTED)))
+    turn = (usual != CLEAN) & ((turned == CLEAN) | (untangle & (usual == FOLDS) & (turned == INVERTED)))
     return (usual == FOLDS) & ~turn, turn
 
 

@@ -98,11 +98,11 @@ def counts(state, areas=None):
 
 
 def closed_on_device(state) -> bool:
-    """Whether :func:`flag_open_cells` tests the cells on the device: a GPU State on the periodic
-    plane (elsewhere the caller runs :func:`check_closed`, which costs nothing on a surface without
-    images)."""
-    from .constraints.plane import PeriodicPlane
-    return state.device.is_gpu and isinstance(state.constraint, PeriodicPlane)
+    """Whether :func:`flag_open_cells` tests the cells on the device (a GPU State on a surface whose
+    kernels flag open cells: :func:`spherevm.constraints.kernels.flags_open_cells`); elsewhere the
+    caller runs :func:`check_closed`, which costs nothing on a surface without images."""
+    from .constraints.kernels import flags_open_cells
+    return flags_open_cells(state)
 
 
 def flag_open_cells(state, word):
@@ -111,8 +111,7 @@ def flag_open_cells(state, word):
     checks read it with the rest of the summary and call :func:`check_closed` only then."""
     if closed_on_device(state) and state.n_cells:
         from .constraints.kernels import flag_open_cells as launch_flag
-        from .constraints.plane import OPEN_TOLERANCE
-        launch_flag(state, word, OPEN_TOLERANCE)
+        launch_flag(state, word)
 
 
 def check_closed(state):

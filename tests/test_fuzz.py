@@ -199,7 +199,7 @@ def test_fuzz_thousands_of_flips_and_no_fold(device):
 
 def test_fuzz_finds_the_folds_the_rule_refuses(monkeypatch):
     """Without the rule the same fuzzing makes folds: the counter sees what the rule prevents."""
-    monkeypatch.setattr(folding, "t1_placement", lambda state, u, slot, new_length: (np.zeros(len(u), dtype=bool),) * 2)
+    monkeypatch.setattr(folding, "t1_placement", lambda state, u, slot, new_length, untangle=False: (np.zeros(len(u), dtype=bool),) * 2)
     folds = FoldCounter()
     for seed in range(2):
         fuzz(svm.init.random_tiling(60, replicas=2, seed=seed), seed, passes=100, device="cpu", check_every=50,
@@ -229,7 +229,7 @@ def test_hot_tiny_spheres_flip_without_folding(device):
 
 
 def test_hot_tiny_spheres_folded_without_the_rule(monkeypatch):
-    monkeypatch.setattr(folding, "t1_placement", lambda state, u, slot, new_length: (np.zeros(len(u), dtype=bool),) * 2)
+    monkeypatch.setattr(folding, "t1_placement", lambda state, u, slot, new_length, untangle=False: (np.zeros(len(u), dtype=bool),) * 2)
     folds, _ = hot_brownian_folds("cpu")
     assert folds.cells > 10 and folds.corners > 10, (folds.cells, folds.corners)
 

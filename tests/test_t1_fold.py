@@ -184,18 +184,20 @@ def test_ordinary_minimisations_refuse_nothing_that_does_not_fold():
 
 
 def test_a_flip_that_folds_turns_where_turned_it_only_keeps_inverted_corners():
-    """Where the usual placement folds and the turned one only keeps corners inverted already, the
-    flip turns rather than being refused (t1_pass.cuh's t1_placement_refused decides the same): a
-    crossed edge beside a fold is flipped, which untangling needs (else the edges next to it flip
-    back and forth, docs/validation.md)."""
+    """Untangling (``T1(untangle=True)``): where the usual placement folds and the turned one only
+    keeps corners inverted already, the flip turns rather than being refused (t1_pass.cuh's
+    t1_placement_refused decides the same): a crossed edge beside a fold is flipped, which untangling
+    needs (else the edges next to it flip back and forth, docs/validation.md). Without untangling the
+    flip is refused, as the rule always was."""
     state = kicked(40, 6, 0.15, replicas=3)
     u, slot, new = candidates(state, 0.6)
     usual = folding.t1_fold_level(state, u, slot, new)
     turned = folding.t1_fold_level(state, u, slot, new, turn=np.ones(len(u), dtype=bool))
     pick = np.flatnonzero((usual == 2) & (turned == 1))
     assert len(pick) > 0
-    refused, turn = folding.t1_placement(state, u[pick], slot[pick], new[pick])
+    refused, turn = folding.t1_placement(state, u[pick], slot[pick], new[pick], untangle=True)
     assert turn.all() and not refused.any()
+    assert folding.t1_placement(state, u[pick], slot[pick], new[pick])[0].all()
     assert (level_when_flipped(state, u[pick], slot[pick], new[pick], turn=turn) == 1).all()
 
 
@@ -252,10 +254,11 @@ def test_cuda_header_agrees_with_numpy(fold_header, surface, n_cells, seed, kick
         rule = folding.t1_fold_level(state, u, slot, new, turn=np.full(n, turn))
         assert np.array_equal(host, rule), np.flatnonzero(host != rule)
         levels[turn] = rule
-    refused, turned = folding.t1_placement(state, u, slot, new)   # what t1_detect decides from the two levels
     keeps = (levels[False] == 2) & (levels[True] == 1)          # usual folds, turned only keeps inverted corners
-    assert np.array_equal(turned, (levels[False] != 0) & ((levels[True] == 0) | keeps))
-    assert np.array_equal(refused, (levels[False] == 2) & ~turned)
+    for untangle in (False, True):       # what t1_detect decides from the two levels
+        refused, turned = folding.t1_placement(state, u, slot, new, untangle)
+        assert np.array_equal(turned, (levels[False] != 0) & ((levels[True] == 0) | (untangle & keeps)))
+        assert np.array_equal(refused, (levels[False] == 2) & ~turned)
     assert n > 20 and (levels[False] == 2).any() and (levels[False] == 0).any(), (n, np.bincount(levels[False]))
 
 

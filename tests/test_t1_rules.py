@@ -186,7 +186,7 @@ def test_small_tiling_walks_meet_non_distinct_cells_and_stay_valid(monkeypatch, 
     flipping one leaves an invalid network. The walks reach those edges through flips that fold the
     network, which the fold rule refuses first (tests/test_t1_fold.py); the distinctness rule must
     hold on its own, so the fold rule is off here (CPU; test_each_refusal_alone covers the GPU)."""
-    monkeypatch.setattr(folding, "t1_placement", lambda state, u, slot, new_length: (np.zeros(len(u), dtype=bool),) * 2)
+    monkeypatch.setattr(folding, "t1_placement", lambda state, u, slot, new_length, untangle=False: (np.zeros(len(u), dtype=bool),) * 2)
     state = svm.init.random_tiling(n_cells, seed=seed)
     sim = svm.Simulation(device="cpu")
     sim.state = state

@@ -29,15 +29,15 @@ extern "C" __global__ void list_edges(const double* pos, const int* vn, const in
 // by_warp: a warp a candidate (t1_check_candidate_warp), else a thread a candidate (t1_check_candidate).
 extern "C" __global__ void check_all(const double* pos, const int* vn, const int* sides, const int* cell_vertices,
                                      int max_sides, const double* size, double full, int* claim, int* cand, int n,
-                                     int by_warp, int* verdict)
+                                     int by_warp, int untangle, int* verdict)
 {
     long t = (long)blockIdx.x * blockDim.x + threadIdx.x;
     long i = by_warp ? t >> 5 : t;
     if (i >= n) return;   // a whole warp leaves together when by_warp
     int* e = cand + i * CAND_INTS;
     Surface::Size s = Surface::size(size, 0);
-    bool kept = by_warp ? t1_check_candidate_warp(pos, vn, sides, cell_vertices, max_sides, s, full, claim, e)
-                        : t1_check_candidate(pos, vn, sides, cell_vertices, max_sides, s, full, claim, e);
+    bool kept = by_warp ? t1_check_candidate_warp(pos, vn, sides, cell_vertices, max_sides, s, full, untangle, claim, e)
+                        : t1_check_candidate(pos, vn, sides, cell_vertices, max_sides, s, full, untangle, claim, e);
     if (!by_warp || (threadIdx.x & 31) == 0) verdict[i] = kept ? 1 + e[12] : 0;
 }
 """
@@ -60,7 +60,8 @@ def jittered(surface, n_cells, seed):
 
 @pytest.mark.gpu
 @pytest.mark.parametrize("surface", ["sphere", "plane"])
-def test_a_warp_decides_every_candidate_as_one_thread_does(surface):
+@pytest.mark.parametrize("untangle", [0, 1])
+def test_a_warp_decides_every_candidate_as_one_thread_does(surface, untangle):
     import cupy as cp
     defines = ("-DSVM_SURFACE_PLANE",) if surface == "plane" else ()
     module = cp.RawModule(code=SOURCE, options=("-std=c++17", f"-I{PACKAGE}") + defines)
@@ -89,7 +90,7 @@ def test_a_warp_decides_every_candidate_as_one_thread_does(surface):
             module.get_function("check_all")(((threads + 127) // 128,), (128,),
                                              (pos, vn, sides, table, np.int32(state.max_sides), size,
                                               np.float64(factor * edge), claim, cand.copy(), np.int32(n),
-                                              np.int32(by_warp), verdict))
+                                              np.int32(by_warp), np.int32(untangle), verdict))
             out.append((verdict.get(), claim.get()))
         (one, claim_one), (warp, claim_warp) = out
         assert (one >= 0).all(), "every candidate decided"

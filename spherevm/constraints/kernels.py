@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..device import launch, load_module
-from .plane import PeriodicPlane
+from .plane import OPEN_TOLERANCE, PeriodicPlane
 from .sphere import Sphere
 
 
@@ -59,12 +59,18 @@ def cell_measures(state):
     return area, perimeter
 
 
-def flag_open_cells(state, word, tolerance):
+def flags_open_cells(state) -> bool:
+    """Whether :func:`flag_open_cells` tests ``state``'s cells on the device: a GPU State on the
+    periodic plane (on the sphere no cell can open: it has no images)."""
+    return state.device.is_gpu and isinstance(state.constraint, PeriodicPlane)
+
+
+def flag_open_cells(state, word):
     """Set ``word`` (a one-element uint64 CuPy array) to 1 if a cell of a GPU State on the periodic
     plane does not close under the minimum image: its minimum-image edges add up to more than
-    ``tolerance`` times its box side (geometry/cell_measures.cu's ``open_cells``, one thread a cell)."""
+    ``OPEN_TOLERANCE`` times its box side (geometry/cell_measures.cu's ``open_cells``, one thread a cell)."""
     xp = state.device.xp
     module, size = surface_kernels(_CELL_MEASURES, state)
     launch(module.get_function("open_cells"), state.n_cells,
            (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, size,
-            xp.int32(state.n_cells), xp.int32(state.max_sides), xp.float64(tolerance), word))
+            xp.int32(state.n_cells), xp.int32(state.max_sides), xp.float64(OPEN_TOLERANCE), word))

@@ -43,14 +43,15 @@ extern "C" __global__ void t1_check(
     const int* __restrict__ cell_vertices, const double* __restrict__ size, const double* __restrict__ new_length,
     double length_factor, int max_sides, int* __restrict__ claim, int* __restrict__ refused,
     unsigned long long* __restrict__ total_refused, int* __restrict__ counters, int* __restrict__ cand,
-    const double* __restrict__ cand_len, int n_slots, const int* __restrict__ width)
+    const double* __restrict__ cand_len, int n_slots, const int* __restrict__ width, int untangle)
 {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n_slots || i >= counters[0]) return;
     int* e = cand + (long)i * CAND_INTS;
     int r = e[11];
     double full = t1_full_length(new_length[r], length_factor, cand_len[i]);
-    if (!t1_check_candidate(pos, vn, sides, cell_vertices, max_sides, Surface::size(size, r), full, claim, e)) {
+    if (!t1_check_candidate(pos, vn, sides, cell_vertices, max_sides, Surface::size(size, r), full, untangle != 0,
+                            claim, e)) {
         atomicAdd(refused + r, 1);
         atomicAdd(total_refused + r, 1ull);
         return;

@@ -233,7 +233,8 @@ class T1(DevicePass, Updater):
         rest = np.flatnonzero(~refused)
         turn = np.zeros(len(u), dtype=bool)
         refused[rest], turn[rest] = folding.t1_placement(state, u[rest], slot[rest],
-                                                         self.new_lengths(state, u[rest], lengths[rest]))
+                                                         self.new_lengths(state, u[rest], lengths[rest]),
+                                                         self.untangle)
         index = 3 * u + slot
         claim = np.full(state.n_cells, np.iinfo(np.int64).max, dtype=np.int64)
         ok = ~refused

@@ -87,7 +87,7 @@ class DevicePass:
                (state.positions, state.vertex_neighbors, state.cell_sides, state.cell_vertices, size, new_length,
                 np.float64(self.length_factor or 0.0), np.int32(state.max_sides), buf["claim"], buf["refused"],
                 buf["total_refused"], buf["counters"], buf["cand"], buf["cand_len"], np.int32(buf["capacity"]),
-                buf["width"]))
+                buf["width"], np.int32(self.untangle)))
         return module, size, new_length
 
     def _apply(self, simulation, buf, module, size, new_length, n_slots, logging, in_graph):

@@ -69,10 +69,10 @@ __device__ __forceinline__ void t1_claim(int* claim, int* e, bool turn)
 
 // folding.t1_placement from the fold levels of the usual and the turned placement: whether the
 // candidate is refused, and whether it turns (usual if clean, else turned if clean, else usual
-// unless it folds, else turned unless it folds).
-__device__ __forceinline__ bool t1_placement_refused(int usual, int turned, bool* turn)
+// unless it folds, else, with `untangle` (T1(untangle=True)), turned unless it folds).
+__device__ __forceinline__ bool t1_placement_refused(int usual, int turned, bool untangle, bool* turn)
 {
-    *turn = usual != T1_CLEAN && (turned == T1_CLEAN || (usual == T1_FOLDS && turned == T1_INVERTED));
+    *turn = usual != T1_CLEAN && (turned == T1_CLEAN || (untangle && usual == T1_FOLDS && turned == T1_INVERTED));
     return usual == T1_FOLDS && !*turn;
 }
 
@@ -82,7 +82,7 @@ __device__ __forceinline__ bool t1_placement_refused(int usual, int turned, bool
 // cells (t1_claim).
 __device__ __forceinline__ bool t1_check_candidate(const double* pos, const int* vn, const int* sides,
                                                    const int* cell_vertices, int max_sides, Surface::Size s,
-                                                   double full, int* claim, int* e)
+                                                   double full, bool untangle, int* claim, int* e)
 {
     int u = e[0], v = e[2], a = e[3], b = e[4], c = e[5], d = e[6];
     int C1 = e[7], C2 = e[8], C3 = e[9], C4 = e[10];
@@ -96,7 +96,7 @@ __device__ __forceinline__ bool t1_check_candidate(const double* pos, const int*
         turned = t1_fold_level(pos, vn, cell_vertices, sides, max_sides, u, v, a, b, c, d, C1, C2, C3, C4, px, py, s);
     }
     bool turn;
-    if (t1_placement_refused(usual, turned, &turn)) return false;
+    if (t1_placement_refused(usual, turned, untangle, &turn)) return false;
     t1_claim(claim, e, turn);
     return true;
 }
@@ -108,7 +108,7 @@ __device__ __forceinline__ bool t1_check_candidate(const double* pos, const int*
 // calls it with the same e and gets the same answer; lane 0 claims.
 __device__ __forceinline__ bool t1_check_candidate_warp(const double* pos, const int* vn, const int* sides,
                                                         const int* cell_vertices, int max_sides, Surface::Size s,
-                                                        double full, int* claim, int* e)
+                                                        double full, bool untangle, int* claim, int* e)
 {
     if (t1_refused_by_topology(sides, e)) return false;
     const unsigned all = 0xffffffffu;
@@ -133,7 +133,7 @@ __device__ __forceinline__ bool t1_check_candidate_warp(const double* pos, const
         level[h] = t1_fold_verdict(n, after, (new_inverted >> (16 * h)) & 0xffffu, (inverted >> (16 * h)) & 0xffffu, s);
     }
     bool turn;
-    if (t1_placement_refused(level[0], level[1], &turn)) return false;
+    if (t1_placement_refused(level[0], level[1], untangle, &turn)) return false;
     if (lane == 0) t1_claim(claim, e, turn);
     return true;
 }

@@ -50,7 +50,8 @@ struct T1Stage {
         for (int i = tid >> 5; i < n; i += stride >> 5) {   // a warp a candidate (blockDim.x: a multiple of 32)
             int* e = cand + (long)i * CAND_INTS;
             bool kept = t1_check_candidate_warp(P, vn, sides, cell_vertices, max_sides, s,
-                                                t1_full_length(a.new_length[r], a.length_factor, len[i]), claim, e);
+                                                t1_full_length(a.new_length[r], a.length_factor, len[i]),
+                                                a.untangle != 0, claim, e);
             if ((tid & 31) != 0) continue;
             if (kept) {
                 atomicMax(step_need + step, max(sides[e[9]], sides[e[10]]));

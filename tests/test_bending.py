@@ -327,7 +327,7 @@ def test_gpu_vertex_model_with_bending_fused_matches_numpy(n_cells, replicas):
 def test_gpu_refuses_the_plane():
     sim = svm.Simulation(device="gpu")
     sim.state = svm.init.random_planar_tiling(64, seed=3, device="gpu")
-    with pytest.raises(ValueError, match="Bending on the GPU supports Sphere"):
+    with pytest.raises(ValueError, match="Bending on the GPU supports GeodesicSphere surfaces only"):
         sim.operations.forces.append(Bending(1.0))
 
 

@@ -146,6 +146,20 @@ ARRANGEMENTS = {
 }
 
 
+def test_the_bending_runs_stay_clear_of_exploding_steps():
+    """The bending runs below, on NumPy: 200 steps with T1 flipping and no exploding step, where
+    B = 2 at T = 0.2 explodes at timestep 2 (the force of a cell much smaller than the mean)."""
+    for arrange, T in ARRANGEMENTS.values():
+        sim = dynamics_simulation(ensemble("sphere", (300, 60)), "cpu", Brownian(dt=0.01, T=T))
+        arrange(sim.operations.forces)
+        sim.run(200)
+        assert sim.operations.updaters[0].total_flips.sum() > 0
+    sim = dynamics_simulation(ensemble("sphere", (300, 60)), "cpu", Brownian(dt=0.01, T=0.2))
+    sim.operations.forces.append(Bending(2.0))
+    with pytest.raises(FloatingPointError, match="exploding step at timestep 2: replica 0, vertex 417"):
+        sim.run(3)
+
+
 @pytest.mark.gpu
 @pytest.mark.parametrize("arrangement", list(ARRANGEMENTS))
 @pytest.mark.parametrize("per_block", [10 ** 6, 300])

@@ -135,11 +135,29 @@ def test_a_users_force_fuses_with_the_step_by_step_bits(monkeypatch, per_block):
     assert_same(three_runs(state, 150, T=0.2, extra=lambda: FastLineTension(0.3), check_every=64))
 
 
-ARRANGEMENTS = {   # the bending force beside the vertex model (Force.combined: one stage), or alone
-    "after": lambda forces: forces.append(Bending(2.0)),
-    "before": lambda forces: forces.insert(0, Bending([2.0, 0.5])),
-    "alone": lambda forces: forces.__setitem__(0, Bending(2.0)),
+# The bending force beside the vertex model (Force.combined: one stage), or alone, and the temperature
+# of its run. A cell's bending force grows as B / |a|: on these unrelaxed tilings (cells down to
+# 0.005 of the mean area) B = 2 at T = 0.2 explodes within three steps on every path, NumPy's
+# included; with these, no force moves a vertex a third of max_step (NumPy, 200 steps, T1 flipping).
+ARRANGEMENTS = {
+    "after": (lambda forces: forces.append(Bending(0.5)), 0.05),
+    "before": (lambda forces: forces.insert(0, Bending([0.5, 0.125])), 0.05),
+    "alone": (lambda forces: forces.__setitem__(0, Bending(0.5)), 0.005),
 }
+
+
+def test_the_bending_runs_stay_clear_of_exploding_steps():
+    """The bending runs below, on NumPy: 200 steps with T1 flipping and no exploding step, where
+    B = 2 at T = 0.2 explodes at timestep 2 (the force of a cell much smaller than the mean)."""
+    for arrange, T in ARRANGEMENTS.values():
+        sim = dynamics_simulation(ensemble("sphere", (300, 60)), "cpu", Brownian(dt=0.01, T=T))
+        arrange(sim.operations.forces)
+        sim.run(200)
+        assert sim.operations.updaters[0].total_flips.sum() > 0
+    sim = dynamics_simulation(ensemble("sphere", (300, 60)), "cpu", Brownian(dt=0.01, T=0.2))
+    sim.operations.forces.append(Bending(2.0))
+    with pytest.raises(FloatingPointError, match="exploding step at timestep 2: replica 0, vertex 417"):
+        sim.run(3)
 
 
 @pytest.mark.gpu
@@ -151,12 +169,13 @@ def test_bending_fuses_with_the_step_by_step_bits(monkeypatch, arrangement, per_
     flips), or bending alone, with T1 and Brownian dynamics, on one block and on clusters: the
     step-by-step trajectory bit for bit over 200 hot steps."""
     monkeypatch.setattr(tissue_steps, "VERTICES_PER_BLOCK", per_block)
+    arrange, T = ARRANGEMENTS[arrangement]
     state = ensemble("sphere", (300, 60))
-    sim = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=0.2))
-    ARRANGEMENTS[arrangement](sim.operations.forces)
+    sim = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=T))
+    arrange(sim.operations.forces)
     assert tissue_steps.why_not(sim) is None
     assert "fused" in sim.explain()
-    runs = three_runs(state, 200, T=0.2, arrange=ARRANGEMENTS[arrangement], check_every=64)
+    runs = three_runs(state, 200, T=T, arrange=arrange, check_every=64)
     assert_same(runs)
     assert runs[-1][2][0].sum() > 0, "T1 flipped"
 

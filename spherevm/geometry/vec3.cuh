@@ -32,3 +32,12 @@ __device__ __forceinline__ vec3 mul3_rn(double a, vec3 x) {
 __device__ __forceinline__ vec3 add3_rn(vec3 x, vec3 y) {
     return v3(__dadd_rn(x.x, y.x), __dadd_rn(x.y, y.y), __dadd_rn(x.z, y.z));
 }
+// a.b and a x b, rounded as written (the products of a cross product's component both feed one
+// subtraction, so ptxas may otherwise fuse either one, and chooses by the code around it).
+__device__ __forceinline__ double dot3_rn(vec3 a, vec3 b) {
+    return __fma_rn(a.z, b.z, __fma_rn(a.x, b.x, __dmul_rn(a.y, b.y)));
+}
+__device__ __forceinline__ vec3 cross3_rn(vec3 a, vec3 b) {
+    return v3(__fma_rn(a.y, b.z, -__dmul_rn(a.z, b.y)), __fma_rn(a.z, b.x, -__dmul_rn(a.x, b.z)),
+              __fma_rn(a.x, b.y, -__dmul_rn(a.y, b.x)));
+}

@@ -1,6 +1,8 @@
 // The bending force's device functions (bending.py: E_b = B_r sum over neighbouring cell pairs of
 // |n_i - n_j|^2 / 2), shared by its general kernels (bending.cu) and its stage of the fused
-// small-tissue steps (bending_stage.cuh), so the two give the same bits.
+// small-tissue steps (bending_stage.cuh), so the two give the same bits: every product and sum is
+// rounded as written (vec3.cuh's *_rn), as the compiler would otherwise fuse multiply-adds by the
+// code each is inlined into.
 #pragma once
 #include "plugins/forces/vertex_model.cuh"
 
@@ -14,11 +16,11 @@ __device__ __forceinline__ void bending_cell_normal(const double* pos, const int
     vec3 xb = x0, A = v3(0.0, 0.0, 0.0);
     for (int i = 1; i < n; ++i) {
         vec3 xd = load3(pos, row[i]);
-        A = A + cross3(xb - x0, xd - xb);
+        A = add3_rn(A, cross3_rn(xb - x0, xd - xb));
         xb = xd;
     }
-    double s = rsqrt(dot3(A, A));
-    *normal = s * A;
+    double s = rsqrt(dot3_rn(A, A));
+    *normal = mul3_rn(s, A);
     *inv_area = s;
 }
 
@@ -46,7 +48,7 @@ __device__ __forceinline__ vec3 bending_neighbour_sum(const Normal& normal, cons
 {
     vec3 s = v3(0.0, 0.0, 0.0);
     double sq = 0.0;
-    auto add = [&](int j) { vec3 d = ni - normal(j); sq += dot3(d, d); s = s + d; };
+    auto add = [&](int j) { vec3 d = ni - normal(j); sq = __dadd_rn(sq, dot3_rn(d, d)); s = add3_rn(s, d); };
     if (n <= BENDING_REGISTER_SIDES) {
         int js[BENDING_REGISTER_SIDES];
 #pragma unroll
@@ -74,8 +76,8 @@ __device__ __forceinline__ vec3 bending_neighbour_sum(const Normal& normal, cons
 // w_i = (dE/da_i) / 2 = B (s - (s.n_i) n_i) / |2 a_i| (inv_area = 1 / |2 a_i|), from the neighbour sum s.
 __device__ __forceinline__ vec3 bending_w(vec3 s, vec3 ni, double B, double inv_area)
 {
-    vec3 t = s - dot3(s, ni) * ni;
-    return (B * inv_area) * t;
+    vec3 t = fma3_rn(-dot3_rn(s, ni), ni, s);
+    return mul3_rn(__dmul_rn(B, inv_area), t);
 }
 
 // The energy's gradient at vertex v (position x) through the area vectors of its three cells, added
@@ -90,10 +92,10 @@ __device__ __forceinline__ void bending_gradient(vec3& g, const double* pos, con
     const int* vc = vertex_cells + 3 * v;
     const int* vn = vertex_neighbors + 3 * v;
     vec3 w0 = load3(w, vc[0]), w1 = load3(w, vc[1]), w2 = load3(w, vc[2]);
-    vec3 G = cross3(load3(pos, vn[0]) - x, w0 - w2);
-    G = G + cross3(load3(pos, vn[1]) - x, w1 - w0);
-    G = G + cross3(load3(pos, vn[2]) - x, w2 - w1);
-    g = g + norm3(x) * G;
+    vec3 G = cross3_rn(load3(pos, vn[0]) - x, w0 - w2);
+    G = add3_rn(G, cross3_rn(load3(pos, vn[1]) - x, w1 - w0));
+    G = add3_rn(G, cross3_rn(load3(pos, vn[2]) - x, w2 - w1));
+    g = fma3_rn(sqrt(dot3_rn(x, x)), G, g);
 }
 
 // Bending alone: minus the gradient at vertex v through its three cells, projected on the tangent
@@ -102,10 +104,10 @@ __device__ __forceinline__ vec3 bending_vertex_force(const double* pos, const in
                                                      const int* vertex_cells, long v, const double* w)
 {
     vec3 x = load3(pos, v);
-    double inv_rn = rsqrt(dot3(x, x));
-    vec3 u = inv_rn * x;
+    double inv_rn = rsqrt(dot3_rn(x, x));
+    vec3 u = mul3_rn(inv_rn, x);
     vec3 g = v3(0.0, 0.0, 0.0);
     bending_gradient(g, pos, vertex_neighbors, vertex_cells, v, x, w);
-    g = g - dot3(g, u) * u;
-    return -(inv_rn * g);
+    g = fma3_rn(-dot3_rn(g, u), u, g);
+    return -mul3_rn(inv_rn, g);
 }

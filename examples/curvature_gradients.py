@@ -60,7 +60,8 @@ def cell_curvature(state):
 
 
 def quench(spec, n, p0s, replicas, max_steps, kr=0.0, seed=0):
-    """FIRE + T1 quenches of ``replicas`` tilings per p0; per-cell rows and per-replica statuses."""
+    """FIRE + T1 quenches of ``replicas`` tilings per p0; per-cell rows (q NaN where a cell's flat area
+    is not positive: inverted) and per-replica statuses."""
     keys = [(seed + n, r) for r in range(replicas * len(p0s))]
     state = svm.init.tilings_on(spec, n, keys)
     p0 = np.repeat(p0s, replicas)
@@ -77,7 +78,7 @@ def quench(spec, n, p0s, replicas, max_steps, kr=0.0, seed=0):
     a, per = np.asarray(geo.area), np.asarray(geo.perimeter)
     k = cell_curvature(sim.state)
     cells = dict(p0=p0[rep], replica=rep, status=status[rep], K_A=k, p_penta=pentagon_perimeter_at_curvature(k),
-                 q=per / np.sqrt(a), perimeter=per / np.sqrt(area), area=a / area, sides=np.asarray(sim.state.cell_sides, dtype=np.float64))
+                 q=per / np.sqrt(np.where(a > 0, a, np.nan)), perimeter=per / np.sqrt(area), area=a / area, sides=np.asarray(sim.state.cell_sides, dtype=np.float64))
     return cells, p0, status
 
 
@@ -139,33 +140,39 @@ def plot(bins, fractions, dyn_bins, path):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.4))
-    ax = axes[0]
-    mid = sorted({r["p0"] for r in bins})[len({r["p0"] for r in bins}) // 2]
-    for name in dict.fromkeys(r["surface"] for r in bins):
-        rows = [r for r in bins if r["surface"] == name and r["quantity"] == "q" and r["p0"] == mid]
+    fig, axes = plt.subplots(2, 3, figsize=(15, 8.8))
+    p0s = sorted({r["p0"] for r in bins})
+    mid = p0s[len(p0s) // 2]
+
+    def curve(ax, rows, **options):
         ax.errorbar([r["K_A"] for r in rows], [r["mean"] for r in rows], [r["sem"] for r in rows], marker="o",
-                    capsize=2, label=name)
-    k = np.linspace(*ax.get_xlim(), 100)
-    ax.plot(k, pentagon_perimeter_at_curvature(k), "k--", label="p_penta(K <A>)")
-    ax.set(xlabel="K <A> at the cell", ylabel=f"cell shape index q (p0 = {mid:g})", title="quenched shapes")
-    ax.legend(fontsize=7)
-    ax = axes[1]
+                    capsize=2, **options)
+    labels = {"q": "cell shape index q = P / sqrt(A)", "perimeter": "P / sqrt(<A>)", "sides": "side number"}
+    for ax, quantity in zip(axes[0], labels):
+        for name in dict.fromkeys(r["surface"] for r in bins):
+            curve(ax, [r for r in bins if r["surface"] == name and r["quantity"] == quantity and r["p0"] == mid],
+                  label=name)
+        if quantity != "sides":
+            k = np.linspace(*ax.get_xlim(), 100)
+            ax.plot(k, pentagon_perimeter_at_curvature(k), "k--", label="p_penta(K <A>)")
+        ax.set(xlabel="K <A> at the cell", ylabel=labels[quantity], title=f"quenched, p0 = {mid:g}")
+        ax.legend(fontsize=7)
+    ax = axes[1, 0]
     for name in dict.fromkeys(r["surface"] for r in fractions):
         rows = [r for r in fractions if r["surface"] == name]
         ax.errorbar([r["p0"] for r in rows], [r["F"] for r in rows], [r["F_err"] for r in rows], marker="o",
                     capsize=2, label=name)
     ax.set(xlabel="p0", ylabel="zero-energy fraction F", title="F(p0)")
     ax.legend(fontsize=7)
-    ax = axes[2]
-    if dyn_bins:
-        rows = [r for r in dyn_bins if r["quantity"] == "msd"]
-        ax.errorbar([r["K_A"] for r in rows], [r["mean"] for r in rows], [r["sem"] for r in rows], marker="o",
-                    capsize=2)
-        ax.set(xlabel="K <A> at the cell", ylabel="centroid MSD at fixed lag",
-               title=f"{DYN_SURFACE}, p0 = {DYN_P0}, T = {DYN_T}")
+    for ax, quantity, label in ((axes[1, 1], "msd", "centroid MSD at fixed lag"),
+                                (axes[1, 2], "t1_rate", "neighbour losses per cell per unit time")):
+        if dyn_bins:
+            curve(ax, [r for r in dyn_bins if r["quantity"] == quantity])
+            ax.set(xlabel="K <A> at the cell", ylabel=label, title=f"{DYN_SURFACE}, p0 = {DYN_P0}, T = {DYN_T}")
+        else:
+            ax.axis("off")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
@@ -174,11 +181,14 @@ def main(argv=None):
     group = ap.add_mutually_exclusive_group()
     group.add_argument("--full", action="store_true", help="N = 256 and 1024, 11 p0 values, 16 replicas (CPU, hours)")
     group.add_argument("--tiny", action="store_true", help="seconds: one p0, a plane and a torus (smoke test)")
+    ap.add_argument("--cells", type=int, nargs="+", help="these N instead of the mode's")
+    ap.add_argument("--replicas", type=int, help="tissues per (surface, N, p0) instead of the mode's")
     ap.add_argument("--kr", type=float, default=0.0, help="area stiffness of the quenches (RigiditySweep's default 0)")
     ap.add_argument("--no-dynamics", action="store_true", help="leave out part (b), the Brownian run")
     ap.add_argument("--out", default=".", help="folder for the CSV files and the figure")
     args = ap.parse_args(argv)
-    mode = MODES["full" if args.full else "tiny" if args.tiny else "default"]
+    mode = dict(MODES["full" if args.full else "tiny" if args.tiny else "default"])
+    mode.update({k: v for k, v in (("cells", args.cells), ("replicas", args.replicas)) if v})
     os.makedirs(args.out, exist_ok=True)
     t0 = time.time()
     cell_rows, bin_rows, fractions = [], [], []

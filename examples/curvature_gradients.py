@@ -1,0 +1,238 @@
+"""Cells against the local Gaussian curvature K: quenched shapes and the zero-energy fraction on tori,
+Gaussian bumps, the sphere and the plane; mobility and neighbour exchanges on a torus at finite T
+(docs/results.md, "Curvature gradients: first measurements").
+
+(a) Zero temperature: FIRE + T1 quenches of random tilings (<A> = 1) at several p0, with the sweeps'
+settings (kr = 0 unless --kr; per cell kA = kr / <A>, kP = 1, A0 = <A>, P0 = p0 sqrt(<A>); FIRE dt 0.02; T1 as
+RigiditySweep's defaults). Per cell: shape index q = P / sqrt(A), area and side number, binned against
+K <A> at the cell's centroid (errors over tissues: each replica's bin mean is one sample), beside the
+local pentagon bound p_penta(K <A>); per surface the zero-energy fraction F(p0) (binomial errors).
+(b) Finite temperature: Brownian dynamics + T1 at p0 = 3.775, kr = 0 on one torus: per-cell mean-square
+displacement of the centroid over a fixed lag (embedding-space chord) and per-cell neighbour losses
+(a cell loses a neighbour in each T1 it takes part in along the lost edge; counted between snapshots,
+so flips undone within one interval are missed), both against K <A>.
+
+The torus, the bump and the flat-facet metric run on the NumPy path only (no GPU kernels yet), so every
+mode is a CPU job:
+
+    python examples/curvature_gradients.py --out curv/           # small default, minutes on a CPU
+    python examples/curvature_gradients.py --full --out curv/    # N = 256 and 1024, 16 replicas: a
+                                                                 # long CPU job (hours), for a cluster node
+    python examples/curvature_gradients.py --tiny --out curv/    # seconds: the test's smoke run
+"""
+import argparse
+import csv
+import os
+import time
+
+import numpy as np
+
+import spherevm as svm
+from spherevm.analysis import binned_mean, gaussian_curvature, pentagon_perimeter_at_curvature
+from spherevm.analysis.rigidity import classify, zero_fraction
+from spherevm.plugins.forces import VertexModel
+from spherevm.plugins.integrators import FIRE, Brownian
+from spherevm.plugins.updaters import T1
+
+SURFACES = {"plane": "plane", "sphere": "sphere", "torus R/r=2": "torus:R=2,r=1", "torus R/r=3": "torus:R=3,r=1",
+            "torus R/r=5": "torus:R=5,r=1", "bump h/w=1": "bump:h=1,w=1,box=6.5", "bump h/w=2": "bump:h=2,w=1,box=6.5"}
+MODES = {   # cells, p0 values, replicas per p0, FIRE max steps, K bins, dynamics (cells, replicas, steps, lag)
+    "tiny": dict(cells=[64], p0=[3.8], replicas=1, max_steps=200, bins=3, surfaces=["plane", "torus R/r=3"],
+                 dyn=(64, 1, 60, 20)),
+    "default": dict(cells=[128], p0=[3.70, 3.80, 3.90], replicas=4, max_steps=20000, bins=4,
+                    surfaces=list(SURFACES), dyn=(128, 4, 3000, 500)),
+    "full": dict(cells=[256, 1024], p0=list(np.round(np.arange(3.70, 3.901, 0.02), 2)), replicas=16,
+                 max_steps=20000, bins=8, surfaces=list(SURFACES), dyn=(256, 16, 40000, 4000)),
+}
+DYN_SURFACE, DYN_P0, DYN_T, DYN_DT, SNAPSHOT, PRE_QUENCH = "torus R/r=3", 3.775, 0.02, 0.05, 10, 1000
+CELL_COLUMNS = ("surface", "n_cells", "p0", "replica", "status", "K_A", "p_penta", "q", "perimeter", "area", "sides")
+QUANTITIES = ("q", "perimeter", "area", "sides")   # perimeter and area in units of sqrt(<A>) and <A>
+BIN_COLUMNS = ("surface", "n_cells", "p0", "quantity", "bin", "K_low", "K_high", "K_A", "mean", "sem", "n_tissues",
+               "n_cells_in_bin", "p_penta")
+
+
+def cell_curvature(state):
+    """K <A> at each cell's area centroid (NumPy)."""
+    rep = state.cell_replica_np()
+    x = np.asarray(state.constraint.cell_centroids(state, "area"))
+    size = np.asarray(state.size)[rep]
+    return gaussian_curvature(state.constraint, x, size=size) * state.mean_cell_area[rep]
+
+
+def quench(spec, n, p0s, replicas, max_steps, kr=0.0, seed=0):
+    """FIRE + T1 quenches of ``replicas`` tilings per p0; per-cell rows (q NaN where a cell's flat area
+    is not positive: inverted) and per-replica statuses."""
+    keys = [(seed + n, r) for r in range(replicas * len(p0s))]
+    state = svm.init.tilings_on(spec, n, keys)
+    p0 = np.repeat(p0s, replicas)
+    rep = state.cell_replica_np()
+    area = state.mean_cell_area[rep]
+    sim = svm.Simulation(device="cpu", seed=seed)
+    sim.state = state
+    sim.operations.forces.append(VertexModel(kA=kr / area, kP=1.0, A0=area, P0=p0[rep] * np.sqrt(area)))
+    sim.operations.updaters.append(T1())
+    sim.operations.integrator = FIRE(dt=0.02)
+    res = sim.minimize(force_tol=1e-12, energy_tol=1e-16, max_steps=max_steps, check_every=10)
+    status = classify(res.energy_per_cell, res.reason)
+    geo = sim.state.constraint.cell_geometry(sim.state)
+    a, per = np.asarray(geo.area), np.asarray(geo.perimeter)
+    k = cell_curvature(sim.state)
+    cells = dict(p0=p0[rep], replica=rep, status=status[rep], K_A=k, p_penta=pentagon_perimeter_at_curvature(k),
+                 q=per / np.sqrt(np.where(a > 0, a, np.nan)), perimeter=per / np.sqrt(area), area=a / area, sides=np.asarray(sim.state.cell_sides, dtype=np.float64))
+    return cells, p0, status
+
+
+def neighbour_pairs(state):
+    """Sorted cell pairs sharing an edge, as int64 keys ``a * n + b``."""
+    vc = np.asarray(state.vertex_cells)
+    n = state.n_cells
+    pairs = np.concatenate([vc[:, [0, 1]], vc[:, [1, 2]], vc[:, [2, 0]]])
+    return np.unique(pairs.min(axis=1) * n + pairs.max(axis=1))
+
+
+def dynamics(spec, n, replicas, steps, lag, seed=1):
+    """Brownian + T1 at p0 = 3.775, kr = 0: per-cell centroid MSD at ``lag`` steps (mean over time
+    origins, snapshots every SNAPSHOT steps) and neighbour losses per unit time, with K <A>, after a
+    FIRE quench of at most PRE_QUENCH steps."""
+    state = svm.init.tilings_on(spec, n, [(seed + n, r) for r in range(replicas)])
+    rep = state.cell_replica_np()
+    area = state.mean_cell_area[rep]
+    sim = svm.Simulation(device="cpu", seed=seed)
+    sim.state = state
+    sim.operations.forces.append(VertexModel(kA=0.0 * area, kP=1.0, A0=area, P0=DYN_P0 * np.sqrt(area)))
+    sim.operations.updaters.append(T1())
+    sim.operations.integrator = FIRE(dt=0.02)            # relax the random tiling's large forces first
+    sim.minimize(force_tol=1e-6, max_steps=PRE_QUENCH, check_every=10)
+    sim.operations.integrator = Brownian(dt=DYN_DT, T=DYN_T)
+    centres, losses, pairs = [], np.zeros(state.n_cells), neighbour_pairs(sim.state)
+    for _ in range(steps // SNAPSHOT + 1):
+        centres.append(np.asarray(sim.state.constraint.cell_centroids(sim.state, "vertex")))
+        sim.run(SNAPSHOT)
+        now = neighbour_pairs(sim.state)
+        lost = np.setdiff1d(pairs, now, assume_unique=True)
+        np.add.at(losses, np.concatenate([lost // state.n_cells, lost % state.n_cells]), 1)
+        pairs = now
+    c = np.stack(centres)
+    m = lag // SNAPSHOT
+    msd = (((c[m:] - c[:-m]) ** 2).sum(axis=-1)).mean(axis=0)
+    return dict(replica=rep, K_A=cell_curvature(sim.state), msd=msd, t1_rate=losses / (len(centres) * SNAPSHOT * DYN_DT))
+
+
+def binned_rows(name, n, p0, cells, quantity, bins, edges=None):
+    """Rows of BIN_COLUMNS: ``quantity`` binned against K <A> (groups: replicas)."""
+    b = binned_mean(cells["K_A"], cells[quantity], bins=bins if edges is None else edges, groups=cells["replica"])
+    counts = np.histogram(cells["K_A"], bins=b.edges)[0] if b.edges[0] < b.edges[-1] else [len(cells["K_A"])]
+    return [dict(surface=name, n_cells=n, p0=p0, quantity=quantity, bin=i, K_low=b.edges[i], K_high=b.edges[i + 1],
+                 K_A=b.x[i], mean=b.mean[i], sem=b.sem[i], n_tissues=int(b.count[i]), n_cells_in_bin=int(counts[i]),
+                 p_penta=float(pentagon_perimeter_at_curvature(b.x[i])) if np.isfinite(b.x[i]) else np.nan)
+            for i in range(len(b.x))]
+
+
+def write_csv(path, rows, columns):
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
+        w.writeheader()
+        for row in rows:
+            w.writerow({k: (f"{v:.6g}" if isinstance(v, (float, np.floating)) else v) for k, v in row.items()})
+
+
+def plot(bins, fractions, dyn_bins, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(2, 3, figsize=(15, 8.8))
+    p0s = sorted({r["p0"] for r in bins})
+    mid = p0s[len(p0s) // 2]
+
+    def curve(ax, rows, **options):
+        ax.errorbar([r["K_A"] for r in rows], [r["mean"] for r in rows], [r["sem"] for r in rows], marker="o",
+                    capsize=2, **options)
+    labels = {"q": "cell shape index q = P / sqrt(A)", "perimeter": "P / sqrt(<A>)", "sides": "side number"}
+    for ax, quantity in zip(axes[0], labels):
+        for name in dict.fromkeys(r["surface"] for r in bins):
+            curve(ax, [r for r in bins if r["surface"] == name and r["quantity"] == quantity and r["p0"] == mid],
+                  label=name)
+        if quantity != "sides":
+            k = np.linspace(*ax.get_xlim(), 100)
+            ax.plot(k, pentagon_perimeter_at_curvature(k), "k--", label="p_penta(K <A>)")
+        ax.set(xlabel="K <A> at the cell", ylabel=labels[quantity], title=f"quenched, p0 = {mid:g}")
+        ax.legend(fontsize=7)
+    ax = axes[1, 0]
+    for name in dict.fromkeys(r["surface"] for r in fractions):
+        rows = [r for r in fractions if r["surface"] == name]
+        ax.errorbar([r["p0"] for r in rows], [r["F"] for r in rows], [r["F_err"] for r in rows], marker="o",
+                    capsize=2, label=name)
+    ax.set(xlabel="p0", ylabel="zero-energy fraction F", title="F(p0)")
+    ax.legend(fontsize=7)
+    for ax, quantity, label in ((axes[1, 1], "msd", "centroid MSD at fixed lag"),
+                                (axes[1, 2], "t1_rate", "neighbour losses per cell per unit time")):
+        if dyn_bins:
+            curve(ax, [r for r in dyn_bins if r["quantity"] == quantity])
+            ax.set(xlabel="K <A> at the cell", ylabel=label, title=f"{DYN_SURFACE}, p0 = {DYN_P0}, T = {DYN_T}")
+        else:
+            ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    group = ap.add_mutually_exclusive_group()
+    group.add_argument("--full", action="store_true", help="N = 256 and 1024, 11 p0 values, 16 replicas (CPU, hours)")
+    group.add_argument("--tiny", action="store_true", help="seconds: one p0, a plane and a torus (smoke test)")
+    ap.add_argument("--cells", type=int, nargs="+", help="these N instead of the mode's")
+    ap.add_argument("--replicas", type=int, help="tissues per (surface, N, p0) instead of the mode's")
+    ap.add_argument("--kr", type=float, default=0.0, help="area stiffness of the quenches (RigiditySweep's default 0)")
+    ap.add_argument("--no-dynamics", action="store_true", help="leave out part (b), the Brownian run")
+    ap.add_argument("--out", default=".", help="folder for the CSV files and the figure")
+    args = ap.parse_args(argv)
+    mode = dict(MODES["full" if args.full else "tiny" if args.tiny else "default"])
+    mode.update({k: v for k, v in (("cells", args.cells), ("replicas", args.replicas)) if v})
+    os.makedirs(args.out, exist_ok=True)
+    t0 = time.time()
+    cell_rows, bin_rows, fractions = [], [], []
+    for n in mode["cells"]:
+        for name in mode["surfaces"]:
+            t = time.time()
+            cells, p0, status = quench(SURFACES[name], n, mode["p0"], mode["replicas"], mode["max_steps"], args.kr)
+            for p in mode["p0"]:
+                sel = {k: v[cells["p0"] == p] for k, v in cells.items()}
+                for quantity in QUANTITIES:
+                    bin_rows += binned_rows(name, n, p, sel, quantity, mode["bins"])
+            cell_rows += [dict(surface=name, n_cells=n, **{k: v[i] for k, v in cells.items()})
+                          for i in range(len(cells["q"]))]
+            f = zero_fraction(np.full(len(p0), n), p0, status)
+            fractions += [dict(surface=name, **{k: f[k][i] for k in f}) for i in range(len(f["p0"]))]
+            print(f"{name:12s} N = {n}: quenched in {time.time() - t:.1f} s; statuses "
+                  f"{dict(zip(*np.unique(status, return_counts=True)))}", flush=True)
+    write_csv(os.path.join(args.out, "curvature_cells.csv"), cell_rows, CELL_COLUMNS)
+    write_csv(os.path.join(args.out, "curvature_bins.csv"), bin_rows, BIN_COLUMNS)
+    write_csv(os.path.join(args.out, "curvature_fraction.csv"), fractions,
+              ("surface", "n_cells", "p0", "n_replicas", "n_zero", "n_rigid", "n_unconverged", "F", "F_err"))
+    dyn_bins = []
+    if not args.no_dynamics:
+        t = time.time()
+        n, reps, steps, lag = mode["dyn"]
+        d = dynamics(SURFACES[DYN_SURFACE], n, reps, steps, lag)
+        for quantity in ("msd", "t1_rate"):
+            dyn_bins += binned_rows(DYN_SURFACE, n, DYN_P0, d, quantity, mode["bins"])
+        write_csv(os.path.join(args.out, "curvature_dynamics.csv"), dyn_bins, BIN_COLUMNS)
+        print(f"dynamics on the {DYN_SURFACE}, N = {n}, {reps} tissues, {steps} steps (lag {lag * DYN_DT:g}): "
+              f"{time.time() - t:.1f} s", flush=True)
+    plot(bin_rows, fractions, dyn_bins, os.path.join(args.out, "curvature_gradients.png"))
+    print("\nsurface       N     p0    F (err)          | q against K <A> (bins low -> high): K <A>: q +- sem "
+          "[p_penta]")
+    for fr in fractions:
+        rows = [r for r in bin_rows if r["surface"] == fr["surface"] and r["n_cells"] == fr["n_cells"]
+                and r["p0"] == fr["p0"] and r["quantity"] == "q"]
+        q = "; ".join(f"{r['K_A']:+.3f}: {r['mean']:.4f} +- {r['sem']:.4f} [{r['p_penta']:.3f}]" for r in rows)
+        print(f"{fr['surface']:12s} {fr['n_cells']:5d} {fr['p0']:.3f} {fr['F']:.2f} +- {fr['F_err']:.2f} "
+              f"({fr['n_zero']}/{fr['n_zero'] + fr['n_rigid']}, {fr['n_unconverged']} unconv.) | {q}")
+    for r in dyn_bins:
+        print(f"{r['quantity']:8s} K <A> {r['K_A']:+.3f}: {r['mean']:.4g} +- {r['sem']:.2g} ({r['n_tissues']} tissues)")
+    print(f"\ntotal {time.time() - t0:.1f} s")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,55 @@
+"""examples/curvature_gradients.py --tiny: the tables' structure and what binning must conserve."""
+import csv
+import pathlib
+import runpy
+
+import numpy as np
+import pytest
+
+from spherevm.analysis import pentagon_perimeter_at_curvature, torus_curvature_range
+
+EXAMPLE = pathlib.Path(__file__).resolve().parent.parent / "examples" / "curvature_gradients.py"
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    pytest.importorskip("matplotlib")
+    out = tmp_path_factory.mktemp("curvature_gradients")
+    runpy.run_path(str(EXAMPLE))["main"](["--tiny", "--out", str(out)])
+    return out
+
+
+def read(path):
+    return list(csv.DictReader(open(path)))
+
+
+def test_tiny_writes_every_table_and_the_figure(tiny):
+    for name in ("curvature_cells.csv", "curvature_bins.csv", "curvature_fraction.csv", "curvature_dynamics.csv"):
+        assert read(tiny / name), name
+    assert (tiny / "curvature_gradients.png").stat().st_size > 10_000
+    fractions = read(tiny / "curvature_fraction.csv")
+    assert {r["surface"] for r in fractions} == {"plane", "torus R/r=3"}
+    for r in fractions:           # every replica is zero, rigid or unconverged
+        assert int(r["n_zero"]) + int(r["n_rigid"]) + int(r["n_unconverged"]) == int(r["n_replicas"]) == 1
+
+
+def test_bins_hold_every_cell_and_a_torus_has_both_signs(tiny):
+    cells = read(tiny / "curvature_cells.csv")
+    bins = read(tiny / "curvature_bins.csv")
+    for surface in ("plane", "torus R/r=3"):
+        ks = np.array([float(c["K_A"]) for c in cells if c["surface"] == surface])
+        assert len(ks) == 64
+        for quantity in ("q", "perimeter", "area", "sides"):
+            rows = [b for b in bins if b["surface"] == surface and b["quantity"] == quantity]
+            assert sum(int(b["n_cells_in_bin"]) for b in rows) == 64, (surface, quantity)
+    torus = [b for b in bins if b["surface"] == "torus R/r=3" and b["quantity"] == "q"]
+    k_min, k_max = torus_curvature_range(3.0, 64)
+    assert float(torus[0]["K_low"]) < 0 < float(torus[-1]["K_high"])
+    assert k_min - 1e-9 <= float(torus[0]["K_low"]) and float(torus[-1]["K_high"]) <= k_max + 1e-9
+    for b in torus:               # the local bound is the pentagon's at the bin's mean K <A>
+        assert float(b["p_penta"]) == pytest.approx(float(pentagon_perimeter_at_curvature(float(b["K_A"]))), rel=1e-5)
+    plane = [b for b in bins if b["surface"] == "plane" and b["quantity"] == "area"]
+    assert len(plane) == 1 and float(plane[0]["K_A"]) == 0.0
+    dyn = read(tiny / "curvature_dynamics.csv")
+    assert {b["quantity"] for b in dyn} == {"msd", "t1_rate"}
+    assert sum(int(b["n_cells_in_bin"]) for b in dyn if b["quantity"] == "msd") == 64

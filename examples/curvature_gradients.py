@@ -177,7 +177,8 @@ def plot(bins, fractions, dyn_bins, path):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
+                                 allow_abbrev=False)
     group = ap.add_mutually_exclusive_group()
     group.add_argument("--full", action="store_true", help="N = 256 and 1024, 11 p0 values, 16 replicas (CPU, hours)")
     group.add_argument("--tiny", action="store_true", help="seconds: one p0, a plane and a torus (smoke test)")

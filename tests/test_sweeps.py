@@ -419,3 +419,15 @@ def test_timeline_orders_each_chunks_stages_and_changes_no_record(tiny_run, tmp_
         assert times == sorted(times), e
         assert e["pid"] == os.getpid() and e["size"] == 2 and e["n_cells"] == 16
     assert not reference.timeline           # only when asked
+
+
+@pytest.mark.skipif(not hasattr(os, "nice"), reason="os.nice: POSIX only")
+def test_tiling_workers_yield_to_the_processes_driving_the_gpus():
+    """TilingPrefetch's workers run at TILING_NICENESS below the sweep's priority."""
+    from spherevm.sweeps.execution import TILING_NICENESS, TilingPrefetch
+    sweep = sweeps.RigiditySweep(cells=[16], p0=[3.7], replicas=2)
+    prefetch = TilingPrefetch(sweep, sweeps.plan_chunks(sweep, batch_cells=100), workers=1, ahead=0)
+    try:
+        assert prefetch.pool.submit(os.nice, 0).result() == min(19, os.nice(0) + TILING_NICENESS)
+    finally:
+        prefetch.close()

@@ -51,11 +51,21 @@ def _tiling_arrays(surface: str, n_cells: int, seeds):
     return state.arrays_np(), state.constraint
 
 
+#: how much lower a tiling worker's scheduling priority is than the sweep's (``os.nice``): the
+#: processes that drive the GPUs need their host cores for every launch and check, and a pool of a
+#: process per spare core builds tilings faster than the GPUs use them (docs/performance.md, "Several
+#: GPUs": on four GPUs each minimisation took half as long again beside a pool of equal priority)
+TILING_NICENESS = 10
+
+
 def _tiling_worker():
     """A tiling worker: one thread (the pool has a process per core already; a thread per core in
-    each would crowd out the process driving the GPU), and Ctrl-C is the main process's business."""
+    each would crowd out the process driving the GPU), a lower priority than the processes driving
+    the GPUs (:data:`TILING_NICENESS`), and Ctrl-C is the main process's business."""
     from ..constraints.corners import single_threaded
     single_threaded()
+    if hasattr(os, "nice"):
+        os.nice(TILING_NICENESS)
     _ignore_interrupts()
 
 

@@ -121,6 +121,30 @@ def test_gsd_keeps_every_parameter_and_finds_plugin_surfaces(tmp_path):
     assert out.stdout.strip() == "Sinusoid(Lx=10, Ly=10, amplitude=1.5) 40", out.stderr
 
 
+def test_gsd_frames_for_ovito(spec, tmp_path):
+    """The frame's box: on a closed surface a cube about the origin holding every vertex; on a
+    periodic one the box (Lx, Ly) in x and y (bonds across its edges are minimum images in OVITO),
+    particles shifted to its centre. With OVITO installed, one face of the cell mesh per cell."""
+    gsd_hoomd = pytest.importorskip("gsd.hoomd")
+    sim = svm.Simulation(device="cpu")
+    sim.state = s = svm.init.random_tiling(40, replicas=2, seed=1, surface=parse_surface(spec))
+    svm.write_gsd(sim, tmp_path / "o.gsd")
+    with gsd_hoomd.open(tmp_path / "o.gsd") as f:
+        box, x = f[0].configuration.box, f[0].particles.position
+    if s.constraint.periodic:
+        L = s.size_np()[0, :2]
+        assert np.allclose(box[:2], L, rtol=1e-6) and box[2] >= 2 * np.abs(s.positions[:, 2]).max()
+        assert np.all(np.abs(x[:, :2]) <= L / 2 * (1 + 1e-6))
+        assert np.allclose(x, s.positions - [L[0] / 2, L[1] / 2, 0], atol=1e-5)
+    else:
+        assert box[0] == box[1] == box[2] and np.all(np.abs(x) < box[0] / 2) and np.allclose(x, s.positions, atol=1e-5)
+    assert np.array_equal(svm.init.from_gsd(tmp_path / "o.gsd").positions, s.positions)
+    pytest.importorskip("ovito")
+    import spherevm.ovito as so
+    mesh = so.pipeline(tmp_path / "o.gsd", side_by_side=False).compute(0).surfaces["cells"]
+    assert mesh.faces.count == s.n_cells and mesh.vertices.count == so.SEGMENTS * s.cell_sides.sum()
+
+
 # ------------------------------------------------------------------ meshes and pictures
 def test_export_and_render_on_each_surface(spec, tmp_path):
     """``spherevm export``: each cell's fan of triangles cut into subdivisions^2, the vertices on the
@@ -210,3 +234,15 @@ def test_analysis_end_to_end_on_each_surface(spec, tmp_path):
     plain = msd(traj, remove_rotation=False, remove_drift=False).value
     expected = ((chords / traj.length_unit[traj.cell_replica][:, None]) ** 2).sum(axis=-1).mean(axis=1)
     assert plain == pytest.approx(expected, rel=1e-12)
+
+
+def test_the_gallery_script_draws_every_surface(tmp_path, monkeypatch, capsys):
+    """examples/surfaces_gallery.py, tiny: one picture per surface."""
+    import runpy
+    script = pathlib.Path(__file__).resolve().parent.parent / "examples" / "surfaces_gallery.py"
+    monkeypatch.setattr(sys, "argv", [str(script), str(tmp_path), "60", "30"])
+    monkeypatch.syspath_prepend(str(EXAMPLE))
+    runpy.run_path(str(script), run_name="__main__")
+    names = ("sphere", "plane", "torus", "ellipsoid", "bump", "sinusoid")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(f"surface_{n}.png" for n in names)
+    assert capsys.readouterr().out.count("FIRE steps") == 6

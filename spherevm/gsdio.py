@@ -24,6 +24,7 @@ leaves out the topology chunks (and gsd.hoomd the HOOMD ones) that equal frame 0
 """
 from __future__ import annotations
 
+import inspect
 import json
 import os
 import warnings
@@ -77,8 +78,12 @@ class Saved(dict):
 
 # ---------------------------------------------------------------------------------------- constraint
 def _constraint_json(constraint) -> np.ndarray:
-    params = {k: v for k, v in vars(constraint).items()
-              if not k.startswith("_") and isinstance(v, (bool, int, float, str))}
+    """Name, class and parameters: public attributes that are numbers or strings, or number sequences
+    the constructor takes by name (a box)."""
+    taken = inspect.signature(type(constraint)).parameters
+    params = {k: v if isinstance(v, (bool, int, float, str)) else [float(x) for x in v]
+              for k, v in vars(constraint).items() if not k.startswith("_") and (
+                  isinstance(v, (bool, int, float, str)) or (k in taken and isinstance(v, (tuple, list))))}
     text = json.dumps({"name": getattr(constraint, "name", type(constraint).__name__),
                        "class": type(constraint).__name__, "params": params}, sort_keys=True)
     return np.frombuffer(text.encode("utf-8"), dtype=np.uint8).copy()
@@ -99,6 +104,9 @@ def _constraint_from_json(raw, path):
     except (ValueError, KeyError, TypeError) as exc:
         raise ValueError(f"{path}: chunk spherevm/constraint is not valid JSON ({exc}); the file is damaged") from exc
     matches = [c for c in _all_subclasses(Constraint) if getattr(c, "name", None) == name]
+    if not matches:                               # a plugin's surface, loaded through its entry point
+        from .constraints.registry import surface_class
+        matches = [c for c in (surface_class(name),) if c is not None]
     if not matches:
         raise ValueError(f"{path}: unknown constraint {name!r}; import the module that defines the "
                          f"Constraint subclass with name = {name!r} before reading the file")

@@ -236,7 +236,8 @@ def glassy_dynamics(n_cells, p0, kr, T, dt=0.01, steps=10_000, replicas=1, seed=
     (``steps = ceil(max_time / dt)``, with the step ``dt`` resolves to; equilibration a tenth of it
     unless given).
     """
-    init.check_surface_spec(surface)
+    if restart is None and initial_state is None:        # else the surface is the file's or the State's
+        init.check_surface_spec(surface)
     started = time.perf_counter()
     if steps < 1 or int(steps) != steps:
         raise ValueError(f"steps must be a positive integer, got {steps!r}")

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .trajectory import Trajectory, _replica_sum, remove_rigid_rotation, replica_mean
+from .trajectory import ROTATIONS, Trajectory, _replica_sum, remove_rigid_rotation, replica_mean, surface_motion
 
 
 # ======================================================================================== correlations
@@ -82,16 +82,18 @@ def _origin_frames(origins, n):
 
 def _zero_modes(traj, remove_rotation, remove_drift):
     """``(remove_rotation, remove_drift)`` resolved for the trajectory's surface: None is on where
-    the surface has that rigid motion (rotations on a sphere, translations on the plane); asking
-    for a motion the surface lacks is refused."""
+    the surface has that rigid motion (rotations on a sphere, about z on a torus, translations on
+    the plane); asking for a motion the surface lacks is refused. A rotation to remove is given as
+    its kind (:data:`~spherevm.analysis.trajectory.ROTATIONS`), else False."""
     motions = tuple(traj.constraint.rigid_motions)
     resolved = []
-    for flag, value, motion, what in (("remove_rotation", remove_rotation, "rotations", "rigid rotation"),
-                                      ("remove_drift", remove_drift, "translations", "centre-of-mass drift")):
-        if value and motion not in motions:
-            raise ValueError(f"{flag}=True: a trajectory on {traj.constraint!r} has no {what} to remove (its rigid "
-                             f"motions: {', '.join(motions) or 'none'})")
-        resolved.append(motion in motions if value is None else bool(value))
+    for flag, value, kinds, what in (("remove_rotation", remove_rotation, ROTATIONS, "rigid rotation"),
+                                     ("remove_drift", remove_drift, ("translations",), "centre-of-mass drift")):
+        has = any(m in motions for m in kinds)
+        if value or (value is None and has):
+            resolved.append(surface_motion(traj.constraint, kinds, f"{flag}=True", what))
+        else:
+            resolved.append(False)
     return tuple(resolved)
 
 
@@ -102,7 +104,7 @@ def _displacements(traj, origin, remove_rotation, geodesic, scaled, remove_drift
     ref = traj.positions[origin]
     cur = traj.positions[origin:]
     if remove_rotation:
-        cur = remove_rigid_rotation(ref, cur, rep)
+        cur = remove_rigid_rotation(ref, cur, rep, about_z=remove_rotation == "z-rotations")
     dr = None
     if remove_drift:
         dr = cur - ref

@@ -196,11 +196,8 @@ class Trajectory:
 
     # ------------------------------------------------------------------ helpers
     def _surface_motion(self, motion: str, what: str, instead: str):
-        """Refuse a rigid ``motion`` ("rotations", "translations") the surface does not have."""
-        motions = tuple(self.constraint.rigid_motions)
-        if motion not in motions:
-            raise ValueError(f"{what}: a trajectory on {self.constraint!r} has no {instead} to remove (its rigid "
-                             f"motions: {', '.join(motions) or 'none'})")
+        """Refuse a rigid ``motion`` ("translations") the surface does not have."""
+        surface_motion(self.constraint, (motion,), what, instead)
 
     def without_rotation(self, reference: int = 0) -> "Trajectory":
         """A copy in which every frame is rigidly rotated (per replica) onto frame ``reference``.
@@ -210,9 +207,10 @@ class Trajectory:
         none (its zero modes are the two translations, see :meth:`without_drift`), so this raises
         ValueError there.
         """
-        self._surface_motion("rotations", "without_rotation", "rigid rotation")
+        about_z = surface_motion(self.constraint, ROTATIONS, "without_rotation", "rigid rotation") == "z-rotations"
         ref = self.centroids[reference]
-        return Trajectory(self.times.copy(), remove_rigid_rotation(ref, self.centroids, self.cell_replica),
+        return Trajectory(self.times.copy(), remove_rigid_rotation(ref, self.centroids, self.cell_replica,
+                                                                   about_z=about_z),
                           self.cell_replica.copy(), constraint=self.constraint, size=self.size.copy())
 
     def without_drift(self, reference: int = 0) -> "Trajectory":
@@ -255,7 +253,23 @@ def _replica_sum(values, order, starts):
 
 
 # ======================================================================================== rotation
-def remove_rigid_rotation(reference, current, cell_replica, return_rotation: bool = False):
+#: the rigid rotations a surface may have (:attr:`~spherevm.constraints.Constraint.rigid_motions`):
+#: about any axis through the origin (a sphere), or about the z axis only (a torus)
+ROTATIONS = ("rotations", "z-rotations")
+
+
+def surface_motion(constraint, kinds, what: str, instead: str) -> str:
+    """Which of the rigid motions ``kinds`` the surface has (the first); ValueError naming ``what``
+    when it has none of them."""
+    motions = tuple(constraint.rigid_motions)
+    found = [m for m in kinds if m in motions]
+    if not found:
+        raise ValueError(f"{what}: a trajectory on {constraint!r} has no {instead} to remove (its rigid "
+                         f"motions: {', '.join(motions) or 'none'})")
+    return found[0]
+
+
+def remove_rigid_rotation(reference, current, cell_replica, return_rotation: bool = False, about_z: bool = False):
     """Rotate each replica of ``current`` rigidly onto ``reference``.
 
     For every replica r the proper rotation ``Q_r`` (det +1) about the sphere's centre that
@@ -271,6 +285,9 @@ def remove_rigid_rotation(reference, current, cell_replica, return_rotation: boo
     cell_replica : numpy.ndarray (n_cells,)
     return_rotation : bool
         Also return ``Q``, shape ``(..., n_replicas, 3, 3)``.
+    about_z : bool
+        Only rotations about the z axis (a torus's rigid motions): the angle ``atan2(H_xy - H_yx,
+        H_xx + H_yy)`` of each replica, which minimises the same sum among them.
 
     Returns
     -------
@@ -298,13 +315,7 @@ def remove_rigid_rotation(reference, current, cell_replica, return_rotation: boo
         outer = np.moveaxis(outer.reshape(outer.shape[:-2] + (9,)), -2, -1)  # (..., 9, n_cells)
         H = _replica_sum(outer, order, starts)                                # (..., 9, n_rep)
         H = np.moveaxis(H, -1, -2).reshape(H.shape[:-2] + (n_rep, 3, 3))
-    U, _, Vt = np.linalg.svd(H)
-    V = np.swapaxes(Vt, -1, -2)
-    d = np.sign(np.linalg.det(V) * np.linalg.det(U))
-    d = np.where(d == 0, 1.0, d)
-    V = V.copy()
-    V[..., :, 2] *= d[..., None]
-    Q = V @ np.swapaxes(U, -1, -2)                                        # (..., n_rep, 3, 3)
+    Q = _about_z(H) if about_z else _kabsch(H)                           # (..., n_rep, 3, 3)
     if equal:
         rotated = (cur_r @ np.swapaxes(Q, -1, -2)).reshape(np.broadcast_shapes(Q.shape[:-3], cur.shape[:-2])
                                                           + cur.shape[-2:])
@@ -314,3 +325,23 @@ def remove_rigid_rotation(reference, current, cell_replica, return_rotation: boo
         rotated = (Qg[..., 0] * cur[..., None, 0] + Qg[..., 1] * cur[..., None, 1]
                    + Qg[..., 2] * cur[..., None, 2])
     return (rotated, Q) if return_rotation else rotated
+
+
+def _kabsch(H):
+    """The proper rotations ``Q`` maximising ``tr(Q H)`` (Kabsch), batched over the leading axes."""
+    U, _, Vt = np.linalg.svd(H)
+    V = np.swapaxes(Vt, -1, -2)
+    d = np.sign(np.linalg.det(V) * np.linalg.det(U))
+    d = np.where(d == 0, 1.0, d)
+    V = V.copy()
+    V[..., :, 2] *= d[..., None]
+    return V @ np.swapaxes(U, -1, -2)
+
+
+def _about_z(H):
+    """The rotations about z maximising ``tr(Q H)``, batched over the leading axes."""
+    angle = np.arctan2(H[..., 0, 1] - H[..., 1, 0], H[..., 0, 0] + H[..., 1, 1])
+    c, s = np.cos(angle), np.sin(angle)
+    Q = np.zeros(H.shape)
+    Q[..., 0, 0], Q[..., 0, 1], Q[..., 1, 0], Q[..., 1, 1], Q[..., 2, 2] = c, -s, s, c, 1.0
+    return Q

@@ -176,6 +176,12 @@ def add_system_arguments(group, replicas_help, seed_help, many=False):
     group.add_argument("--seed", type=integer(0), default=None, help=f"{seed_help} {default('seed')}")
 
 
+def _same_surface(spec, constraint) -> bool:
+    """Whether the ``--surface`` spec names the file's surface (its shape; the file's size wins)."""
+    from ..constraints.registry import surface
+    return repr(surface(spec)) == repr(constraint)
+
+
 def settle_restart(args):
     """Fill in ``--cells``, ``--replicas``, ``--surface`` and ``--seed`` (None when not given):
     :data:`SYSTEM_DEFAULTS` without ``--restart``; with it, the file's tissue and seed. A
@@ -198,7 +204,8 @@ def settle_restart(args):
     what = {"cells": f"{found['cells']} cells per replica", "replicas": f"{found['replicas']} replica(s)",
             "surface": f"a tissue on the {surface}"}
     for name, text in what.items():
-        if given[name] is not None and given[name] != found[name]:
+        if given[name] is not None and given[name] != found[name] and not (
+                name == "surface" and _same_surface(given[name], state.constraint)):
             raise CLIError(f"argument --{name}: {given[name]}, but --restart {args.restart!r} holds {text}; leave "
                            f"--{name} out with --restart")
         setattr(args, name, found[name])

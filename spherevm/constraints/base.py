@@ -108,7 +108,8 @@ class Constraint:
 
     # ------------------------------------------------------------------ trajectories (spherevm.analysis)
     #: the surface's rigid motions, which move a whole tissue without deforming it (noise makes it
-    #: diffuse along them): "rotations" (about the origin, removed by Kabsch) or "translations"
+    #: diffuse along them): "rotations" (about the origin, removed by Kabsch), "z-rotations" (about
+    #: the z axis only) or "translations"; none here (a surface that none of these maps onto itself)
     rigid_motions = ()
 
     def unwrap_path(self, centroids, size):

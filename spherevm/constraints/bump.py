@@ -86,7 +86,7 @@ class GaussianBump(ImplicitSurface):
 
     def __init__(self, height: float = 1.0, width: float = 1.0, box=None):
         b = np.broadcast_to(np.asarray(10.0 * float(width) if box is None else box, dtype=np.float64).reshape(-1), (2,))
-        self.height, self.width = float(height), float(width)
+        self.height, self.width, self.box = float(height), float(width), (float(b[0]), float(b[1]))
         self.shape = tuple(self.check_size([b[0], b[1], height, width])[0])
 
     def check_parameters(self, Lx, Ly, h, w):

@@ -48,6 +48,13 @@ class Ellipsoid(ImplicitSurface):
         self.shape = tuple(self.check_size([a, b, c])[0])
         self.a, self.b, self.c = self.shape
 
+    @property
+    def rigid_motions(self):
+        """Those of its shape: every rotation when a = b = c, those about z when a = b, else none
+        (a tissue of a general ellipsoid has no rigid motion)."""
+        a, b, c = self.shape
+        return ("rotations",) if a == b == c else ("z-rotations",) if a == b else ()
+
     def F(self, x, size):
         a, b, c = self.parameters(size)
         return (x[..., 0] / a) ** 2 + (x[..., 1] / b) ** 2 + (x[..., 2] / c) ** 2 - 1.0

@@ -174,6 +174,24 @@ class ImplicitSurface(FlatFacets, Constraint):
         out[..., :2] = xp.where(w >= box, w - box, w)
         return out
 
+    def hoomd_box(self, size):
+        """On a periodic surface the largest replica's box in x and y and, in z, twice the largest
+        parameter (a height field's heights lie within it), centred on the origin; else the default
+        cube (None)."""
+        if not self.periodic:
+            return None
+        s = np.asarray(size, dtype=np.float64).reshape(-1, len(self.size_names))
+        lx, ly = s[:, :2].max(axis=0)
+        return 3, np.array([lx, ly, 2.0 * s.max(), 0.0, 0.0, 0.0])
+
+    def particle_origin(self, size):
+        """On a periodic surface the middle of the largest box in x and y (HOOMD's box is centred on
+        the origin, the State's starts there); else the origin."""
+        if not self.periodic:
+            return np.zeros(3)
+        lx, ly = np.asarray(size, dtype=np.float64).reshape(-1, len(self.size_names))[:, :2].max(axis=0)
+        return np.array([lx / 2, ly / 2, 0.0])
+
     def outside_box(self, x, size):
         """Mask of the points not stored inside the periodic box (none on a closed surface)."""
         if not self.periodic:

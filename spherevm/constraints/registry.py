@@ -25,6 +25,12 @@ def surfaces() -> dict:
     return found
 
 
+def surface_class(name: str):
+    """The surface class of that name (a built-in, or an entry point's, loaded), or None."""
+    found = surfaces().get(name)
+    return found if found is None or isinstance(found, type) else found.load()
+
+
 def surface(spec: str):
     """The surface a spec names: ``"torus"``, ``"torus:R=3,r=1"``, ``"ellipsoid:a=1,b=1,c=2"``,
     ``"bump:height=1,width=1"`` or a registered name with its constructor's keywords (numbers).
@@ -33,8 +39,7 @@ def surface(spec: str):
     known = surfaces()
     if name not in known:
         raise ValueError(f"unknown surface {name!r} in {spec!r}; known: {', '.join(sorted(known))}")
-    cls = known[name]
-    cls = cls if isinstance(cls, type) else cls.load()
+    cls = surface_class(name)
     kwargs = {}
     for item in filter(None, rest.split(",")):
         key, eq, value = item.partition("=")

@@ -40,6 +40,9 @@ class Torus(ImplicitSurface):
             raise ValueError(f"major_radius must be larger than minor_radius (a ring torus), got major_radius="
                              f"{np.asarray(R)[bad][0]:g} and minor_radius={np.asarray(r)[bad][0]:g}")
 
+    #: rotations about its axis map the torus onto itself
+    rigid_motions = ("z-rotations",)
+
     def _core(self, x, R):
         """The nearest point of the core circle (radius ``R``, z = 0) and ``x`` minus it."""
         xp = array_module(x)

@@ -23,7 +23,7 @@ class Sinusoid(ImplicitSurface):
 
     def __init__(self, amplitude=1.0, box=10.0):
         lx, ly = np.broadcast_to(np.asarray(box, dtype=float).reshape(-1), (2,))
-        self.amplitude = float(amplitude)
+        self.amplitude, self.box = float(amplitude), (float(lx), float(ly))
         self.shape = tuple(self.check_size([lx, ly, amplitude])[0])
 
     def F(self, x, size):

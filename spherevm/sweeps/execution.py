@@ -51,10 +51,8 @@ def _tiling_arrays(surface: str, n_cells: int, seeds):
     return state.arrays_np(), state.constraint
 
 
-#: how much lower a tiling worker's scheduling priority is than the sweep's (``os.nice``): the
-#: processes that drive the GPUs need their host cores for every launch and check, and a pool of a
-#: process per spare core builds tilings faster than the GPUs use them (docs/performance.md, "Several
-#: GPUs": on four GPUs each minimisation took half as long again beside a pool of equal priority)
+#: a tiling worker's priority below the sweep's (``os.nice``): the processes driving the GPUs need
+#: their host cores for every launch (docs/performance.md, "Several GPUs")
 TILING_NICENESS = 10
 
 

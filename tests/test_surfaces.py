@@ -357,6 +357,41 @@ def test_division_on_implicit_surfaces(name):
     s.validate()
 
 
+@pytest.mark.parametrize("name", list(SURFACES))
+def test_extrusion_and_narrowed_minimisations_on_implicit_surfaces(name):
+    """A triangle extruded (the network stays a tiling of the surface's Euler characteristic, every
+    vertex on it), then a FIRE + T1 minimisation of three replicas that narrows to the unconverged
+    ones: the replicas it finished first are those a minimisation without narrowing gives, bitwise."""
+    from spherevm.plugins.updaters import Extrusion
+    seed = next(k for k in range(1, 20)
+                if (svm.init.random_tiling(80, seed=k, surface=SURFACES[name]()).cell_sides == 3).any())
+    sim = svm.Simulation(device="cpu")
+    sim.state = svm.init.random_tiling(80, seed=seed, surface=SURFACES[name]())
+    triangle = int(np.flatnonzero(sim.state.cell_sides == 3)[0])
+    sim.operations.updaters.append(Extrusion(rule=lambda s: [triangle]))
+    sim.operations.integrator = Brownian(dt=1e-6, T=0.0)
+    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
+    sim.run(1)
+    s = sim.state
+    assert s.n_cells == 79
+    assert s.n_vertices - 3 * s.n_vertices // 2 + s.n_cells == s.constraint.euler_characteristic
+    assert _distance(s).max() < 1e-12
+    s.validate()
+
+    def minimised(narrow):
+        m = svm.Simulation(device="cpu")
+        m.state = svm.init.random_tiling(48, replicas=3, seed=2, surface=SURFACES[name]())
+        m.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.7))
+        m.operations.updaters.append(T1())
+        m.operations.integrator = FIRE(dt=0.02)
+        res = m.minimize(force_tol=1e-2, max_steps=1000, check_every=1, narrow=narrow)
+        return res, m.state.positions.copy()
+
+    (narrowed, pos_n), (whole, pos_w) = minimised(True), minimised(False)
+    assert np.array_equal(narrowed.steps, whole.steps) and np.array_equal(pos_n, pos_w)
+    assert len(set(narrowed.steps.tolist())) > 1          # the replicas stopped at different steps
+
+
 def test_command_line_surfaces(capsys):
     """``--surface torus:R=3,r=1`` and the like: the library's tilings of that surface; a bad spec
     is a one-line usage error."""

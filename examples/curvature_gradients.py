@@ -30,7 +30,9 @@ import numpy as np
 import spherevm as svm
 from spherevm.analysis import binned_mean, gaussian_curvature, pentagon_perimeter_at_curvature
 from spherevm.analysis.rigidity import classify, zero_fraction
+from spherevm.shapes import shape_index_of
 from spherevm.plugins.forces import VertexModel
+from spherevm.plugins.forces.bending import neighbor_pairs
 from spherevm.plugins.integrators import FIRE, Brownian
 from spherevm.plugins.updaters import T1
 
@@ -78,16 +80,15 @@ def quench(spec, n, p0s, replicas, max_steps, kr=0.0, seed=0):
     a, per = np.asarray(geo.area), np.asarray(geo.perimeter)
     k = cell_curvature(sim.state)
     cells = dict(p0=p0[rep], replica=rep, status=status[rep], K_A=k, p_penta=pentagon_perimeter_at_curvature(k),
-                 q=per / np.sqrt(np.where(a > 0, a, np.nan)), perimeter=per / np.sqrt(area), area=a / area, sides=np.asarray(sim.state.cell_sides, dtype=np.float64))
+                 q=shape_index_of(a, per), perimeter=per / np.sqrt(area), area=a / area, sides=np.asarray(sim.state.cell_sides, dtype=np.float64))
     return cells, p0, status
 
 
 def neighbour_pairs(state):
-    """Sorted cell pairs sharing an edge, as int64 keys ``a * n + b``."""
-    vc = np.asarray(state.vertex_cells)
-    n = state.n_cells
-    pairs = np.concatenate([vc[:, [0, 1]], vc[:, [1, 2]], vc[:, [2, 0]]])
-    return np.unique(pairs.min(axis=1) * n + pairs.max(axis=1))
+    """Sorted cell pairs sharing an edge (:func:`spherevm.plugins.forces.bending.neighbor_pairs`), as
+    int64 keys ``a * n + b``."""
+    pairs = neighbor_pairs(state)
+    return pairs[:, 0] * state.n_cells + pairs[:, 1]
 
 
 def dynamics(spec, n, replicas, steps, lag, seed=1):

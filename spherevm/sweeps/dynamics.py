@@ -23,6 +23,7 @@ from ..validation import SHAPE_INDEX_MAX, integer, positive, real
 from .spec import Chunk, Sweep, _check_forces
 from .store import CURVE_COLUMNS, CURVE_DIR, DYNAMICS_COLUMNS, write_columns
 
+
 def _grid(name, values, low, high=math.inf, low_open=False) -> tuple:
     """A non-empty list of distinct finite numbers in the allowed range, as a sorted tuple."""
     if isinstance(values, (int, float, np.integer, np.floating)):

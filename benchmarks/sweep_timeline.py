@@ -10,6 +10,10 @@ submitting a chunk and its worker starting it (queue and transfer), and the tail
 end after the first worker ran out of work). It writes each run's timeline as CSV (one row a chunk,
 seconds from the sweep's start) and checks that every run gave the same tables. Needs dask-cuda;
 ``--cpu-workers N`` times a LocalCluster of N processes on the CPU instead (``--gpus`` ignored).
+
+A ``--gpus`` value may carry the tiling pool's settings, to compare them in one alternated call:
+``4:nice=0`` (the tiling workers' niceness, default ``TILING_NICENESS``), ``4:tilers=16`` (the pool's
+processes, default one a core not driving a GPU), or both (``4:nice=0:tilers=16``).
 """
 import argparse
 import csv
@@ -19,7 +23,7 @@ import shutil
 import statistics
 import time
 
-from spherevm.sweeps import RigiditySweep, cluster, parse_p0_grid, run_sweep, write_tables
+from spherevm.sweeps import RigiditySweep, cluster, execution, parse_p0_grid, run_sweep, write_tables
 
 PAPER_CELLS = (32, 48, 64, 96, 128, 192, 256, 512, 1024)
 
@@ -46,6 +50,17 @@ def summarize(result, cluster_start):
     }
 
 
+def parse_run(text):
+    """``"4:nice=0:tilers=16"`` -> (label, gpus, niceness or None, tiling processes or None)."""
+    gpus, *options = text.split(":")
+    settings = dict(o.split("=", 1) for o in options)
+    unknown = set(settings) - {"nice", "tilers"}
+    if unknown:
+        raise SystemExit(f"unknown run setting(s) {sorted(unknown)} in {text!r}: use nice= and tilers=")
+    as_int = {k: int(v) for k, v in settings.items()}
+    return text.replace(":", "_").replace("=", ""), int(gpus), as_int.get("nice"), as_int.get("tilers")
+
+
 def write_timeline(path, result):
     keys = ["chunk", "n_cells", "size", "pid", "asked", "submitted", "started", "built", "minimized", "ended",
             "received", "written"]
@@ -68,7 +83,7 @@ def tables_digest(folder):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
                                  allow_abbrev=False)
-    ap.add_argument("--gpus", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--gpus", nargs="+", default=["1", "2"], help="GPUs per run, e.g. 1 4 4:nice=0 4:tilers=16")
     ap.add_argument("--cells", type=int, nargs="+", default=list(PAPER_CELLS))
     ap.add_argument("--p0", default="3.60:3.95:0.01")
     ap.add_argument("--replicas", type=int, default=100)
@@ -83,28 +98,32 @@ def main():
     os.makedirs(args.out, exist_ok=True)
     digests, figures = set(), {}
     device = "gpu" if args.cpu_workers is None else "cpu"
+    default_niceness = execution.TILING_NICENESS
+    runs = [parse_run(g) for g in args.gpus] if device == "gpu" else [(f"cpu{args.cpu_workers}", args.cpu_workers,
+                                                                      None, None)]
     for rep in range(args.repeat):
-        for g in (args.gpus if device == "gpu" else [args.cpu_workers]):
-            folder = os.path.join(args.out, f"gpus{g}_run{rep}")
+        for label, g, niceness, tilers in runs:
+            folder = os.path.join(args.out, f"gpus{label}_run{rep}")
             shutil.rmtree(folder, ignore_errors=True)
+            execution.TILING_NICENESS = default_niceness if niceness is None else niceness
             t = time.perf_counter()
             client = cluster.client(gpus=g) if device == "gpu" else cluster.client(scheduler="local", workers=g)
             started = time.perf_counter() - t
             try:
                 result = run_sweep(sweep, folder, executor=client, device=device, batch_cells=args.batch_cells,
-                                   prefetch=prefetch, timeline=True)
+                                   prefetch=prefetch, timeline=True, workers=tilers)
             finally:
                 client.close()
             write_tables(folder, result.records, plots=False)
             digests.add(tables_digest(folder))
-            write_timeline(os.path.join(args.out, f"timeline_gpus{g}_run{rep}.csv"), result)
+            write_timeline(os.path.join(args.out, f"timeline_gpus{label}_run{rep}.csv"), result)
             s = summarize(result, started)
-            figures.setdefault(g, []).append(s)
-            print(f"gpus={g} run {rep}: " + ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
-                                                      for k, v in s.items()), flush=True)
-    for g, runs in figures.items():
-        print(f"gpus={g}: sweep median {statistics.median(r['sweep'] for r in runs):.2f} s over {len(runs)} run(s); "
-              f"cluster start median {statistics.median(r['cluster_start'] for r in runs):.2f} s")
+            figures.setdefault(label, []).append(s)
+            print(f"gpus={label} run {rep}: " + ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
+                                                          for k, v in s.items()), flush=True)
+    for label, rs in figures.items():
+        print(f"gpus={label}: sweep median {statistics.median(r['sweep'] for r in rs):.2f} s over {len(rs)} run(s); "
+              f"cluster start median {statistics.median(r['cluster_start'] for r in rs):.2f} s")
     print(f"tables identical across runs: {len(digests) == 1} ({sorted(digests)})")
 
 

@@ -431,3 +431,8 @@ def test_tiling_workers_yield_to_the_processes_driving_the_gpus():
         assert prefetch.pool.submit(os.nice, 0).result() == min(19, os.nice(0) + TILING_NICENESS)
     finally:
         prefetch.close()
+    level = TilingPrefetch(sweep, sweeps.plan_chunks(sweep, batch_cells=100), workers=1, ahead=0, niceness=0)
+    try:
+        assert level.pool.submit(os.nice, 0).result() == os.nice(0)
+    finally:
+        level.close()

@@ -52,18 +52,17 @@ def _tiling_arrays(surface: str, n_cells: int, seeds):
 
 
 #: a tiling worker's priority below the sweep's (``os.nice``): the processes driving the GPUs need
-#: their host cores for every launch (docs/performance.md, "Several GPUs")
+#: their host cores for every launch (docs/performance.md, "Several GPUs"); read at each sweep's start
 TILING_NICENESS = 10
 
 
-def _tiling_worker():
-    """A tiling worker: one thread (the pool has a process per core already; a thread per core in
-    each would crowd out the process driving the GPU), a lower priority than the processes driving
-    the GPUs (:data:`TILING_NICENESS`), and Ctrl-C is the main process's business."""
+def _tiling_worker(niceness: int):
+    """A tiling worker: one thread (the pool has a process per core already), ``niceness`` below the
+    processes driving the GPUs, and Ctrl-C is the main process's business."""
     from ..constraints.corners import single_threaded
     single_threaded()
-    if hasattr(os, "nice"):
-        os.nice(TILING_NICENESS)
+    if hasattr(os, "nice") and niceness:
+        os.nice(niceness)
     _ignore_interrupts()
 
 
@@ -80,13 +79,15 @@ def build_chunk_state(sweep: RigiditySweep, chunk: Chunk, state=None):
 class TilingPrefetch:
     """Builds the tilings of the next ``ahead`` chunks in a process pool while the GPU minimises the
     current one: each chunk's seeds are cut into one part per worker and the parts concatenated in
-    order, which is the State that :func:`build_chunk_state` builds alone (tested)."""
+    order, which is the State that :func:`build_chunk_state` builds alone (tested); its workers run
+    ``niceness`` (default :data:`TILING_NICENESS`) below this process's priority."""
 
-    def __init__(self, sweep: RigiditySweep, chunks, workers: int, ahead: int = 2):
+    def __init__(self, sweep: RigiditySweep, chunks, workers: int, ahead: int = 2, niceness: int | None = None):
         import multiprocessing
         self.sweep, self.chunks, self.workers, self.ahead = sweep, list(chunks), workers, ahead
+        nice = TILING_NICENESS if niceness is None else int(niceness)
         self.pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                           initializer=_tiling_worker)
+                                           initializer=_tiling_worker, initargs=(nice,))
         self.futures = {}
         self._submit_until(0)
 
@@ -438,9 +439,8 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
         if prefetch is None:
             prefetch = (sweep.prefetch_tilings and device_name == "gpu" and cpus > 2 and len(todo) > 1
                         and sum(c.n_cells * c.size for c in todo) >= PREFETCH_MIN_CELLS)
-        # bounded submission: the in-process executor runs at submit time (each chunk is written
-        # before the next starts); with prefetched tilings two chunks per worker, so the pool works
-        # just ahead of them; else everything at once
+        # bounded submission: in-process runs at submit (each chunk written before the next starts);
+        # with prefetched tilings two chunks per worker (the pool just ahead); else all at once
         limit = 1 if in_process else 2 * slots if prefetch else len(todo)
         prefetch = TilingPrefetch(sweep, todo, max(1, cpus - slots) if workers is None else workers,
                                   ahead=limit + 1) if prefetch else None

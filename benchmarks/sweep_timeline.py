@@ -23,7 +23,7 @@ import shutil
 import statistics
 import time
 
-from spherevm.sweeps import RigiditySweep, cluster, execution, parse_p0_grid, run_sweep, write_tables
+from spherevm.sweeps import RigiditySweep, cluster, parse_p0_grid, tilings, run_sweep, write_tables
 
 PAPER_CELLS = (32, 48, 64, 96, 128, 192, 256, 512, 1024)
 
@@ -98,14 +98,14 @@ def main():
     os.makedirs(args.out, exist_ok=True)
     digests, figures = set(), {}
     device = "gpu" if args.cpu_workers is None else "cpu"
-    default_niceness = execution.TILING_NICENESS
+    default_niceness = tilings.TILING_NICENESS
     runs = [parse_run(g) for g in args.gpus] if device == "gpu" else [(f"cpu{args.cpu_workers}", args.cpu_workers,
                                                                       None, None)]
     for rep in range(args.repeat):
         for label, g, niceness, tilers in runs:
             folder = os.path.join(args.out, f"gpus{label}_run{rep}")
             shutil.rmtree(folder, ignore_errors=True)
-            execution.TILING_NICENESS = default_niceness if niceness is None else niceness
+            tilings.TILING_NICENESS = default_niceness if niceness is None else niceness
             t = time.perf_counter()
             client = cluster.client(gpus=g) if device == "gpu" else cluster.client(scheduler="local", workers=g)
             started = time.perf_counter() - t

@@ -127,6 +127,14 @@ def test_tilings_prefetched_for_a_cluster_give_the_same_tables(tmp_path, referen
     same(result.records, reference)
 
 
+def test_each_worker_holds_its_next_chunk():
+    """The clusters this module starts let a worker hold two chunks (the one it runs and the next,
+    whose tilings travel meanwhile), not Dask's default 1.1."""
+    with sweeps.cluster.client(scheduler="local", workers=1) as client:
+        saturation = client.run_on_scheduler(lambda dask_scheduler: dask_scheduler.WORKER_SATURATION)
+    assert saturation == sweeps.cluster.WORKER_SATURATION == 2.0
+
+
 def test_prefetch_must_be_a_bool(tmp_path):
     with pytest.raises(TypeError, match="prefetch must be True, False or None"):
         sweeps.run_sweep(sweeps.RigiditySweep(**SWEEP), tmp_path / "s", device="cpu", prefetch="yes")

@@ -370,7 +370,7 @@ def test_p0_star_increases_with_n(tmp_path):
 def test_prefetched_tilings_are_the_chunk_states(surface):
     """TilingPrefetch (GPU sweeps build tilings in a process pool, cut into parts per worker) gives
     each chunk exactly the State that build_chunk_state builds alone, in the order asked."""
-    from spherevm.sweeps.execution import TilingPrefetch
+    from spherevm.sweeps.tilings import TilingPrefetch
     sweep = sweeps.RigiditySweep(cells=[16, 24], p0=[3.7, 3.9], replicas=5, seed=4, surface=surface)
     chunks = sweeps.plan_chunks(sweep, batch_cells=100)
     assert len(chunks) > 2
@@ -421,10 +421,29 @@ def test_timeline_orders_each_chunks_stages_and_changes_no_record(tiny_run, tmp_
     assert not reference.timeline           # only when asked
 
 
+def test_pool_workers_fork_from_a_preloaded_server_that_never_touches_cuda():
+    """Sweep pools fork their workers from a fork server that imported spherevm once (where the
+    platform has one); what it preloads must not import CuPy (no CUDA state in a forked worker)."""
+    import multiprocessing
+    import subprocess
+    import sys
+    from spherevm.sweeps.pools import PRELOAD, process_pool
+    pool = process_pool(1)
+    try:
+        assert pool.submit(abs, -2).result() == 2
+        expected = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+        assert pool._mp_context.get_start_method() == expected
+    finally:
+        pool.shutdown()
+    code = f"import sys; [__import__(m) for m in {PRELOAD!r}]; print('cupy' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True).stdout.strip() == "False"
+
+
 @pytest.mark.skipif(not hasattr(os, "nice"), reason="os.nice: POSIX only")
 def test_tiling_workers_yield_to_the_processes_driving_the_gpus():
     """TilingPrefetch's workers run at TILING_NICENESS below the sweep's priority."""
-    from spherevm.sweeps.execution import TILING_NICENESS, TilingPrefetch
+    from spherevm.sweeps.tilings import TILING_NICENESS, TilingPrefetch
     sweep = sweeps.RigiditySweep(cells=[16], p0=[3.7], replicas=2)
     prefetch = TilingPrefetch(sweep, sweeps.plan_chunks(sweep, batch_cells=100), workers=1, ahead=0)
     try:

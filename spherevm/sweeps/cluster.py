@@ -10,26 +10,34 @@ from __future__ import annotations
 
 from ..validation import integer
 
+#: chunks a single-threaded worker holds at once: the one it minimises and the next, whose tilings
+#: travel to it meanwhile (Dask's ``distributed.scheduler.worker-saturation``; its default, 1.1,
+#: sends the next chunk only when the worker asks, and the worker waits for the transfer)
+WORKER_SATURATION = 2.0
+
 
 def client(scheduler: str | None = None, gpus: int | None = None, workers: int | None = None):
     """A ``distributed.Client``: ``gpus=N`` starts one worker per GPU of this host (dask-cuda's
     ``LocalCUDACluster``, each worker pinned to its GPU); ``scheduler="local"`` one single-threaded
     worker process per core (or ``workers``); any other ``scheduler`` is an address such as
-    ``tcp://host:8786`` of a scheduler whose workers are already running."""
+    ``tcp://host:8786`` of a scheduler whose workers are already running (start that scheduler with
+    :data:`WORKER_SATURATION` in its Dask config to overlap the chunks' transfers with their runs)."""
     if (scheduler is None) == (gpus is None):
         raise ValueError("give exactly one of scheduler (an address or 'local') and gpus")
     try:
+        import dask
         from distributed import Client, LocalCluster
     except ImportError:
         raise ValueError("a Dask cluster needs spherevm[cluster] (dask[distributed])") from None
-    if gpus is not None:
-        gpus = integer("gpus", gpus, minimum=1)
-        try:
-            from dask_cuda import LocalCUDACluster
-        except ImportError:
-            raise ValueError("gpus needs dask-cuda: pip install 'spherevm[cluster-cuda]'") from None
-        return Client(LocalCUDACluster(CUDA_VISIBLE_DEVICES=list(range(gpus)), threads_per_worker=1))
-    if scheduler == "local":
-        n = None if workers is None else integer("workers", workers, minimum=1)
-        return Client(LocalCluster(n_workers=n, threads_per_worker=1, processes=True))
+    with dask.config.set({"distributed.scheduler.worker-saturation": WORKER_SATURATION}):
+        if gpus is not None:
+            gpus = integer("gpus", gpus, minimum=1)
+            try:
+                from dask_cuda import LocalCUDACluster
+            except ImportError:
+                raise ValueError("gpus needs dask-cuda: pip install 'spherevm[cluster-cuda]'") from None
+            return Client(LocalCUDACluster(CUDA_VISIBLE_DEVICES=list(range(gpus)), threads_per_worker=1))
+        if scheduler == "local":
+            n = None if workers is None else integer("workers", workers, minimum=1)
+            return Client(LocalCluster(n_workers=n, threads_per_worker=1, processes=True))
     return Client(scheduler)

@@ -56,7 +56,7 @@ def run_dynamics_chunk(parameters: dict, n_cells: int, start: int, stop: int, de
     the protocol). Plain arguments, for any executor."""
     from ..plugins import build_force
     from ..protocols import glassy_dynamics
-    from .execution import build_tilings
+    from .tilings import build_tilings
 
     t0, started = time.perf_counter(), time.time()
     sweep = DynamicsSweep.from_parameters(parameters)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import concurrent.futures as cf
 import math
 import os
-import signal
 import time
 from dataclasses import dataclass, field
 
@@ -13,10 +12,12 @@ import numpy as np
 
 from ..progress import bar as progress_bar
 from ..validation import check_run_memory, integer
-from .spec import Chunk, RigiditySweep, Sweep, tiling_seed
+from .pools import ignore_interrupts, process_pool
+from .spec import Chunk, RigiditySweep, Sweep
 from .states import chunk_state_gsd, save_chunk_state, state_path
 from .store import CHUNK_DIR, merge_records, open_sweep_folder, scan_chunks, sorted_records, write_columns
 from .tables import summarize_records
+from .tilings import TilingPrefetch, build_tilings, chunk_seeds
 
 #: cells per batch on the CPU: the NumPy cost per cell and step is flat from ~500 cells up (and
 #: rises slowly beyond ~2000, out of cache), while a smaller batch wastes fewer steps waiting for
@@ -33,39 +34,6 @@ PREFETCH_MIN_CELLS = 100_000
 
 
 # ---------------------------------------------------------------------------------------- one chunk
-def chunk_seeds(sweep: RigiditySweep, chunk: Chunk):
-    """The chunk's units ``(p0 index, replica)`` and their tiling seeds."""
-    units = [sweep.unit(u) for u in range(chunk.start, chunk.stop)]
-    return units, [tiling_seed(sweep.seed, chunk.n_cells, sweep.p0[k], r, sweep.shared_tilings) for k, r in units]
-
-
-def build_tilings(surface: str, n_cells: int, seeds):
-    """The random tilings of ``seeds`` on ``surface`` as one State."""
-    from ..init import tilings_on
-    return tilings_on(surface, n_cells, [(int(s), 0) for s in seeds])
-
-
-def _tiling_arrays(surface: str, n_cells: int, seeds):
-    """:func:`build_tilings` as plain arrays and the constraint (what a process pool can send back)."""
-    state = build_tilings(surface, n_cells, seeds)
-    return state.arrays_np(), state.constraint
-
-
-#: a tiling worker's priority below the sweep's (``os.nice``): the processes driving the GPUs need
-#: their host cores for every launch (docs/performance.md, "Several GPUs"); read at each sweep's start
-TILING_NICENESS = 10
-
-
-def _tiling_worker(niceness: int):
-    """A tiling worker: one thread (the pool has a process per core already), ``niceness`` below the
-    processes driving the GPUs, and Ctrl-C is the main process's business."""
-    from ..constraints.corners import single_threaded
-    single_threaded()
-    if hasattr(os, "nice") and niceness:
-        os.nice(niceness)
-    _ignore_interrupts()
-
-
 def build_chunk_state(sweep: RigiditySweep, chunk: Chunk, state=None):
     """The batched State of a chunk (``state`` if it was built elsewhere, as :class:`TilingPrefetch`
     does) and its per-replica (p0, p0_index, replica, tiling_seed)."""
@@ -74,41 +42,6 @@ def build_chunk_state(sweep: RigiditySweep, chunk: Chunk, state=None):
         state = build_tilings(sweep.surface, chunk.n_cells, seeds)
     p0 = np.array([sweep.p0[k] for k, _ in units])
     return state, p0, [k for k, _ in units], [r for _, r in units], seeds
-
-
-class TilingPrefetch:
-    """Builds the tilings of the next ``ahead`` chunks in a process pool while the GPU minimises the
-    current one: each chunk's seeds are cut into one part per worker and the parts concatenated in
-    order, which is the State that :func:`build_chunk_state` builds alone (tested); its workers run
-    ``niceness`` (default :data:`TILING_NICENESS`) below this process's priority."""
-
-    def __init__(self, sweep: RigiditySweep, chunks, workers: int, ahead: int = 2, niceness: int | None = None):
-        import multiprocessing
-        self.sweep, self.chunks, self.workers, self.ahead = sweep, list(chunks), workers, ahead
-        nice = TILING_NICENESS if niceness is None else int(niceness)
-        self.pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                           initializer=_tiling_worker, initargs=(nice,))
-        self.futures = {}
-        self._submit_until(0)
-
-    def _submit_until(self, index):
-        for c in self.chunks[index:index + self.ahead + 1]:
-            if c.id not in self.futures:
-                seeds = chunk_seeds(self.sweep, c)[1]
-                parts = np.array_split(np.array(seeds, dtype=np.int64), min(self.workers, len(seeds)))
-                self.futures[c.id] = [self.pool.submit(_tiling_arrays, self.sweep.surface, c.n_cells, part.tolist())
-                                      for part in parts if len(part)]
-
-    def get(self, chunk):
-        """The chunk's State (waits for its parts), and the next chunks submitted."""
-        from ..state import State
-        self._submit_until(self.chunks.index(chunk))
-        parts = [State(**arrays, constraint=constraint, validate=False)       # validated by the worker
-                 for arrays, constraint in (f.result() for f in self.futures.pop(chunk.id))]
-        return parts[0] if len(parts) == 1 else State.concatenate(parts)
-
-    def close(self):
-        self.pool.shutdown(wait=False, cancel_futures=True)
 
 
 def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu", state=None,
@@ -198,10 +131,7 @@ def default_executor(device="auto", workers=None):
     n = (os.cpu_count() or 1) if workers is None else integer("workers", workers, 1)
     if n <= 1:
         return InProcessExecutor(), dev.name, True
-    import multiprocessing
-    # spawn: no fork of a process that may hold a CUDA context or threads
-    return cf.ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"),
-                                  initializer=_ignore_interrupts), dev.name, True
+    return process_pool(n, initializer=ignore_interrupts), dev.name, True
 
 
 def executor_slots(executor) -> int:
@@ -210,12 +140,6 @@ def executor_slots(executor) -> int:
     if hasattr(client, "nthreads"):
         return max(1, sum(client.nthreads().values()))
     return max(1, int(getattr(executor, "_max_workers", 1)))
-
-
-def _ignore_interrupts():
-    """In a pool worker: Ctrl-C is the main process's business (it stops the workers), so a worker
-    neither prints a traceback nor reports a chunk as failed when the terminal sends SIGINT to all."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _stop_now(executor):

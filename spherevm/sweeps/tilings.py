@@ -1,0 +1,76 @@
+"""A sweep's tilings on the host: the seeds of a chunk's tilings, building them, and building the
+next chunks' tilings in a process pool while the GPU minimises (:class:`TilingPrefetch`)."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .pools import ignore_interrupts, process_pool
+from .spec import Chunk, RigiditySweep, tiling_seed
+
+
+def chunk_seeds(sweep: RigiditySweep, chunk: Chunk):
+    """The chunk's units ``(p0 index, replica)`` and their tiling seeds."""
+    units = [sweep.unit(u) for u in range(chunk.start, chunk.stop)]
+    return units, [tiling_seed(sweep.seed, chunk.n_cells, sweep.p0[k], r, sweep.shared_tilings) for k, r in units]
+
+
+def build_tilings(surface: str, n_cells: int, seeds):
+    """The random tilings of ``seeds`` on ``surface`` as one State."""
+    from ..init import tilings_on
+    return tilings_on(surface, n_cells, [(int(s), 0) for s in seeds])
+
+
+def _tiling_arrays(surface: str, n_cells: int, seeds):
+    """:func:`build_tilings` as plain arrays and the constraint (what a process pool can send back)."""
+    state = build_tilings(surface, n_cells, seeds)
+    return state.arrays_np(), state.constraint
+
+
+#: a tiling worker's priority below the sweep's (``os.nice``): the processes driving the GPUs need
+#: their host cores for every launch (docs/performance.md, "Several GPUs"); read at each sweep's start
+TILING_NICENESS = 10
+
+
+def _tiling_worker(niceness: int):
+    """A tiling worker: one thread (the pool has a process per core already), ``niceness`` below the
+    processes driving the GPUs, and Ctrl-C is the main process's business."""
+    from ..constraints.corners import single_threaded
+    single_threaded()
+    if hasattr(os, "nice") and niceness:
+        os.nice(niceness)
+    ignore_interrupts()
+
+
+class TilingPrefetch:
+    """Builds the tilings of the next ``ahead`` chunks in a process pool while the GPU minimises the
+    current one: each chunk's seeds are cut into one part per worker and the parts concatenated in
+    order, which is the State that :func:`~spherevm.sweeps.execution.build_chunk_state` builds alone (tested); its workers run
+    ``niceness`` (default :data:`TILING_NICENESS`) below this process's priority."""
+
+    def __init__(self, sweep: RigiditySweep, chunks, workers: int, ahead: int = 2, niceness: int | None = None):
+        self.sweep, self.chunks, self.workers, self.ahead = sweep, list(chunks), workers, ahead
+        nice = TILING_NICENESS if niceness is None else int(niceness)
+        self.pool = process_pool(workers, initializer=_tiling_worker, initargs=(nice,))
+        self.futures = {}
+        self._submit_until(0)
+
+    def _submit_until(self, index):
+        for c in self.chunks[index:index + self.ahead + 1]:
+            if c.id not in self.futures:
+                seeds = chunk_seeds(self.sweep, c)[1]
+                parts = np.array_split(np.array(seeds, dtype=np.int64), min(self.workers, len(seeds)))
+                self.futures[c.id] = [self.pool.submit(_tiling_arrays, self.sweep.surface, c.n_cells, part.tolist())
+                                      for part in parts if len(part)]
+
+    def get(self, chunk):
+        """The chunk's State (waits for its parts), and the next chunks submitted."""
+        from ..state import State
+        self._submit_until(self.chunks.index(chunk))
+        parts = [State(**arrays, constraint=constraint, validate=False)       # validated by the worker
+                 for arrays, constraint in (f.result() for f in self.futures.pop(chunk.id))]
+        return parts[0] if len(parts) == 1 else State.concatenate(parts)
+
+    def close(self):
+        self.pool.shutdown(wait=False, cancel_futures=True)

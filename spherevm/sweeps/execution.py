@@ -34,18 +34,21 @@ PREFETCH_MIN_CELLS = 100_000
 
 
 # ---------------------------------------------------------------------------------------- one chunk
-def build_chunk_state(sweep: RigiditySweep, chunk: Chunk, state=None):
-    """The batched State of a chunk (``state`` if it was built elsewhere, as :class:`TilingPrefetch`
-    does) and its per-replica (p0, p0_index, replica, tiling_seed)."""
-    units, seeds = chunk_seeds(sweep, chunk)
+def build_chunk_state(sweep: RigiditySweep, chunk: Chunk, state=None, seeds=None):
+    """The batched State of a chunk (``state`` and ``seeds`` if they were made elsewhere, as
+    :class:`TilingPrefetch` does) and its per-replica (p0, p0_index, replica, tiling_seed)."""
+    if seeds is None:
+        units, seeds = chunk_seeds(sweep, chunk)
+    else:
+        units = [sweep.unit(u) for u in range(chunk.start, chunk.stop)]
     if state is None:   # shared tilings: a repeated seed gives the same tiling
         state = build_tilings(sweep.surface, chunk.n_cells, seeds)
     p0 = np.array([sweep.p0[k] for k, _ in units])
-    return state, p0, [k for k, _ in units], [r for _, r in units], seeds
+    return state, p0, [k for k, _ in units], [r for _, r in units], list(seeds)
 
 
 def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu", state=None,
-              save_states=False, timing=False) -> dict:
+              save_states=False, timing=False, seeds=None) -> dict:
     """Minimise one chunk; returns its per-replica records (a dict of lists, :data:`RECORD_COLUMNS`),
     with ``save_states`` also its minimised State as the bytes of a GSD file (key ``"state_gsd"``,
     :func:`spherevm.sweeps.states.chunk_state_gsd`), with ``timing`` also when its stages ended
@@ -53,7 +56,8 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     and the worker's ``pid``).
 
     A plain module-level function of plain arguments, so any executor (process pool, Dask) can run
-    it (``state``: the chunk's tilings when built elsewhere). The vertex model is given per cell:
+    it (``state``, ``seeds``: the chunk's tilings and their seeds when made elsewhere). The vertex
+    model is given per cell:
     ``kA = kr kP / <A>``, ``kP = 1``, ``A0 = <A>``, ``P0 = p0 sqrt(<A>)``, with each replica's own p0.
     """
     from ..plugins import build_force
@@ -65,7 +69,7 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     t0, started = time.perf_counter(), time.time()
     sweep = RigiditySweep.from_parameters(parameters)
     chunk = Chunk(int(n_cells), int(start), int(stop))
-    state, p0, p0_index, replica, seeds = build_chunk_state(sweep, chunk, state)
+    state, p0, p0_index, replica, seeds = build_chunk_state(sweep, chunk, state, seeds)
     built = time.time()
     mean_area = state.mean_cell_area                     # per replica (1 at the default radius)
     cell_rep = state.cell_replica_np()
@@ -132,6 +136,19 @@ def default_executor(device="auto", workers=None):
     if n <= 1:
         return InProcessExecutor(), dev.name, True
     return process_pool(n, initializer=ignore_interrupts), dev.name, True
+
+
+def taper(chunks, slots: int) -> list:
+    """``chunks`` in running order, the last ``2 slots`` of them cut in halves when several workers
+    share them, so that the workers run out of work at nearly the same time (a replica's result does
+    not depend on its chunk: tests/test_sweeps.py)."""
+    if slots < 2:
+        return list(chunks)
+    cut = max(0, len(chunks) - 2 * slots)
+    halves = [h for c in chunks[cut:] for h in ((c,) if c.size < 2 else
+                                                 (Chunk(c.n_cells, c.start, c.start + c.size // 2),
+                                                  Chunk(c.n_cells, c.start + c.size // 2, c.stop)))]
+    return list(chunks[:cut]) + halves
 
 
 def executor_slots(executor) -> int:
@@ -358,7 +375,9 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
         events, started = {}, time.time()
         in_process = isinstance(executor, InProcessExecutor)
         slots = executor_slots(executor)
-        todo = sorted(chunks, key=lambda c: -c.n_cells * c.size)        # largest N first
+        todo = sorted(chunks, key=lambda c: -c.n_cells * c.size)        # largest first
+        if sweep.cuttable:
+            todo = taper(todo, slots)
         cpus = os.cpu_count() or 1
         if prefetch is None:
             prefetch = (sweep.prefetch_tilings and device_name == "gpu" and cpus > 2 and len(todo) > 1
@@ -375,10 +394,10 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
             while todo and len(pending) < limit:
                 c = todo.pop(0)
                 asked = time.time()
-                built = () if prefetch is None else (prefetch.get(c),)
+                built = {} if prefetch is None else prefetch.get(c)
                 events[c.id] = {"chunk": c.id, "n_cells": c.n_cells, "size": c.size, "asked": asked,
                                 "submitted": time.time()}
-                pending[executor.submit(run, params, c.n_cells, c.start, c.stop, device_name, *built,
+                pending[executor.submit(run, params, c.n_cells, c.start, c.stop, device_name, **built,
                                         **options)] = c
             finished, _ = cf.wait(list(pending), return_when=cf.FIRST_COMPLETED)
             for fut in finished:

@@ -46,31 +46,32 @@ def _tiling_worker(niceness: int):
 class TilingPrefetch:
     """Builds the tilings of the next ``ahead`` chunks in a process pool while the GPU minimises the
     current one: each chunk's seeds are cut into one part per worker and the parts concatenated in
-    order, which is the State that :func:`~spherevm.sweeps.execution.build_chunk_state` builds alone (tested); its workers run
-    ``niceness`` (default :data:`TILING_NICENESS`) below this process's priority."""
+    order, which is the State that :func:`~spherevm.sweeps.execution.build_chunk_state` builds alone
+    (tested); its workers run ``niceness`` (default :data:`TILING_NICENESS`) below this process."""
 
     def __init__(self, sweep: RigiditySweep, chunks, workers: int, ahead: int = 2, niceness: int | None = None):
         self.sweep, self.chunks, self.workers, self.ahead = sweep, list(chunks), workers, ahead
         nice = TILING_NICENESS if niceness is None else int(niceness)
         self.pool = process_pool(workers, initializer=_tiling_worker, initargs=(nice,))
-        self.futures = {}
+        self.futures, self.seeds = {}, {}
         self._submit_until(0)
 
     def _submit_until(self, index):
         for c in self.chunks[index:index + self.ahead + 1]:
             if c.id not in self.futures:
-                seeds = chunk_seeds(self.sweep, c)[1]
+                seeds = self.seeds[c.id] = chunk_seeds(self.sweep, c)[1]
                 parts = np.array_split(np.array(seeds, dtype=np.int64), min(self.workers, len(seeds)))
                 self.futures[c.id] = [self.pool.submit(_tiling_arrays, self.sweep.surface, c.n_cells, part.tolist())
                                       for part in parts if len(part)]
 
-    def get(self, chunk):
-        """The chunk's State (waits for its parts), and the next chunks submitted."""
+    def get(self, chunk) -> dict:
+        """The chunk's ``state`` (waits for its parts) and tiling ``seeds``, keyword arguments of
+        :func:`~spherevm.sweeps.execution.run_chunk`; the next chunks submitted."""
         from ..state import State
         self._submit_until(self.chunks.index(chunk))
         parts = [State(**arrays, constraint=constraint, validate=False)       # validated by the worker
                  for arrays, constraint in (f.result() for f in self.futures.pop(chunk.id))]
-        return parts[0] if len(parts) == 1 else State.concatenate(parts)
+        return {"state": parts[0] if len(parts) == 1 else State.concatenate(parts), "seeds": self.seeds.pop(chunk.id)}
 
     def close(self):
         self.pool.shutdown(wait=False, cancel_futures=True)

@@ -282,21 +282,6 @@ def test_results_do_not_depend_on_chunking(tiny_run, tmp_path):
     _same_records(first.records, one.records)
 
 
-def test_taper_halves_the_last_chunks_and_keeps_every_unit():
-    """Several workers: the last 2 x workers chunks are cut in halves (covering the same units, in
-    the same order); one worker: the plan unchanged."""
-    from spherevm.sweeps.execution import taper
-    sweep = sweeps.RigiditySweep(cells=[16, 32], p0=[3.7, 3.8, 3.9], replicas=7)
-    chunks = sweeps.plan_chunks(sweep, batch_cells=64)
-    assert taper(chunks, 1) == chunks
-    cut = taper(chunks, 2)
-    assert cut[:len(chunks) - 4] == chunks[:-4]
-    assert len(cut) == len(chunks) + sum(c.size > 1 for c in chunks[-4:])
-    units = [(c.n_cells, u) for c in chunks for u in range(c.start, c.stop)]
-    assert [(c.n_cells, u) for c in cut for u in range(c.start, c.stop)] == units
-    assert max(c.size for c in cut[len(chunks) - 4:]) <= max(c.size for c in chunks[-4:]) // 2 + 1
-
-
 def test_dask_cluster_gives_the_same_table(tiny_run, tmp_path):
     distributed = pytest.importorskip("distributed")
     _, first, _ = tiny_run
@@ -304,7 +289,7 @@ def test_dask_cluster_gives_the_same_table(tiny_run, tmp_path):
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
         result = sweeps.run_sweep(sweeps.RigiditySweep(**TINY), tmp_path / "dask", executor=client,
                                   device="cpu", batch_cells=32)
-    assert result.executor == "ClientExecutor" and len(result.computed) == 4   # 2 chunks, halved for 2 threads
+    assert result.executor == "ClientExecutor" and len(result.computed) == 2
     _same_records(first.records, result.records)
     a = rigidity.zero_fraction(first.records["n_cells"], first.records["p0"],
                                rigidity.classify(first.records["energy_per_cell"], first.records["reason"]))

@@ -31,6 +31,10 @@ GPU_BATCH_CELLS = 1 << 18
 #: of the GPU (one tiling per replica on the host is otherwise the bottleneck: 0.02-0.06 s each at
 #: N = 1024, against ~1 ms of GPU time per replica)
 PREFETCH_MIN_CELLS = 100_000
+#: the prefetching pool's processes per GPU worker at most: enough to keep an H200 fed (~3 busy at
+#: paper size), while each chunk cut into more parts costs this process time to gather them
+#: (docs/performance.md, "Several GPUs")
+TILING_PROCESSES_PER_WORKER = 8
 
 
 # ---------------------------------------------------------------------------------------- one chunk
@@ -136,19 +140,6 @@ def default_executor(device="auto", workers=None):
     if n <= 1:
         return InProcessExecutor(), dev.name, True
     return process_pool(n, initializer=ignore_interrupts), dev.name, True
-
-
-def taper(chunks, slots: int) -> list:
-    """``chunks`` in running order, the last ``2 slots`` of them cut in halves when several workers
-    share them, so that the workers run out of work at nearly the same time (a replica's result does
-    not depend on its chunk: tests/test_sweeps.py)."""
-    if slots < 2:
-        return list(chunks)
-    cut = max(0, len(chunks) - 2 * slots)
-    halves = [h for c in chunks[cut:] for h in ((c,) if c.size < 2 else
-                                                 (Chunk(c.n_cells, c.start, c.start + c.size // 2),
-                                                  Chunk(c.n_cells, c.start + c.size // 2, c.stop)))]
-    return list(chunks[:cut]) + halves
 
 
 def executor_slots(executor) -> int:
@@ -295,7 +286,8 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
     device : {"cpu", "gpu", "auto"}
         Where each chunk is minimised (with your own executor it is resolved on the worker).
     workers : int, optional
-        Processes (default: the CPU count, less one per GPU worker when tilings are prefetched).
+        Processes (default: the CPU count; when tilings are prefetched, the CPU count less one per
+        GPU worker, at most :data:`TILING_PROCESSES_PER_WORKER` per GPU worker).
     batch_cells : int, optional
         Cells per chunk (default :data:`CPU_BATCH_CELLS` or :data:`GPU_BATCH_CELLS`); it changes how
         the work is cut, never the results.
@@ -375,9 +367,7 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
         events, started = {}, time.time()
         in_process = isinstance(executor, InProcessExecutor)
         slots = executor_slots(executor)
-        todo = sorted(chunks, key=lambda c: -c.n_cells * c.size)        # largest first
-        if sweep.cuttable:
-            todo = taper(todo, slots)
+        todo = sorted(chunks, key=lambda c: -c.n_cells * c.size)        # largest N first
         cpus = os.cpu_count() or 1
         if prefetch is None:
             prefetch = (sweep.prefetch_tilings and device_name == "gpu" and cpus > 2 and len(todo) > 1
@@ -385,8 +375,8 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
         # bounded submission: in-process runs at submit (each chunk written before the next starts);
         # with prefetched tilings two chunks per worker (the pool just ahead); else all at once
         limit = 1 if in_process else 2 * slots if prefetch else len(todo)
-        prefetch = TilingPrefetch(sweep, todo, max(1, cpus - slots) if workers is None else workers,
-                                  ahead=limit + 1) if prefetch else None
+        tilers = min(max(1, cpus - slots), TILING_PROCESSES_PER_WORKER * slots) if workers is None else workers
+        prefetch = TilingPrefetch(sweep, todo, tilers, ahead=limit + 1) if prefetch else None
         pending = {}
         computed = []
         folder = os.path.join(path, CHUNK_DIR)

@@ -28,7 +28,6 @@ class Sweep:
     chunk_function = None   # None: spherevm.sweeps.execution.run_chunk (the rigidity sweep's)
     prefetch_tilings = False   # run_sweep may build the chunks' tilings ahead (TilingPrefetch)
     keeps_states = False    # run_sweep(save_states=True) is allowed
-    cuttable = False        # a unit's result does not depend on its chunk: run_sweep may cut chunks
 
     def plan(self, batch_cells: int, done=None) -> list:
         """The chunks that cover every unit not in ``done`` (N -> bool array over units)."""
@@ -101,7 +100,7 @@ class RigiditySweep(Sweep):
     forces: tuple = ()
 
     KIND, FORMAT, UNIT, columns = "rigidity", FORMAT, "p0_index", RIGIDITY_COLUMNS
-    prefetch_tilings = keeps_states = cuttable = True
+    prefetch_tilings = keeps_states = True
 
     def __post_init__(self):
         set_ = object.__setattr__

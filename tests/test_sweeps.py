@@ -442,6 +442,25 @@ def test_pool_workers_fork_from_a_preloaded_server_that_never_touches_cuda():
                           check=True).stdout.strip() == "False"
 
 
+def test_prefetching_pool_is_capped_on_many_cores(tmp_path, monkeypatch):
+    """On a host of many cores the prefetching pool stops at MAX_TILING_PROCESSES (this process
+    gathers every part of every chunk); an explicit ``workers`` is taken as given."""
+    from spherevm.sweeps import execution
+    seen = []
+
+    class Recorder(execution.TilingPrefetch):
+        def __init__(self, sweep, chunks, workers, **options):
+            seen.append(workers)
+            super().__init__(sweep, chunks, 1, **options)
+
+    monkeypatch.setattr(execution, "TilingPrefetch", Recorder)
+    monkeypatch.setattr(execution.os, "cpu_count", lambda: 64)
+    for out, workers in (("auto", None), ("given", 40)):
+        sweeps.run_sweep(sweeps.RigiditySweep(**TINY), tmp_path / out, executor=sweeps.InProcessExecutor(),
+                         device="cpu", batch_cells=16, prefetch=True, workers=workers)
+    assert seen == [execution.MAX_TILING_PROCESSES, 40]
+
+
 @pytest.mark.skipif(not hasattr(os, "nice"), reason="os.nice: POSIX only")
 def test_tiling_workers_yield_to_the_processes_driving_the_gpus():
     """TilingPrefetch's workers run at TILING_NICENESS below the sweep's priority."""

@@ -31,10 +31,9 @@ GPU_BATCH_CELLS = 1 << 18
 #: of the GPU (one tiling per replica on the host is otherwise the bottleneck: 0.02-0.06 s each at
 #: N = 1024, against ~1 ms of GPU time per replica)
 PREFETCH_MIN_CELLS = 100_000
-#: the prefetching pool's processes per GPU worker at most: enough to keep an H200 fed (~3 busy at
-#: paper size), while each chunk cut into more parts costs this process time to gather them
-#: (docs/performance.md, "Several GPUs")
-TILING_PROCESSES_PER_WORKER = 8
+#: the prefetching pool's processes at most: each chunk is cut into one part per process, and this
+#: process gathers the parts of every chunk for every GPU (docs/performance.md, "Several GPUs")
+MAX_TILING_PROCESSES = 32
 
 
 # ---------------------------------------------------------------------------------------- one chunk
@@ -287,7 +286,7 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
         Where each chunk is minimised (with your own executor it is resolved on the worker).
     workers : int, optional
         Processes (default: the CPU count; when tilings are prefetched, the CPU count less one per
-        GPU worker, at most :data:`TILING_PROCESSES_PER_WORKER` per GPU worker).
+        GPU worker, at most :data:`MAX_TILING_PROCESSES`).
     batch_cells : int, optional
         Cells per chunk (default :data:`CPU_BATCH_CELLS` or :data:`GPU_BATCH_CELLS`); it changes how
         the work is cut, never the results.
@@ -345,7 +344,7 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
         except BaseException:
             executor.shutdown(wait=False, cancel_futures=True)
             raise
-    prefetch = None
+    tilings = None
     try:
         path = open_sweep_folder(sweep, out, create=True)
         done, parts, bad = scan_chunks(sweep, path, clean=True)
@@ -375,8 +374,8 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
         # bounded submission: in-process runs at submit (each chunk written before the next starts);
         # with prefetched tilings two chunks per worker (the pool just ahead); else all at once
         limit = 1 if in_process else 2 * slots if prefetch else len(todo)
-        tilers = min(max(1, cpus - slots), TILING_PROCESSES_PER_WORKER * slots) if workers is None else workers
-        prefetch = TilingPrefetch(sweep, todo, tilers, ahead=limit + 1) if prefetch else None
+        tilers = min(max(1, cpus - slots), MAX_TILING_PROCESSES) if workers is None else workers
+        tilings = TilingPrefetch(sweep, todo, tilers, ahead=limit + 1) if prefetch else None
         pending = {}
         computed = []
         folder = os.path.join(path, CHUNK_DIR)
@@ -384,7 +383,7 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
             while todo and len(pending) < limit:
                 c = todo.pop(0)
                 asked = time.time()
-                built = {} if prefetch is None else prefetch.get(c)
+                built = {} if tilings is None else tilings.get(c)
                 events[c.id] = {"chunk": c.id, "n_cells": c.n_cells, "size": c.size, "asked": asked,
                                 "submitted": time.time()}
                 pending[executor.submit(run, params, c.n_cells, c.start, c.stop, device_name, **built,
@@ -422,8 +421,8 @@ def run_sweep(sweep: Sweep, out, executor=None, device="auto", workers=None, bat
             _stop_now(executor)
         raise
     finally:
-        if prefetch is not None:
-            prefetch.close()
+        if tilings is not None:
+            tilings.close()
         if owned:
             executor.shutdown(wait=True)
     records = sorted_records(merge_records(parts, sweep.columns), sweep.columns)

@@ -77,9 +77,10 @@ def test_scheduler_and_workers_started_like_the_slurm_recipe(tmp_path, reference
     here both run on this machine's loopback address, and ``spherevm rigidity --scheduler`` uses them."""
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
+    recipe = {**os.environ, "DASK_DISTRIBUTED__SCHEDULER__WORKER_SATURATION": "2"}
     procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
                                "--port", str(port), "--no-dashboard"],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=recipe)]
     try:
         procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nworkers", "2",
                                        "--nthreads", "1", "--no-dashboard"],
@@ -87,6 +88,7 @@ def test_scheduler_and_workers_started_like_the_slurm_recipe(tmp_path, reference
         from distributed import Client
         with Client(address, timeout=60) as c:
             c.wait_for_workers(2, timeout=60)
+            assert c.run_on_scheduler(lambda dask_scheduler: dask_scheduler.WORKER_SATURATION) == 2.0
         out = tmp_path / "sweep"
         rc = cli.main(["rigidity", "--cells", *map(str, SWEEP["cells"]), "--p0", *map(str, SWEEP["p0"]), "--replicas", "2",
                        "--seed", "3", "--scheduler", address, "--device", "cpu", "--batch-cells", "40", "--out", str(out),

@@ -1,8 +1,9 @@
-"""Which CUDA surface a constraint is compiled as (geometry/surface.cuh), and the kernels of the
-geometry layer (geometry/cell_measures.cu): every cell's area and perimeter in one launch, which
+"""Which CUDA surface a constraint is compiled as (its device code, Constraint.device_surface, at the
+head of each module; geometry/surface.cuh), and the kernels of the geometry layer
+(geometry/cell_measures.cu): every cell's area and perimeter in one launch, which
 :func:`spherevm.shapes.cell_shapes` uses on the GPU instead of the per-corner array arithmetic of
 ``cell_geometry`` (a few dozen CuPy launches: 2.3 ms for 1,024 x 32 cells on an H200, where this
-kernel takes microseconds), and the run's closed-cell check on the periodic plane."""
+kernel takes microseconds), and the run's closed-cell check on periodic surfaces."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -25,10 +26,11 @@ class GeodesicSphere(metaclass=_Metric):
     runs on device="cpu" only: operations listing KERNEL_SURFACES in ``gpu_surfaces`` refuse it."""
 
 
-#: The surfaces with CUDA kernels and the macros that compile geometry/surface.cuh for each: one
-#: kernel source per operation serves them all (``gpu_surfaces`` of the built-in operations).
-SURFACE_DEFINES = {GeodesicSphere: (), PeriodicPlane: ("SVM_SURFACE_PLANE",)}
-KERNEL_SURFACES = tuple(SURFACE_DEFINES)
+#: The surfaces whose constraints give device code (Constraint.device_surface): one kernel source per
+#: operation serves them all (``gpu_surfaces`` of the built-in operations).
+KERNEL_SURFACES = (GeodesicSphere, PeriodicPlane)
+#: the surfaces the fused small-tissue steps (spherevm.tissue_steps) are compiled for
+FUSED_SURFACES = (GeodesicSphere, PeriodicPlane)
 _CELL_MEASURES = Path(__file__).parent.parent / "geometry" / "cell_measures.cu"
 
 
@@ -39,11 +41,12 @@ def keeps_directions(constraint) -> bool:
 
 
 def surface_kernels(cu_file, state, defines=()):
-    """``(module, size)``: the kernels of ``cu_file`` compiled for ``state``'s surface (and the macros
-    ``defines``) and the State's per-replica size array they take (``radius`` on the sphere, ``box``
-    on the plane)."""
-    surface = next(d for cls, d in SURFACE_DEFINES.items() if isinstance(state.constraint, cls))
-    return load_module(cu_file, surface + tuple(defines)), state.size
+    """``(module, size)``: the kernels of ``cu_file`` compiled for ``state``'s surface (its device
+    code first, and the macros ``defines``) and the per-replica size array they take
+    (``Constraint.kernel_size``: ``radius`` on the sphere, ``box`` on the plane, an implicit
+    surface's parameters with its length scale and half its area)."""
+    surface = state.constraint.device_surface()
+    return load_module(cu_file, tuple(defines), prelude=surface.prelude), state.constraint.kernel_size(state)
 
 
 def cell_measures(state):

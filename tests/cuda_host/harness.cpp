@@ -7,7 +7,8 @@
 #include "cuda_host.h"
 
 #include "random_philox.cuh"
-#include "geometry/surface.cuh"   // geometry/sphere.cuh, geometry/plane.cuh and the two Surface structs
+#include "constraints/sphere.cuh"   // the two Surface structs (and geometry/sphere.cuh, geometry/plane.cuh)
+#include "constraints/plane.cuh"
 
 typedef unsigned int u32;
 typedef unsigned long long u64;

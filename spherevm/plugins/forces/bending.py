@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ...constraints.kernels import GeodesicSphere
+from ...constraints.kernels import GeodesicSphere, surface_kernels
 from ...constraints.cell_rows import cell_blocks, fold, row_table
 from ...constraints.corners import in_parallel
-from ...device import array_module, launch, load_module, segment_sums, weighted_bincount
+from ...device import array_module, launch, segment_sums, weighted_bincount
 from ...kernel_struct import KernelStruct
 from ..base import Force, ForceResult
 from ..fusion import FusedStage, overrides
@@ -264,7 +264,7 @@ class Bending(Force):
         """Three kernels (bending.cu): area vectors and normals per cell; energy and dE/da per cell
         over its neighbours; forces per vertex over its three corners."""
         import cupy as cp
-        module = load_module(_KERNELS)
+        module = surface_kernels(_KERNELS, state)[0]
         nc, nv = state.n_cells, state.n_vertices
         normal, inv_area = cp.empty((nc, 3)), cp.empty(nc)
         launch(module.get_function("bending_cell_normals"), nc,
@@ -284,17 +284,17 @@ class Bending(Force):
         before its tangent projection."""
         import cupy as cp
         kA, kP, A0, P0 = model.device_parameters(state)
-        module = load_module(_KERNELS)
+        module, size = surface_kernels(_KERNELS, state)
         nc, nv = state.n_cells, state.n_vertices
         coef, cell_energy, energy = cp.empty((nc, 2)), cp.empty(nc), cp.empty(state.n_replicas)
         normal, inv_area = cp.empty((nc, 3)), cp.empty(nc)
         launch(module.get_function("vm_bending_cell_geometry"), nc,
-               (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, state.size,
+               (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, size,
                 np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, cell_energy, normal, inv_area))
         w = self._cell_terms_gpu(state, module, normal, inv_area, cell_energy, energy, "bending_cell_terms_add")
         forces = cp.empty_like(state.positions)
         launch(module.get_function("vm_bending_vertex_forces"), nv,
-               (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, state.size,
+               (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, size,
                 np.int32(nv), coef, w, forces))
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
 

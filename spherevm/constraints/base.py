@@ -96,6 +96,10 @@ class Constraint:
         it runs on device="cpu" only (here)."""
         return None
 
+    def has_device_code(self) -> bool:
+        """Whether :meth:`device_surface` gives code (the kernels compile for this surface)."""
+        return self.device_surface() is not None
+
     def kernel_size(self, state):
         """The per-replica size array the kernels take (``Surface::size``): the State's own here."""
         return state.size

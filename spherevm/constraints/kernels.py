@@ -9,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..device import launch, load_module
+from .implicit import ImplicitSurface
 from .plane import OPEN_TOLERANCE, PeriodicPlane
 from .sphere import Sphere
 
@@ -27,11 +28,17 @@ class GeodesicSphere(metaclass=_Metric):
 
 
 #: The surfaces whose constraints give device code (Constraint.device_surface): one kernel source per
-#: operation serves them all (``gpu_surfaces`` of the built-in operations).
-KERNEL_SURFACES = (GeodesicSphere, PeriodicPlane)
+#: operation serves them all (``gpu_surfaces`` of the built-in operations). A user's ImplicitSurface
+#: without CUDA code for F and grad F is refused by its ``device_surface``, saying what to add.
+KERNEL_SURFACES = (GeodesicSphere, PeriodicPlane, ImplicitSurface)
 #: the surfaces the fused small-tissue steps (spherevm.tissue_steps) are compiled for
 FUSED_SURFACES = (GeodesicSphere, PeriodicPlane)
 _CELL_MEASURES = Path(__file__).parent.parent / "geometry" / "cell_measures.cu"
+
+
+def compiles(constraint) -> bool:
+    """Whether the kernels compile for ``constraint``: one of KERNEL_SURFACES that gives device code."""
+    return isinstance(constraint, KERNEL_SURFACES) and constraint.has_device_code()
 
 
 def keeps_directions(constraint) -> bool:
@@ -64,13 +71,16 @@ def cell_measures(state):
 
 def flags_open_cells(state) -> bool:
     """Whether :func:`flag_open_cells` tests ``state``'s cells on the device: a GPU State on the
-    periodic plane (on the sphere no cell can open: it has no images)."""
-    return state.device.is_gpu and isinstance(state.constraint, PeriodicPlane)
+    periodic plane or a periodic implicit surface with device code (on a closed surface no cell can
+    open: it has no images)."""
+    con = state.constraint
+    periodic = isinstance(con, PeriodicPlane) or isinstance(con, ImplicitSurface) and con.periodic
+    return state.device.is_gpu and periodic and compiles(con)
 
 
 def flag_open_cells(state, word):
-    """Set ``word`` (a one-element uint64 CuPy array) to 1 if a cell of a GPU State on the periodic
-    plane does not close under the minimum image: its minimum-image edges add up to more than
+    """Set ``word`` (a one-element uint64 CuPy array) to 1 if a cell of a GPU State on a periodic
+    surface does not close under the minimum image: its minimum-image edges add up to more than
     ``OPEN_TOLERANCE`` times its box side (geometry/cell_measures.cu's ``open_cells``, one thread a cell)."""
     xp = state.device.xp
     module, size = surface_kernels(_CELL_MEASURES, state)

@@ -11,6 +11,7 @@ struct PlaneSurface {
     static constexpr bool vertex_size = true;
     static constexpr bool periodic = true;    // minimum images in the box period(b) = b
     __device__ static box2 period(Size b) { return b; }
+    static constexpr int coef_width = 2;      // the vertex model's coefficients per cell (a_c, p_c)
 
     __device__ static Size size(const double* box, long r) { return load_box(box, r); }
     __device__ static double length_scale(Size b) { return sqrt(b.x * b.y); }
@@ -32,9 +33,9 @@ struct PlaneSurface {
         return -plane_vertex_gradient(pos, vn, vc, v, b, coef);
     }
 
-    __device__ static vec3 normal(vec3) { return v3(0.0, 0.0, 1.0); }
+    __device__ static vec3 normal(vec3, Size) { return v3(0.0, 0.0, 1.0); }
     __device__ static vec3 place(vec3 y, vec3, Size b) { return wrap_into_box(y, b); }
-    __device__ static vec3 cell_normal(const double*, const int*, int) { return v3(0.0, 0.0, 1.0); }
+    __device__ static vec3 cell_normal(const double*, const int*, int, Size) { return v3(0.0, 0.0, 1.0); }
 
     // T1 takes the edge as PeriodicPlane.displacement(u, v): the minimum image of x_v - x_u
     __device__ static double chord2(vec3 pu, vec3 pv, Size b) { return plane_length2(plane_edge(pu, pv, b)); }

@@ -11,6 +11,7 @@ struct SphereSurface {
     static constexpr bool vertex_size = false;
     static constexpr bool directions = true;
     static constexpr bool periodic = false;   // no images (geometry/cell_measures.cu's open_cells)
+    static constexpr int coef_width = 2;      // the vertex model's coefficients per cell (a_c, p_c)
 
     // vertex i's unit direction (the products rounded as written, as normalize3's are compiled here)
     template <class Norm>
@@ -95,11 +96,11 @@ struct SphereSurface {
         return -(inv_rn * g);
     }
 
-    __device__ static vec3 normal(vec3 x) { return normalize3(x); }
+    __device__ static vec3 normal(vec3 x, Size) { return normalize3(x); }
     __device__ static vec3 place(vec3, vec3 n, Size R) { return R * n; }
 
     // the normalised centroid of the cell's unit vertex directions
-    __device__ static vec3 cell_normal(const double* pos, const int* row, int n) {
+    __device__ static vec3 cell_normal(const double* pos, const int* row, int n, Size) {
         vec3 sum = v3(0.0, 0.0, 0.0);
         for (int k = 0; k < n; ++k) sum = sum + normalize3(load3(pos, row[k]));
         return normalize3(sum);

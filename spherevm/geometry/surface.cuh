@@ -15,12 +15,15 @@
 //                             (RsqrtNorm, the default) or kept from before (KeptNorm)
 //   cell_measures(...)        a cell's area and perimeter
 //   area_unit, length_unit    what the vertex-force coefficients are scaled by
+//   coef_width                the vertex model's doubles per cell: 2 (a_c, p_c), or 4 on implicit
+//                             surfaces (facet: the vector area a_c, coefficients (a_c a / A, p_c))
+//   periodic, period(s)       whether edges are minimum images in the box period(s)
 //   vertex_force(...)         minus the surface gradient of sum_c a_c A_c + p_c P_c at a vertex (on the
 //                             sphere a force fused into the vertex model adds its gradient through
 //                             an `extra`, see plugins/forces/vertex_model.cuh)
-//   normal(x)                 the unit normal at x
+//   normal(x, s)              the unit normal at x
 //   place(y, n, s)            P_N: the surface point for y, whose normal n = normal(y) the caller has
-//   cell_normal(...)          the normal at a cell's centre (active cell directors)
+//   cell_normal(..., s)       the normal at a cell's centre (active cell directors)
 //   chord2, edge_length       the T1 short-edge test and the edge's length
 //   t1_positions(...)         the two vertices of a flipped edge
 //   triangle_area(a, b, c, s) the sign-carrying area of a triangle, half_area(s) half the surface's

@@ -1,0 +1,137 @@
+"""Implicit surfaces on the GPU (Implicit<Shape> of constraints/implicit.cuh) against the NumPy
+path: forces and energies with per-cell parameters to 1e-12, FIRE with T1, T1 flip for flip (with
+and without untangling), Brownian with T1 for 1,000 steps to the same tables, Active dynamics, cell
+shapes and narrowed minimisations, on the torus, the ellipsoid, the Gaussian bump and the user's
+sinusoid. Skipped without CuPy and a GPU (conftest.py); the device code itself is compared with
+NumPy on the CPU by tests/test_implicit_device.py."""
+import pathlib
+
+import numpy as np
+import pytest
+from conftest import assert_gpu_force_matches_numpy, dynamics_simulation, kick_on_surface, relative_gap, t1_simulations
+
+import spherevm as svm
+from spherevm import shapes
+from spherevm.constraints import Ellipsoid, GaussianBump, Torus
+from spherevm.constraints.registry import surface as parse_surface
+from spherevm.plugins.forces import VertexModel
+from spherevm.plugins.integrators import FIRE, Active, Brownian
+from spherevm.plugins.updaters import T1
+
+pytestmark = pytest.mark.gpu
+EXAMPLE = pathlib.Path(__file__).parent / "plugin_example"
+SURFACES = {"torus": lambda: Torus(3.0, 1.0), "ellipsoid": lambda: Ellipsoid(1.0, 1.5, 2.0),
+            "bump": lambda: GaussianBump(1.5, 1.0, 10.0)}
+
+
+@pytest.fixture(params=["torus", "ellipsoid", "bump", "sinusoid"])
+def surface(request, monkeypatch):
+    if request.param == "sinusoid":
+        monkeypatch.syspath_prepend(str(EXAMPLE))
+        return parse_surface("sinusoid:amplitude=1.5,box=10")
+    return SURFACES[request.param]()
+
+
+def _tissues(surface, n_cells, replicas, seed):
+    return svm.State.concatenate([svm.init.random_tiling(n_cells, seed=seed + r, surface=surface)
+                                  for r in range(replicas)])
+
+
+def _gap(gpu_state, cpu_state):
+    """Largest distance between the GPU's and the CPU's vertices (nearest images on a periodic surface)."""
+    con = cpu_state.constraint
+    size = con.size(cpu_state, cpu_state.vertex_replica)
+    return np.abs(con.unwrap(gpu_state.positions.get(), cpu_state.positions, size) - cpu_state.positions).max()
+
+
+def _table(state):
+    cv = state.device.to_numpy(state.cell_vertices)
+    return cv[:, :int(state.device.to_numpy(state.cell_sides).max())]
+
+
+def test_forces_and_energies_match_numpy(surface):
+    s = _tissues(surface, 120, 3, seed=4)
+    rng = np.random.default_rng(0)
+    assert_gpu_force_matches_numpy(VertexModel.dimensionless(kr=1.0, p0=3.7), s)
+    assert_gpu_force_matches_numpy(VertexModel(kA=rng.uniform(0.5, 2, s.n_cells), kP=rng.uniform(0.5, 2, s.n_cells),
+                                               A0=1.0, P0=rng.uniform(3.4, 4.0, s.n_cells)), s)
+    area, perimeter = shapes.cell_shapes(s.to("gpu"))
+    geom = s.constraint.cell_geometry(s)
+    assert relative_gap(area, geom.area) <= 1e-12 and relative_gap(perimeter, geom.perimeter) <= 1e-12
+
+
+def test_fire_with_t1_matches_numpy(surface):
+    state = _tissues(surface, 60, 2, seed=5)
+    sims = {}
+    for device in ("cpu", "gpu"):
+        sim = svm.Simulation(device=device)
+        sim.state = state
+        sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
+        sim.operations.updaters.append(T1())
+        sim.operations.integrator = FIRE(dt=0.02)
+        sim.run(200)
+        sims[device] = sim
+    c, g = sims["cpu"], sims["gpu"]
+    assert np.array_equal(g.log("t1_total_flips"), c.log("t1_total_flips"))
+    assert np.array_equal(_table(g.state), _table(c.state))
+    assert _gap(g.state, c.state) <= 1e-9
+    assert relative_gap(g.log("energy"), c.log("energy")) <= 1e-9
+
+
+@pytest.mark.parametrize("untangle", [False, True])
+def test_t1_passes_match_numpy_flip_for_flip(surface, untangle):
+    """Random kicks, then a T1 pass, many times: the same flips, refusals, tables and positions."""
+    rng = np.random.default_rng(3)
+    state = _tissues(surface, 100, 2, seed=15)
+    sims = t1_simulations(state, threshold=0.3, new_length=0.45, max_flip_backs=10 ** 6, untangle=untangle)
+    for _ in range(30):
+        kick = rng.normal(scale=0.04, size=state.positions.shape)
+        for sim in sims.values():
+            kick_on_surface(sim, kick)
+            sim.run_updaters()
+        c, g = sims["cpu"], sims["gpu"]
+        assert np.array_equal(g.log("t1_flips"), c.log("t1_flips"))
+        assert np.array_equal(g.log("t1_refused"), c.log("t1_refused"))
+        assert np.array_equal(_table(g.state), _table(c.state))
+        assert np.array_equal(g.state.vertex_cells.get(), c.state.vertex_cells)
+        assert _gap(g.state, c.state) <= 1e-12
+    assert int(sims["cpu"].log("t1_total_flips").sum()) > 50
+
+
+def test_brownian_with_t1_matches_numpy_for_1000_steps(surface):
+    state = _tissues(surface, 64, 2, seed=12)
+    cpu = dynamics_simulation(state, "cpu", Brownian(dt=0.01, T=2e-3))
+    gpu = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=2e-3))
+    cpu.run(1000)
+    gpu.run(1000)
+    flips = cpu.log("t1_total_flips")
+    assert flips.sum() > 0 and np.array_equal(gpu.log("t1_total_flips"), flips)
+    assert np.array_equal(_table(gpu.state), _table(cpu.state))
+    assert np.array_equal(gpu.state.vertex_neighbors.get(), cpu.state.vertex_neighbors)
+    assert _gap(gpu.state, cpu.state) <= 1e-9
+    gpu.state.validate(orientation=False)
+
+
+@pytest.mark.parametrize("directors", ["cell", "vertex"])
+def test_active_matches_numpy(surface, directors):
+    state = _tissues(surface, 60, 2, seed=13)
+    make = lambda: Active(dt=0.01, v0=0.1, Dr=1.0, T=1e-4, directors=directors)  # noqa: E731
+    cpu, gpu = dynamics_simulation(state, "cpu", make()), dynamics_simulation(state, "gpu", make())
+    cpu.run(300)
+    gpu.run(300)
+    assert _gap(gpu.state, cpu.state) <= 1e-9
+    assert np.abs(gpu.operations.integrator.directors.get() - cpu.operations.integrator.directors).max() <= 1e-9
+
+
+def test_narrowed_minimisation_matches_numpy(surface):
+    def run(device, narrow):
+        sim = svm.Simulation(device=device)
+        sim.state = _tissues(surface, 40, 4, seed=21)
+        sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.75))
+        sim.operations.updaters.append(T1())
+        sim.operations.integrator = FIRE(dt=0.02)
+        return sim, sim.minimize(force_tol=1e-10, max_steps=4000, narrow=narrow)
+    (g, rg), (c, rc) = run("gpu", True), run("cpu", True)
+    assert np.array_equal(rg.converged, rc.converged) and np.array_equal(rg.reason, rc.reason)
+    assert np.allclose(rg.energy_per_cell, rc.energy_per_cell, rtol=1e-6, atol=1e-12)
+    assert np.array_equal(g.log("t1_total_flips"), c.log("t1_total_flips"))

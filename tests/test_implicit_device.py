@@ -31,7 +31,7 @@ def sinusoid():
 
 
 SURFACES = {"torus": lambda: Torus(3.0, 1.0), "ellipsoid": lambda: Ellipsoid(1.0, 1.5, 2.0),
-            "bump": lambda: GaussianBump(1.5, 1.0, 10.0)}
+            "bump": lambda: GaussianBump(1.5, 1.0, 10.0), "sinusoid": sinusoid}
 
 
 @pytest.fixture(scope="module")

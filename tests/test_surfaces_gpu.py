@@ -8,14 +8,15 @@ import pathlib
 
 import numpy as np
 import pytest
-from conftest import assert_gpu_force_matches_numpy, dynamics_simulation, kick_on_surface, relative_gap, t1_simulations
+from conftest import (assert_brownian_with_t1_matches_numpy, assert_gpu_force_matches_numpy, assert_t1_round_matches_numpy,
+                      dynamics_simulation, relative_gap, t1_simulations)
 
 import spherevm as svm
 from spherevm import shapes
 from spherevm.constraints import Ellipsoid, GaussianBump, Torus
 from spherevm.constraints.registry import surface as parse_surface
 from spherevm.plugins.forces import VertexModel
-from spherevm.plugins.integrators import FIRE, Active, Brownian
+from spherevm.plugins.integrators import FIRE, Active
 from spherevm.plugins.updaters import T1
 
 pytestmark = pytest.mark.gpu
@@ -85,31 +86,12 @@ def test_t1_passes_match_numpy_flip_for_flip(surface, untangle):
     state = _tissues(surface, 100, 2, seed=15)
     sims = t1_simulations(state, threshold=0.3, new_length=0.45, max_flip_backs=10 ** 6, untangle=untangle)
     for _ in range(30):
-        kick = rng.normal(scale=0.04, size=state.positions.shape)
-        for sim in sims.values():
-            kick_on_surface(sim, kick)
-            sim.run_updaters()
-        c, g = sims["cpu"], sims["gpu"]
-        assert np.array_equal(g.log("t1_flips"), c.log("t1_flips"))
-        assert np.array_equal(g.log("t1_refused"), c.log("t1_refused"))
-        assert np.array_equal(_table(g.state), _table(c.state))
-        assert np.array_equal(g.state.vertex_cells.get(), c.state.vertex_cells)
-        assert _gap(g.state, c.state) <= 1e-12
+        assert_t1_round_matches_numpy(sims, rng.normal(scale=0.04, size=state.positions.shape), _gap)
     assert int(sims["cpu"].log("t1_total_flips").sum()) > 50
 
 
 def test_brownian_with_t1_matches_numpy_for_1000_steps(surface):
-    state = _tissues(surface, 64, 2, seed=12)
-    cpu = dynamics_simulation(state, "cpu", Brownian(dt=0.01, T=2e-3))
-    gpu = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=2e-3))
-    cpu.run(1000)
-    gpu.run(1000)
-    flips = cpu.log("t1_total_flips")
-    assert flips.sum() > 0 and np.array_equal(gpu.log("t1_total_flips"), flips)
-    assert np.array_equal(_table(gpu.state), _table(cpu.state))
-    assert np.array_equal(gpu.state.vertex_neighbors.get(), cpu.state.vertex_neighbors)
-    assert _gap(gpu.state, cpu.state) <= 1e-9
-    gpu.state.validate(orientation=False)
+    assert_brownian_with_t1_matches_numpy(_tissues(surface, 64, 2, seed=12), _gap)
 
 
 @pytest.mark.parametrize("directors", ["cell", "vertex"])

@@ -139,21 +139,18 @@ def test_kernels_compile_for_an_implicit_surface(tmp_path, cu):
     assert done.returncode == 0, done.stderr
 
 
-@pytest.mark.parametrize("name", ["torus", "bump"])
-def test_vertex_model_gpu_path_on_the_host(tmp_path, monkeypatch, name):
-    """VertexModel._compute_gpu (its allocations, the coefficients' width, the launches) with
-    vertex_model.cu built for the CPU after the surface's device code (tests/test_cuda_kernels_host.py's
-    stand-ins): vm_facet_terms' coefficients give the NumPy path's forces and energies to 1e-12."""
+def _host_gpu(tmp_path, monkeypatch, con, cu, *modules):
+    """``cu`` built for the CPU after ``con``'s device code (tests/test_cuda_kernels_host.py's stand-ins),
+    and the GPU paths of ``modules`` (plugins) running on it: cupy's allocations from NumPy, each
+    launch calling the host kernel once per thread."""
     if find_compiler() is None:
         pytest.skip("no C++ compiler (g++ or c++) on the PATH")
+    import types
     from test_cuda_headers import CXXFLAGS
     from test_cuda_kernels_host import Kernels
-    import types
-    from spherevm.plugins.forces import vertex_model
-    con = SURFACES[name]()
     source = tmp_path / "kernels.cpp"
     source.write_text('#include "cuda_host.h"\n#include "device_common.cuh"\n' + con.device_surface().prelude +
-                      '#include "plugins/forces/vertex_model.cu"\nextern "C" void h_set_thread(long i)\n'
+                      f'#include "{cu}"\nextern "C" void h_set_thread(long i)\n'
                       "{ blockIdx.x = (unsigned int)i; threadIdx.x = 0; blockDim.x = 1; }\n")
     lib = tmp_path / "libkernels.so"
     done = subprocess.run([find_compiler(), *CXXFLAGS, "-Wno-unknown-pragmas", f"-I{HERE / 'kernels'}", f"-I{PACKAGE}",
@@ -163,15 +160,49 @@ def test_vertex_model_gpu_path_on_the_host(tmp_path, monkeypatch, name):
     monkeypatch.setitem(sys.modules, "cupy", types.SimpleNamespace(empty=np.empty, zeros=np.zeros,
                                                                      empty_like=np.empty_like))
     functions = types.SimpleNamespace(get_function=lambda kernel: kernel)
-    monkeypatch.setattr(vertex_model, "surface_kernels", lambda path, state: (functions, con.kernel_size(state)))
-    monkeypatch.setattr(vertex_model, "launch", lambda kernel, n, args: kernels.launch(kernel, n, *args))
-    s = svm.State.concatenate([svm.init.random_tiling(60, seed=3 + r, surface=con) for r in range(2)])
-    rng = np.random.default_rng(4)
-    vm = VertexModel(kA=rng.uniform(0.5, 2, s.n_cells), kP=rng.uniform(0.5, 2, s.n_cells), A0=1.0,
-                     P0=rng.uniform(3.4, 4.0, s.n_cells))
-    got, ref = vm._compute_gpu(s), vm._compute_cpu(s)
+    for module in modules:
+        monkeypatch.setattr(module, "surface_kernels", lambda path, state: (functions, con.kernel_size(state)))
+        monkeypatch.setattr(module, "launch", lambda kernel, n, args: kernels.launch(kernel, n, *args))
+
+
+def _assert_same(got, ref):
     for a, b in ((got.forces, ref.forces), (got.energy, ref.energy), (got.cell_energy, ref.cell_energy)):
         assert np.abs(a - b).max() <= RTOL * np.abs(b).max()
+
+
+def _per_cell_model(s):
+    rng = np.random.default_rng(4)
+    return VertexModel(kA=rng.uniform(0.5, 2, s.n_cells), kP=rng.uniform(0.5, 2, s.n_cells), A0=1.0,
+                       P0=rng.uniform(3.4, 4.0, s.n_cells))
+
+
+@pytest.mark.parametrize("name", ["torus", "bump"])
+def test_vertex_model_gpu_path_on_the_host(tmp_path, monkeypatch, name):
+    """VertexModel._compute_gpu (its allocations, the coefficients' width, the launches) with
+    vertex_model.cu built for the CPU: vm_facet_terms' coefficients give the NumPy path's forces and
+    energies to 1e-12."""
+    from spherevm.plugins.forces import vertex_model
+    con = SURFACES[name]()
+    _host_gpu(tmp_path, monkeypatch, con, "plugins/forces/vertex_model.cu", vertex_model)
+    s = svm.State.concatenate([svm.init.random_tiling(60, seed=3 + r, surface=con) for r in range(2)])
+    vm = _per_cell_model(s)
+    _assert_same(vm._compute_gpu(s), vm._compute_cpu(s))
+
+
+@pytest.mark.parametrize("name", ["ellipsoid", "bump"])
+def test_bending_gpu_paths_on_the_host(tmp_path, monkeypatch, name):
+    """Bending._facets_gpu, alone and combined with the vertex model (bending.cu built for the CPU):
+    the NumPy path's forces and energies to 1e-12, with per-replica B."""
+    from spherevm.plugins.forces import Bending, bending
+    con = SURFACES[name]()
+    _host_gpu(tmp_path, monkeypatch, con, "plugins/forces/bending.cu", bending)
+    s = svm.State.concatenate([svm.init.random_tiling(60, seed=5 + r, surface=con) for r in range(2)])
+    force = Bending(np.array([0.5, 2.0]))
+    got = force._compute_gpu(s)
+    _assert_same(got, force._compute_cpu(s))
+    assert np.abs(got.forces).max() > 1e-3
+    vm = _per_cell_model(s)
+    _assert_same(force._combined_gpu(vm, s), force._combined_cpu(vm, s))
 
 
 # ------------------------------------------------------------------ T1's fold rule (plugins/updaters/t1_fold.cuh)

@@ -1,7 +1,7 @@
 """Implicit surfaces on the GPU (Implicit<Shape> of constraints/implicit.cuh) against the NumPy
 path: forces and energies with per-cell parameters to 1e-12, FIRE with T1, T1 flip for flip (with
 and without untangling), Brownian with T1 for 1,000 steps to the same tables, Active dynamics, cell
-shapes and narrowed minimisations, on the torus, the ellipsoid, the Gaussian bump and the user's
+shapes, narrowed minimisations and bending, on the torus, the ellipsoid, the Gaussian bump and the user's
 sinusoid. Skipped without CuPy and a GPU (conftest.py); the device code itself is compared with
 NumPy on the CPU by tests/test_implicit_device.py."""
 import pathlib
@@ -15,8 +15,8 @@ import spherevm as svm
 from spherevm import shapes
 from spherevm.constraints import Ellipsoid, GaussianBump, Torus
 from spherevm.constraints.registry import surface as parse_surface
-from spherevm.plugins.forces import VertexModel
-from spherevm.plugins.integrators import FIRE, Active
+from spherevm.plugins.forces import Bending, VertexModel
+from spherevm.plugins.integrators import FIRE, Active, Brownian
 from spherevm.plugins.updaters import T1
 
 pytestmark = pytest.mark.gpu
@@ -117,3 +117,19 @@ def test_narrowed_minimisation_matches_numpy(surface):
     assert np.array_equal(rg.converged, rc.converged) and np.array_equal(rg.reason, rc.reason)
     assert np.allclose(rg.energy_per_cell, rc.energy_per_cell, rtol=1e-6, atol=1e-12)
     assert np.array_equal(g.log("t1_total_flips"), c.log("t1_total_flips"))
+
+
+def test_bending_matches_numpy(surface):
+    """Bending alone (per-replica B) and with the vertex model in Brownian dynamics with T1: its
+    normals from the flat facets' vector areas, dE/da added to the vertex model's coefficients."""
+    state = _tissues(surface, 100, 2, seed=6)
+    assert_gpu_force_matches_numpy(Bending(np.array([0.5, 2.0])), state)
+    sims = {}
+    for device in ("cpu", "gpu"):
+        sims[device] = dynamics_simulation(state, device, Brownian(dt=0.01, T=2e-3))
+        sims[device].operations.forces.append(Bending(0.5))
+        sims[device].run(300)
+    c, g = sims["cpu"], sims["gpu"]
+    assert np.array_equal(g.log("t1_total_flips"), c.log("t1_total_flips"))
+    assert _gap(g.state, c.state) <= 1e-9
+    assert relative_gap(g.log("energy"), c.log("energy")) <= 1e-9

@@ -31,6 +31,10 @@ class GeodesicSphere(metaclass=_Metric):
 #: operation serves them all (``gpu_surfaces`` of the built-in operations). A user's ImplicitSurface
 #: without CUDA code for F and grad F is refused by its ``device_surface``, saying what to add.
 KERNEL_SURFACES = (GeodesicSphere, PeriodicPlane, ImplicitSurface)
+#: the surfaces Bending's kernels (plugins/forces/bending.cu) compile for: the sphere, and the
+#: implicit surfaces through their flat-facet coefficients; its fused stage: the sphere's
+BENDING_SURFACES = (GeodesicSphere, ImplicitSurface)
+FUSED_BENDING_SURFACES = (GeodesicSphere,)
 #: the surfaces the fused small-tissue steps (spherevm.tissue_steps) are compiled for
 FUSED_SURFACES = (GeodesicSphere, PeriodicPlane)
 _CELL_MEASURES = Path(__file__).parent.parent / "geometry" / "cell_measures.cu"

@@ -1,9 +1,10 @@
 """Implicit surfaces on the GPU (Implicit<Shape> of constraints/implicit.cuh) against the NumPy
 path: forces and energies with per-cell parameters to 1e-12, FIRE with T1, T1 flip for flip (with
 and without untangling), Brownian with T1 for 1,000 steps to the same tables, Active dynamics, cell
-shapes, narrowed minimisations and bending, on the torus, the ellipsoid, the Gaussian bump and the user's
-sinusoid. Skipped without CuPy and a GPU (conftest.py); the device code itself is compared with
-NumPy on the CPU by tests/test_implicit_device.py."""
+shapes, narrowed minimisations and bending, on the torus, the ellipsoid, the Gaussian bump and the
+user's sinusoid; and the fused small-tissue steps bitwise the general kernels. Skipped without CuPy
+and a GPU (conftest.py); the device code itself is compared with NumPy on the CPU by
+tests/test_implicit_device.py."""
 import pathlib
 
 import numpy as np
@@ -12,7 +13,7 @@ from conftest import (assert_brownian_with_t1_matches_numpy, assert_gpu_force_ma
                       dynamics_simulation, relative_gap, t1_simulations)
 
 import spherevm as svm
-from spherevm import shapes
+from spherevm import shapes, tissue_steps
 from spherevm.constraints import Ellipsoid, GaussianBump, Torus
 from spherevm.constraints.registry import surface as parse_surface
 from spherevm.plugins.forces import Bending, VertexModel
@@ -133,3 +134,39 @@ def test_bending_matches_numpy(surface):
     assert np.array_equal(g.log("t1_total_flips"), c.log("t1_total_flips"))
     assert _gap(g.state, c.state) <= 1e-9
     assert relative_gap(g.log("energy"), c.log("energy")) <= 1e-9
+
+
+# ------------------------------------------------------------------ the fused small-tissue steps
+def _ensemble(surface, sizes):
+    return svm.State.concatenate([svm.init.random_tiling(n, seed=3 + i, surface=surface) for i, n in enumerate(sizes)])
+
+
+def test_fused_steps_are_the_general_kernels_trajectory(surface):
+    """Brownian + T1 on tissues of mixed sizes, fused (the vertex model's stage with 4 coefficients
+    a cell), in CUDA graphs and step by step: the same State bitwise (no contracted multiply-adds in
+    an implicit surface's modules: its functions round as written wherever they are inlined)."""
+    from test_tissue_steps import assert_same, three_runs
+    state = _ensemble(surface, (60, 150))
+    assert tissue_steps.why_not(dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=0.05))) is None
+    runs = three_runs(state, 300, T=0.05, check_every=100)
+    assert_same(runs)
+    assert runs[-1][2][0].sum() > 0, "T1 flipped"
+
+
+@pytest.mark.parametrize("directors", ["cell", "vertex"])
+def test_fused_active_dynamics_are_the_general_kernels_trajectory(surface, directors):
+    from test_tissue_steps import assert_same, three_runs
+    active = lambda: Active(dt=0.01, v0=0.3, Dr=0.5, T=0.02, directors=directors)   # noqa: E731
+    assert_same(three_runs(_ensemble(surface, (60, 100)), 150, integrator=active, check_every=64))
+
+
+def test_fused_minimisation_is_the_general_one(surface):
+    from conftest import assert_same_minimizations, minimizations, sweep_like
+    from test_tissue_steps import MINIMIZE_WAYS
+    sizes = (60, 150, 80)
+    p0 = np.linspace(3.7, 3.9, len(sizes))
+    assert tissue_steps.why_not(sweep_like(_ensemble(surface, sizes), p0), minimizing=True) is None
+    *others, step = minimizations(_ensemble(surface, sizes), p0, MINIMIZE_WAYS,
+                                  calls=({"max_steps": 2000, "check_every": 90},))
+    for other in others:
+        assert_same_minimizations(other, step)

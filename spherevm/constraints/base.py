@@ -29,11 +29,13 @@ class DeviceSurface:
     """A surface's device code: CUDA ``source`` defining ``struct``, the functions
     geometry/surface.cuh lists, which every kernel module compiled for the surface starts with
     (:func:`spherevm.constraints.kernels.surface_kernels`); ``coef_width``: the doubles per cell of
-    the vertex model's coefficients its ``vertex_force`` reads."""
+    the vertex model's coefficients its ``vertex_force`` reads; ``options``: compiler options of
+    every module compiled for it."""
 
     source: str
     struct: str
     coef_width: int = 2
+    options: tuple = ()
 
     @property
     def prelude(self) -> str:

@@ -19,6 +19,9 @@ import numpy as np
 from .base import DeviceSurface
 
 _BUILT = {}
+#: no contracted multiply-adds: every operation rounded as written, so a function gives the same bits
+#: wherever it is inlined (the general kernels and the fused small-tissue steps), whoever wrote it
+FMAD = ("--fmad=false",)
 
 
 def shape_code(cls):
@@ -54,7 +57,7 @@ def device_surface(surface) -> DeviceSurface:
                   f"    __device__ static double F(vec3 x, const double* p) {{ return svm_{name}::F(x, p); }}\n"
                   f"    __device__ static vec3 grad_F(vec3 x, const double* p) {{ return svm_{name}::grad_F(x, p); }}"
                   f"{project}\n}};")
-        _BUILT[cls] = DeviceSurface(source, f"Implicit<{name}Shape>", coef_width=4)
+        _BUILT[cls] = DeviceSurface(source, f"Implicit<{name}Shape>", coef_width=4, options=FMAD)
     return _BUILT[cls]
 
 

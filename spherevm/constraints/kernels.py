@@ -35,8 +35,6 @@ KERNEL_SURFACES = (GeodesicSphere, PeriodicPlane, ImplicitSurface)
 #: implicit surfaces through their flat-facet coefficients; its fused stage: the sphere's
 BENDING_SURFACES = (GeodesicSphere, ImplicitSurface)
 FUSED_BENDING_SURFACES = (GeodesicSphere,)
-#: the surfaces the fused small-tissue steps (spherevm.tissue_steps) are compiled for
-FUSED_SURFACES = (GeodesicSphere, PeriodicPlane)
 _CELL_MEASURES = Path(__file__).parent.parent / "geometry" / "cell_measures.cu"
 
 
@@ -57,7 +55,8 @@ def surface_kernels(cu_file, state, defines=()):
     (``Constraint.kernel_size``: ``radius`` on the sphere, ``box`` on the plane, an implicit
     surface's parameters with its length scale and half its area)."""
     surface = state.constraint.device_surface()
-    return load_module(cu_file, tuple(defines), prelude=surface.prelude), state.constraint.kernel_size(state)
+    module = load_module(cu_file, tuple(defines), prelude=surface.prelude, options=surface.options)
+    return module, state.constraint.kernel_size(state)
 
 
 def cell_measures(state):

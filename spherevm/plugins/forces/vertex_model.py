@@ -217,7 +217,8 @@ class VertexModel(Force):
             return None
         kA, kP, A0, P0 = self.device_parameters(simulation.state)
         return FusedStage("force", "VertexModelStage", '#include "plugins/forces/vertex_model_stage.cuh"',
-                          self.FUSED_ARGS, dict(kA=kA, kP=kP, A0=A0, P0=P0), cell_doubles=2, measures=True,
+                          self.FUSED_ARGS, dict(kA=kA, kP=kP, A0=A0, P0=P0),
+                          cell_doubles=simulation.state.constraint.device_surface().coef_width, measures=True,
                           takes_extra=True)
 
     def _compute_gpu(self, state) -> ForceResult:

@@ -170,3 +170,18 @@ def test_fused_minimisation_is_the_general_one(surface):
                                   calls=({"max_steps": 2000, "check_every": 90},))
     for other in others:
         assert_same_minimizations(other, step)
+
+
+def test_division_grows_the_same_tissue_on_both_devices(surface):
+    """Division (its draws on the device, its surgery on the host) with Brownian dynamics and T1."""
+    state = _tissues(surface, 80, 1, seed=7)
+    sims = {}
+    for device in ("cpu", "gpu"):
+        sims[device] = dynamics_simulation(state, device, Brownian(dt=1e-3, T=1e-3))
+        sims[device].operations.updaters.insert(0, svm.plugins.updaters.Division(rule="rate", rate=5.0, dt=1e-3))
+        sims[device].run(20)
+    c, g = sims["cpu"].state, sims["gpu"].state
+    assert c.n_cells > 84 and g.n_cells == c.n_cells
+    assert np.array_equal(_table(g), _table(c))
+    assert _gap(g, c) <= 1e-9
+    g.validate()

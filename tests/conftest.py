@@ -217,8 +217,8 @@ def kick_on_surface(sim, kick):
     st = sim.state
     con = st.constraint
     k = st.device.asarray(kick)
-    st.positions = con.project_normal(st.positions + con.project_tangent(st.positions, k),
-                                      con.size(st, st.vertex_replica))
+    size = con.size(st, st.vertex_replica)
+    st.positions = con.project_normal(st.positions + con.project_tangent(st.positions, k, size), size)
 
 
 # ------------------------------------------------------------------------- minimisations (GPU)

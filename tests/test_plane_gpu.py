@@ -1,5 +1,5 @@
-"""The periodic plane on the GPU (the kernels compiled with -DSVM_SURFACE_PLANE) against the NumPy
-path: forces and energies, FIRE with T1, T1 flip for flip across the boundary, Brownian and Active
+"""The periodic plane on the GPU (the kernels compiled after its device code, PlaneSurface) against
+the NumPy path: forces and energies, FIRE with T1, T1 flip for flip across the boundary, Brownian and Active
 dynamics with T1 on the same Philox stream, narrowing, GSD, a planar rigidity sweep and the command
 line. Skipped without CuPy and a GPU (conftest.py); the plane's device header is checked on the CPU
 by tests/test_cuda_headers.py."""

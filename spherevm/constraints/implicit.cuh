@@ -64,7 +64,7 @@ struct Implicit {
     __device__ static double length_scale(Size s) { return s.scale; }
     __device__ static double area_unit(Size) { return 1.0; }
     __device__ static double length_unit(Size) { return 1.0; }
-    __device__ static box2 period(Size s) { box2 b = {s.p[0], s.p[Shape::k > 1 ? 1 : 0]}; return b; }
+    __device__ static box2 period(Size s) { box2 b = {s.p[0], s.p[1]}; return b; }   // periodic shapes only
 
     // ---------------------------------------------------------------- images (periodic surfaces)
     // the difference d taken to its nearest image in x and y (ImplicitSurface.nearest_images)

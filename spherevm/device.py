@@ -190,34 +190,37 @@ class CompiledModule:
         return function
 
 
-def load_module(cu_file, defines=()):
-    """Compile (once per process and set of ``defines``) the CUDA source ``cu_file`` and return it
-    as a :class:`CompiledModule`.
+def load_module(cu_file, defines=(), prelude="", options=()):
+    """Compile (once per process, set of ``defines``, prelude and options) the CUDA source ``cu_file``
+    and return it as a :class:`CompiledModule`.
 
     ``cu_file`` is a path to a ``.cu`` file beside the plugin that owns it; it may include the
-    package's headers (``geometry/surface.cuh``, ``device_common.cuh``). ``defines``: macro names
-    passed as ``-D`` (``SVM_SURFACE_PLANE`` compiles the kernels for the periodic plane). Kernels use
-    the NumPy path's formulas; fused multiply-adds and rsqrt make them agree with it to rounding, not
+    package's headers (``geometry/surface.cuh``, ``device_common.cuh``). ``prelude``: text the
+    source starts with (a surface's device code, spherevm.constraints.kernels.surface_kernels);
+    ``defines``: macro names passed as ``-D``; ``options``: more compiler options. Kernels use the
+    NumPy path's formulas; fused multiply-adds and rsqrt make them agree with it to rounding, not
     bitwise.
     """
-    import cupy
-    key = (str(cu_file), tuple(defines))
+    key = (str(cu_file), tuple(defines), prelude, tuple(options))
     if key not in _MODULES:
         code = __import__("pathlib").Path(cu_file).read_text()
-        options = ("-std=c++17", f"-I{_PACKAGE_DIR}") + tuple(f"-D{name}" for name in defines)
-        _MODULES[key] = CompiledModule(cupy.RawModule(code=code, options=options))
+        _MODULES[key] = _compile(prelude + code, defines, options)
     return _MODULES[key]
 
 
-def load_source(code: str, defines=()):
-    """Compile (once per process, source text and set of ``defines``) generated CUDA source that may
-    include the package's headers and ``.cu`` files, and return it as a :class:`CompiledModule`."""
-    import cupy
-    key = ("source", code, tuple(defines))
+def load_source(code: str, defines=(), options=()):
+    """Compile (once per process, source text, set of ``defines`` and options) generated CUDA source
+    that may include the package's headers and ``.cu`` files, and return it as a :class:`CompiledModule`."""
+    key = ("source", code, tuple(defines), tuple(options))
     if key not in _MODULES:
-        options = ("-std=c++17", f"-I{_PACKAGE_DIR}") + tuple(f"-D{name}" for name in defines)
-        _MODULES[key] = CompiledModule(cupy.RawModule(code=code, options=options))
+        _MODULES[key] = _compile(code, defines, options)
     return _MODULES[key]
+
+
+def _compile(code, defines, options):
+    import cupy
+    options = ("-std=c++17", f"-I{_PACKAGE_DIR}") + tuple(f"-D{name}" for name in defines) + tuple(options)
+    return CompiledModule(cupy.RawModule(code=code, options=options))
 
 
 def launch(kernel, n, args, block=BLOCK):

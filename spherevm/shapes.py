@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .constraints.kernels import KERNEL_SURFACES, cell_measures
+from .constraints.kernels import cell_measures, compiles
 
 CENTROID_METHODS = ("area", "vertex")
 
@@ -26,7 +26,7 @@ def cell_shapes(state):
     -------
     (area, perimeter)
         NumPy arrays of length ``n_cells``."""
-    if state.device.is_gpu and isinstance(state.constraint, KERNEL_SURFACES):
+    if state.device.is_gpu and compiles(state.constraint):
         area, perimeter = cell_measures(state)
     else:
         g = state.constraint.cell_geometry(state)

@@ -263,7 +263,7 @@ __device__ __forceinline__ void tissue_steps_body(const TissueState& st, const F
         if constexpr (Move::cell_phase)   // the last step's move, its cell part (active cell directors)
             if (step > 0)
                 for (int c = cb0 + tid; c < cb1; c += stride)
-                    move.cell(P, st.cell_vertices, st.sides, st.max_sides, c, timestep - 1);
+                    move.cell(P, st.cell_vertices, st.sides, st.max_sides, c, s, timestep - 1);
         if constexpr (Forces::measures)   // this block's cells, their coefficients to the other blocks
             tissue_cells<Surface>(P, norm, st.cell_vertices, st.sides, st.max_sides, s, cb1 - cb0,
                                   [=](int i) { return cb0 + i; }, lanes, forces, coef, nc, c0, send);
@@ -305,7 +305,7 @@ __device__ __forceinline__ void tissue_steps_body(const TissueState& st, const F
     if constexpr (Move::cell_phase)   // the last step's cell part, on its new positions
         if (steps > 0)
             for (int c = cb0 + tid; c < cb1; c += stride)
-                move.cell(shared + at_pos + 3L * nv * now, st.cell_vertices, st.sides, st.max_sides, c,
+                move.cell(shared + at_pos + 3L * nv * now, st.cell_vertices, st.sides, st.max_sides, c, s,
                           step0 + steps - 1);
     for (int j = 3 * (vb0 - v0) + tid; j < 3 * (vb1 - v0); j += stride)
         st.pos[3L * v0 + j] = shared[at_pos + 3L * nv * now + 3L * v0 + j];

@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .constraints.kernels import SURFACE_DEFINES, keeps_directions
+from .constraints.kernels import compiles, keeps_directions
 from .device import BLOCK, load_source
 from .kernel_struct import KernelStruct
 from .plan import Plan
@@ -276,7 +276,7 @@ def reason(plan) -> str | None:
 def _why_not(plan):
     simulation, minimizing = plan.simulation, plan.minimizing
     state = simulation.state
-    if not isinstance(state.constraint, tuple(SURFACE_DEFINES)):
+    if not compiles(state.constraint):
         return f"no kernels for {type(state.constraint).__name__}"
     found = stages(plan)
     if isinstance(found, str):
@@ -423,7 +423,7 @@ class TissueSteps:
         st = TISSUE_STATE.pack(
             pos=state.positions, vn=state.vertex_neighbors, vc=state.vertex_cells, cell_vertices=state.cell_vertices,
             sides=state.cell_sides, vertex_start=vertex_start, cell_start=cell_start,
-            size=state.size, max_sides=state.max_sides,
+            size=state.constraint.kernel_size(state), max_sides=state.max_sides,
             active=sim.operations.integrator.active_on_device(), step_need=self.step_need)
         fa = np.array(tuple(s.packed() for s in forces), dtype=forces_dtype)[()]
         args = (st, fa, move.packed(), pas.packed() if pas is not None else self.no_pass)
@@ -436,12 +436,12 @@ class TissueSteps:
     def _kernel(self, found, state, cluster, bound, shared):
         """The compiled kernel for the stages ``found`` on ``state``'s surface (kept per combination),
         with room for ``shared`` bytes, and the dtype of its forces' arguments."""
-        surface = next(d for cls, d in SURFACE_DEFINES.items() if isinstance(state.constraint, cls))
-        key = (_signature(found, self.minimizing), surface, cluster, bound)
+        surface = state.constraint.device_surface()
+        key = (_signature(found, self.minimizing), surface.prelude, cluster, bound)
         entry = _KERNELS_BUILT.get(key)
         if entry is None:
-            module = load_source(kernel_source(found, self.minimizing),
-                                 surface + (f"TISSUE_CLUSTER={cluster}", f"TISSUE_THREADS={bound}"))
+            module = load_source(surface.prelude + kernel_source(found, self.minimizing),
+                                 (f"TISSUE_CLUSTER={cluster}", f"TISSUE_THREADS={bound}"), surface.options)
             kernel = _Kernel(module, "tissue_minimize" if self.minimizing else "tissue_steps")
             dtype = np.dtype([(f"s{k}", s.arguments.dtype) for k, s in enumerate(found[0])], align=True)
             entry = _KERNELS_BUILT[key] = (kernel, dtype)

@@ -165,6 +165,22 @@ def t1_simulations(state, **t1):
     return sims
 
 
+def assert_t1_round_matches_numpy(sims, kick, gap):
+    """One round of :func:`t1_simulations`: both States kicked by ``kick`` (kick_on_surface), a T1
+    pass on each, then the same flips and refusals, cell tables and vertex cells, and positions within
+    1e-12 (``gap(gpu_state, cpu_state)``)."""
+    for sim in sims.values():
+        kick_on_surface(sim, kick)
+        sim.run_updaters()
+    c, g = sims["cpu"], sims["gpu"]
+    assert np.array_equal(g.log("t1_flips"), c.log("t1_flips"))
+    assert np.array_equal(g.log("t1_refused"), c.log("t1_refused"))
+    width = int(c.state.cell_sides.max())
+    assert np.array_equal(g.state.cell_vertices.get()[:, :width], c.state.cell_vertices[:, :width])
+    assert np.array_equal(g.state.vertex_cells.get(), c.state.vertex_cells)
+    assert gap(g.state, c.state) <= 1e-12
+
+
 def dynamics_simulation(state, device, integrator, seed=11):
     """A Simulation of the vertex model (kr = 1, p0 = 3.75) with T1 and ``integrator`` on ``device``:
     the pair the CPU/GPU dynamics comparisons run (test_gpu, test_plane_gpu)."""
@@ -178,13 +194,31 @@ def dynamics_simulation(state, device, integrator, seed=11):
     return sim
 
 
+def assert_brownian_with_t1_matches_numpy(state, gap, steps=1000):
+    """Brownian dynamics with T1 (dynamics_simulation, T = 2e-3) of ``state`` for ``steps`` steps on
+    the CPU and the GPU: some flips, the same flips, cell tables and neighbours, and positions within
+    1e-9 (``gap(gpu_state, cpu_state)``, the largest distance between them)."""
+    from spherevm.plugins.integrators import Brownian
+    cpu = dynamics_simulation(state, "cpu", Brownian(dt=0.01, T=2e-3))
+    gpu = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=2e-3))
+    cpu.run(steps)
+    gpu.run(steps)
+    flips = cpu.log("t1_total_flips")
+    assert flips.sum() > 0 and np.array_equal(gpu.log("t1_total_flips"), flips)
+    width = int(cpu.state.cell_sides.max())
+    assert np.array_equal(gpu.state.cell_vertices.get()[:, :width], cpu.state.cell_vertices[:, :width])
+    assert np.array_equal(gpu.state.vertex_neighbors.get(), cpu.state.vertex_neighbors)
+    assert gap(gpu.state, cpu.state) <= 1e-9
+    gpu.state.validate(orientation=False)
+
+
 def kick_on_surface(sim, kick):
     """Move every vertex by the tangent part of ``kick`` (NumPy, (V, 3)) and back onto the surface."""
     st = sim.state
     con = st.constraint
     k = st.device.asarray(kick)
-    st.positions = con.project_normal(st.positions + con.project_tangent(st.positions, k),
-                                      con.size(st, st.vertex_replica))
+    size = con.size(st, st.vertex_replica)
+    st.positions = con.project_normal(st.positions + con.project_tangent(st.positions, k, size), size)
 
 
 # ------------------------------------------------------------------------- minimisations (GPU)

@@ -334,7 +334,7 @@ def test_gpu_refuses_surfaces_without_bending_kernels(surface):
         state = svm.init.random_tiling(64, seed=3, device="gpu")
         state.constraint = svm.constraints.Sphere(metric="flat")
         sim.state = state
-    with pytest.raises(ValueError, match="Bending on the GPU supports GeodesicSphere surfaces only"):
+    with pytest.raises(ValueError, match="Bending on the GPU supports GeodesicSphere, ImplicitSurface surfaces only"):
         sim.operations.forces.append(Bending(1.0))
 
 

@@ -145,9 +145,9 @@ def test_device_path_is_looked_up_once_and_gpu_surfaces_are_checked():
     assert vm.implementation("compute", cpu_state) == vm._compute_cpu
     assert vm.implementation("compute", cpu_state) is vm.implementation("compute", cpu_state)
     # a state on the GPU (only its device and surface matter here) on a surface the kernels do not know
-    fake = SimpleNamespace(device=Device("gpu", np), constraint=svm.constraints.Torus(3.0, 1.0))
-    with pytest.raises(ValueError, match=r"VertexModel on the GPU supports GeodesicSphere, PeriodicPlane surfaces only, but the "
-                                         r"state is on Torus\(major_radius=3, minor_radius=1\)"):
+    fake = SimpleNamespace(device=Device("gpu", np), constraint=svm.constraints.Sphere(metric="flat"))
+    with pytest.raises(ValueError, match=r"VertexModel on the GPU supports GeodesicSphere, PeriodicPlane, ImplicitSurface "
+                                         r"surfaces only, but the state is on Sphere\(metric='flat'\)"):
         vm.implementation("compute", fake)
     sphere = SimpleNamespace(device=Device("gpu", np), constraint=svm.constraints.Sphere())
     assert vm.implementation("compute", sphere) == vm._compute_gpu

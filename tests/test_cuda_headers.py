@@ -178,7 +178,7 @@ class Harness:
 
     @staticmethod
     def _size(state):
-        return np.ascontiguousarray(state.constraint.size_np(state), dtype=np.float64)
+        return np.ascontiguousarray(state.constraint.kernel_size(state), dtype=np.float64)
 
     def cells(self, surface, state):
         """Surface::cell_measures per cell: (area, perimeter, (area_unit, length_unit))."""
@@ -233,7 +233,9 @@ class Harness:
         out = np.empty((state.n_cells, 3))
         getattr(self.lib, f"h_{surface}_cell_normals")(ctypes.c_long(state.n_cells), self._p(self._vec(state.positions)),
                                                        self._p(cv), self._p(self._i32(state.cell_sides)),
-                                                       ctypes.c_int(cv.shape[1]), self._p(out))
+                                                       self._p(self._i32(state.cell_replica)),
+                                                       self._p(self._size(state)), ctypes.c_int(cv.shape[1]),
+                                                       self._p(out))
         return out
 
 

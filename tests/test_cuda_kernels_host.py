@@ -65,9 +65,8 @@ def host_gpu(kernels, monkeypatch):
     """The forces' GPU paths with cupy's allocations from NumPy and the kernels from the host build."""
     monkeypatch.setitem(sys.modules, "cupy", types.SimpleNamespace(empty=np.empty, zeros=np.zeros, empty_like=np.empty_like))
     functions = types.SimpleNamespace(get_function=lambda name: name)
-    monkeypatch.setattr(bending, "load_module", lambda path: functions)
-    monkeypatch.setattr(vertex_model, "surface_kernels",
-                        lambda path, state: (functions, state.size))
+    for module in (bending, vertex_model):
+        monkeypatch.setattr(module, "surface_kernels", lambda path, state: (functions, state.size))
     for module in (bending, vertex_model):
         monkeypatch.setattr(module, "launch", lambda kernel, n, args: kernels.launch(kernel, n, *args))
 

@@ -206,7 +206,8 @@ def test_gpu_kernels_refuse_the_flat_metric(operation, name):
     """Checked on a State whose device says GPU (only its device and surface matter here)."""
     state = SimpleNamespace(device=Device("gpu", np), constraint=Sphere(metric="flat"))
     with pytest.raises(ValueError, match=rf"{type(operation).__name__} on the GPU supports GeodesicSphere, "
-                                         r"PeriodicPlane surfaces only, but the state is on Sphere\(metric='flat'\); "
+                                         r"PeriodicPlane, ImplicitSurface surfaces only, but the state is on "
+                                         r"Sphere\(metric='flat'\); "
                                          r"use device='cpu'"):
         operation.implementation(name, state)
     geodesic = SimpleNamespace(device=Device("gpu", np), constraint=Sphere())

@@ -264,14 +264,13 @@ def test_t1_flip_across_the_boundary_rotates_about_the_midpoint():
 def test_gpu_paths_serve_the_plane_and_refuse_other_surfaces():
     """The CUDA paths are compiled per surface (geometry/surface.cuh): the plane binds them, a
     surface without kernels is refused naming the ones that have them."""
-    from spherevm.constraints.torus import Torus
     plane = SimpleNamespace(device=Device("gpu", np), constraint=PeriodicPlane())
-    torus = SimpleNamespace(device=Device("gpu", np), constraint=Torus(3.0, 1.0))
+    flat = SimpleNamespace(device=Device("gpu", np), constraint=svm.constraints.Sphere(metric="flat"))
     for op, name in ((VertexModel(), "compute"), (FIRE(), "move"), (Brownian(dt=0.01, T=0.1), "step"),
                      (T1(), "update")):
         assert op.implementation(name, plane).__name__ == f"_{name}_gpu"
-        with pytest.raises(ValueError, match="Sphere, PeriodicPlane surfaces only.*Torus"):
-            op.implementation(name, torus)
+        with pytest.raises(ValueError, match="Sphere, PeriodicPlane, ImplicitSurface surfaces only.*metric='flat'"):
+            op.implementation(name, flat)
 
 
 # ------------------------------------------------------------------ GSD

@@ -1,5 +1,5 @@
-"""The periodic plane on the GPU (the kernels compiled with -DSVM_SURFACE_PLANE) against the NumPy
-path: forces and energies, FIRE with T1, T1 flip for flip across the boundary, Brownian and Active
+"""The periodic plane on the GPU (the kernels compiled after its device code, PlaneSurface) against
+the NumPy path: forces and energies, FIRE with T1, T1 flip for flip across the boundary, Brownian and Active
 dynamics with T1 on the same Philox stream, narrowing, GSD, a planar rigidity sweep and the command
 line. Skipped without CuPy and a GPU (conftest.py); the plane's device header is checked on the CPU
 by tests/test_cuda_headers.py."""
@@ -7,8 +7,8 @@ import json
 
 import numpy as np
 import pytest
-from conftest import (assert_gpu_force_matches_numpy, dynamics_simulation, kick_on_surface, relative_gap,
-                      t1_simulations)
+from conftest import (assert_brownian_with_t1_matches_numpy, assert_gpu_force_matches_numpy, assert_t1_round_matches_numpy,
+                      dynamics_simulation, relative_gap, t1_simulations)
 
 import spherevm as svm
 from spherevm import cli, sweeps
@@ -104,17 +104,8 @@ def test_planar_t1_passes_match_numpy_flip_for_flip():
     sims = t1_simulations(state, threshold=0.3, new_length=0.45, max_flip_backs=10 ** 6)
     across = 0
     for _ in range(40):
-        kick = rng.normal(scale=0.06, size=state.positions.shape)
-        for sim in sims.values():
-            kick_on_surface(sim, kick)
-            sim.run_updaters()
-        c, g = sims["cpu"], sims["gpu"]
-        assert np.array_equal(g.log("t1_flips"), c.log("t1_flips"))
-        assert np.array_equal(g.log("t1_refused"), c.log("t1_refused"))
-        assert np.array_equal(_table(g.state), _table(c.state))
-        assert np.array_equal(g.state.vertex_cells.get(), c.state.vertex_cells)
-        assert _gap(g.state, c.state) <= 1e-12
-        cs = c.state
+        assert_t1_round_matches_numpy(sims, rng.normal(scale=0.06, size=state.positions.shape), _gap)
+        cs = sims["cpu"].state
         raw = cs.positions[cs.vertex_neighbors, :2] - cs.positions[:, None, :2]
         across += int((np.abs(raw) > cs.box_np()[cs.vertex_replica][:, None] / 2).any(axis=-1).sum())
     assert int(sims["cpu"].log("t1_total_flips").sum()) > 200 and across > 0
@@ -124,17 +115,7 @@ def test_planar_t1_passes_match_numpy_flip_for_flip():
 
 # ------------------------------------------------------------------------------------ dynamics
 def test_planar_brownian_with_t1_matches_numpy_for_1000_steps():
-    state = _boxes(128, 2, seed=12)
-    cpu = dynamics_simulation(state, "cpu", Brownian(dt=0.01, T=2e-3))
-    gpu = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=2e-3))
-    cpu.run(1000)
-    gpu.run(1000)
-    flips = cpu.log("t1_total_flips")
-    assert flips.sum() > 0 and np.array_equal(gpu.log("t1_total_flips"), flips)
-    assert np.array_equal(_table(gpu.state), _table(cpu.state))
-    assert np.array_equal(gpu.state.vertex_neighbors.get(), cpu.state.vertex_neighbors)
-    assert _gap(gpu.state, cpu.state) <= 1e-9
-    gpu.state.validate(orientation=False)
+    assert_brownian_with_t1_matches_numpy(_boxes(128, 2, seed=12), _gap)
 
 
 @pytest.mark.parametrize("directors", ["cell", "vertex"])

@@ -20,7 +20,6 @@ from spherevm.plugins.updaters import T1
 from spherevm.testing import check_force
 
 EXAMPLE = pathlib.Path(__file__).parent / "plugin_example"
-GPU_LATER = "implicit surfaces run on device='cpu'; their CUDA kernels are the next issue"
 
 
 @pytest.fixture
@@ -41,15 +40,11 @@ def surface(request):
     return SURFACES[request.param]()
 
 
-def _cpu_only(device):
-    if device == "gpu":
-        pytest.skip(GPU_LATER)
-
-
 def _distance(state):
     con = state.constraint
     size = con.size(state, state.vertex_replica)
-    return np.abs(con.distance_to_surface(state.positions, size)) / con.length_scale(size)
+    distance = np.abs(con.distance_to_surface(state.positions, size)) / con.length_scale(size)
+    return state.device.to_numpy(distance)
 
 
 # ------------------------------------------------------------------ the surfaces themselves
@@ -160,8 +155,7 @@ def test_torus_cells_at_the_inner_equator_are_simple_polygons():
 # ------------------------------------------------------------------ forces
 def test_forces_are_minus_the_gradient_and_tangent(surface, device):
     """Per-cell parameters; the torus, the ellipsoid, and the periodic bump and sinusoid, where cells
-    straddle the box's edges (some do in these tilings: checked)."""
-    _cpu_only(device)
+    straddle the box's edges (some do in these tilings: checked); on the GPU its kernels."""
     s = svm.init.random_tiling(60, replicas=2, seed=3, surface=surface)
     if surface.periodic:
         x = s.positions[s.cell_vertices[:, :5]]
@@ -169,7 +163,7 @@ def test_forces_are_minus_the_gradient_and_tangent(surface, device):
     rng = np.random.default_rng(1)
     vm = VertexModel(kA=rng.uniform(0.5, 2, s.n_cells), kP=rng.uniform(0.5, 2, s.n_cells), A0=1.0,
                      P0=rng.uniform(3.4, 4.0, s.n_cells))
-    check_force(vm, s, samples=12, h=1e-5).assert_ok()
+    check_force(vm, s.to(device), samples=12, h=1e-5).assert_ok()
 
 
 def test_forces_on_cells_straddling_the_box(sinusoid):
@@ -220,7 +214,6 @@ def test_torus_rotation_and_bump_translation_are_symmetries():
 
 # ------------------------------------------------------------------ operations
 def test_fire_and_t1_keep_every_vertex_on_the_surface(surface, device):
-    _cpu_only(device)
     sim = svm.Simulation(device=device)
     sim.state = svm.init.random_tiling(60, replicas=2, seed=2, surface=surface)
     sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.9))
@@ -230,7 +223,7 @@ def test_fire_and_t1_keep_every_vertex_on_the_surface(surface, device):
     for _ in range(60):
         sim.run(1)
         assert _distance(sim.state).max() < 1e-12
-        energy.append(sim.log("energy").copy())
+        energy.append(np.array(sim.log("energy")))
     s = sim.state
     assert np.all(energy[-1] < energy[0])
     s.validate()
@@ -240,7 +233,6 @@ def test_fire_and_t1_keep_every_vertex_on_the_surface(surface, device):
 
 
 def test_brownian_dynamics_runs_with_t1(device):
-    _cpu_only(device)
     sim = svm.Simulation(device=device, seed=3)
     sim.state = svm.init.random_tiling(60, seed=2, surface=Torus(3.0, 1.0))
     sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
@@ -254,13 +246,31 @@ def test_brownian_dynamics_runs_with_t1(device):
 @pytest.mark.parametrize("operation, name", [(VertexModel(), "compute"), (FIRE(dt=0.01), "move"),
                                              (Brownian(dt=0.01, T=0.1), "step"), (T1(), "update")])
 @pytest.mark.parametrize("make", [lambda: Torus(3, 1), lambda: Ellipsoid(1, 2, 3), lambda: GaussianBump(1, 1, 10)])
-def test_gpu_kernels_refuse_implicit_surfaces(operation, name, make):
-    """Checked on a State whose device says GPU (only its device and surface matter here)."""
-    con = make()
-    state = SimpleNamespace(device=Device("gpu", np), constraint=con)
-    with pytest.raises(ValueError, match=rf"{type(operation).__name__} on the GPU supports GeodesicSphere, "
-                                         rf"PeriodicPlane surfaces only, but the state is on {type(con).__name__}\("):
-        operation.implementation(name, state)
+def test_gpu_kernels_take_implicit_surfaces(operation, name, make):
+    """The GPU paths bind for the built-in implicit surfaces (their device code: Implicit<Shape> of
+    constraints/implicit.cuh); checked on a State whose device says GPU."""
+    state = SimpleNamespace(device=Device("gpu", np), constraint=make())
+    assert operation.implementation(name, state).__name__ == f"_{name}_gpu"
+
+
+def test_a_user_surface_without_device_code_is_refused_on_the_gpu():
+    """One line saying what to add (CUDA code for F and grad F) or to use the CPU."""
+    class Plain(ImplicitSurface):
+        size_names = ("radius",)
+
+        def F(self, x, size):
+            return (x * x).sum(axis=-1) - size[..., 0] ** 2
+
+        def grad_F(self, x, size):
+            return 2 * x
+
+    state = SimpleNamespace(device=Device("gpu", np), constraint=Plain())
+    message = (r"^Plain has no CUDA code to run on the GPU: give the class cuda_code \(a string\) or cuda_file \(a "
+               r"\.cuh path\) defining __device__ double F\(vec3 x, const double\* p\) and __device__ vec3 "
+               r"grad_F\(vec3 x, const double\* p\) \(docs/surfaces.md, 'On the GPU'\), or use device='cpu'$")
+    with pytest.raises(ValueError, match=message):
+        VertexModel().implementation("compute", state)
+    assert VertexModel().implementation("compute", SimpleNamespace(device=Device("cpu", np), constraint=Plain()))
 
 
 # ------------------------------------------------------------------ bad input
@@ -446,7 +456,6 @@ def test_t1_fuzzing_keeps_the_network_valid(surface):
 
 def test_active_directors_stay_in_the_tangent_planes(device):
     """Active cell directors live in the plane tangent at each cell's centre (normals from grad F)."""
-    _cpu_only(device)
     sim = svm.Simulation(device=device, seed=4)
     sim.state = svm.init.random_tiling(60, seed=2, surface=Ellipsoid(1.0, 1.5, 2.0))
     sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
@@ -454,7 +463,7 @@ def test_active_directors_stay_in_the_tangent_planes(device):
     sim.operations.integrator = active
     sim.run(20)
     s = sim.state
-    normal = s.constraint.cell_normals(s)
-    assert np.abs((active.directors * normal).sum(axis=1)).max() < 1e-12
-    assert np.allclose(np.linalg.norm(active.directors, axis=1), 1.0, rtol=1e-12)
+    normal, directors = s.device.to_numpy(s.constraint.cell_normals(s)), s.device.to_numpy(active.directors)
+    assert np.abs((directors * normal).sum(axis=1)).max() < 1e-12
+    assert np.allclose(np.linalg.norm(directors, axis=1), 1.0, rtol=1e-12)
     assert _distance(s).max() < 1e-12

@@ -263,10 +263,13 @@ def test_cuda_header_agrees_with_numpy(fold_header, surface, n_cells, seed, kick
 
 
 @pytest.mark.skipif(shutil.which("nvcc") is None, reason="no nvcc: the T1 kernels are compiled at run time by CuPy")
-@pytest.mark.parametrize("flags", [[], ["-DSVM_SURFACE_PLANE"]], ids=["sphere", "plane"])
-def test_t1_kernels_compile(tmp_path, flags):
-    kernel = PACKAGE / "plugins" / "updaters" / "t1.cu"
-    done = subprocess.run(["nvcc", "-ptx", "-std=c++17", *flags, f"-I{PACKAGE}", str(kernel), "-o",
+@pytest.mark.parametrize("surface", [svm.constraints.Sphere(), svm.constraints.PeriodicPlane()],
+                         ids=["sphere", "plane"])
+def test_t1_kernels_compile(tmp_path, surface):
+    """t1.cu after the surface's device code, as surface_kernels compiles it."""
+    source = tmp_path / "t1.cu"
+    source.write_text(surface.device_surface().prelude + (PACKAGE / "plugins" / "updaters" / "t1.cu").read_text())
+    done = subprocess.run(["nvcc", "-ptx", "-std=c++17", f"-I{PACKAGE}", str(source), "-o",
                            str(tmp_path / "t1.ptx")], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert pathlib.Path(tmp_path / "t1.ptx").stat().st_size > 0

@@ -63,9 +63,8 @@ def jittered(surface, n_cells, seed):
 @pytest.mark.parametrize("untangle", [0, 1])
 def test_a_warp_decides_every_candidate_as_one_thread_does(surface, untangle):
     import cupy as cp
-    defines = ("-DSVM_SURFACE_PLANE",) if surface == "plane" else ()
-    module = cp.RawModule(code=SOURCE, options=("-std=c++17", f"-I{PACKAGE}") + defines)
     state, pos, edge = jittered(surface, 300, seed=5)
+    module = cp.RawModule(code=state.constraint.device_surface().prelude + SOURCE, options=("-std=c++17", f"-I{PACKAGE}"))
     size = cp.asarray(np.asarray(state.box if surface == "plane" else state.radius, dtype=float))
     pos = cp.asarray(pos)
     vn, vc = cp.asarray(state.vertex_neighbors, dtype=cp.int32), cp.asarray(state.vertex_cells, dtype=cp.int32)

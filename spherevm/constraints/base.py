@@ -1,6 +1,8 @@
 """The interface every constraint surface implements."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 
@@ -20,6 +22,25 @@ class CellMeasures:
         if callable(self._center):
             self._center = self._center()
         return self._center
+
+
+@dataclass(frozen=True)
+class DeviceSurface:
+    """A surface's device code: CUDA ``source`` defining ``struct``, the functions
+    geometry/surface.cuh lists, which every kernel module compiled for the surface starts with
+    (:func:`spherevm.constraints.kernels.surface_kernels`); ``coef_width``: the doubles per cell of
+    the vertex model's coefficients its ``vertex_force`` reads; ``options``: compiler options of
+    every module compiled for it."""
+
+    source: str
+    struct: str
+    coef_width: int = 2
+    options: tuple = ()
+
+    @property
+    def prelude(self) -> str:
+        """The text a kernel module starts with: the source, then the struct named as ``SVM_SURFACE``."""
+        return f"{self.source}\n#define SVM_SURFACE {self.struct}\n"
 
 
 class Constraint:
@@ -70,6 +91,20 @@ class Constraint:
     def size_np(self, state):
         """Every replica's surface size as a NumPy array, ``(n_replicas, *size_shape)``."""
         return state.size_np()
+
+    # ------------------------------------------------------------------ the GPU
+    def device_surface(self):
+        """This surface's device code (:class:`DeviceSurface`) for the CUDA kernels, or None where
+        it runs on device="cpu" only (here)."""
+        return None
+
+    def has_device_code(self) -> bool:
+        """Whether :meth:`device_surface` gives code (the kernels compile for this surface)."""
+        return self.device_surface() is not None
+
+    def kernel_size(self, state):
+        """The per-replica size array the kernels take (``Surface::size``): the State's own here."""
+        return state.size
 
     # ------------------------------------------------------------------ files and pictures
     def display_extent(self, size) -> float:

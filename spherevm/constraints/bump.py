@@ -83,6 +83,7 @@ class GaussianBump(ImplicitSurface):
     size_names = ("Lx", "Ly", "height", "width")
     periodic = True
     euler_characteristic = 0
+    cuda_file = "bump.cuh"
 
     def __init__(self, height: float = 1.0, width: float = 1.0, box=None):
         b = np.broadcast_to(np.asarray(10.0 * float(width) if box is None else box, dtype=np.float64).reshape(-1), (2,))

@@ -43,6 +43,7 @@ class Ellipsoid(ImplicitSurface):
     name = "ellipsoid"
     size_names = ("a", "b", "c")
     euler_characteristic = 2
+    cuda_file = "ellipsoid.cuh"
 
     def __init__(self, a: float = 1.0, b: float = 1.0, c: float = 1.0):
         self.shape = tuple(self.check_size([a, b, c])[0])

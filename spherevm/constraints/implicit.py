@@ -19,6 +19,7 @@ from ..device import array_module
 from ..geometry import flat
 from ..geometry.sphere import _cross, _dot
 from .base import Constraint
+from . import implicit_device
 from .flat import FlatFacets
 
 #: the step, in units of the length scale, of the second difference that tells a smooth surface from
@@ -74,6 +75,11 @@ class ImplicitSurface(FlatFacets, Constraint):
     #: O(<A> curvature^2); a tiling covers the surface once when the sum is the area to within half
     #: of it (twice over it would be twice the area)
     cover_tolerance = 0.5
+    #: the GPU (constraints/implicit_device.py): CUDA code defining F and grad F, as a string or the
+    #: path of a .cuh file (relative to the class's module); True: it defines project too
+    cuda_code = None
+    cuda_file = None
+    cuda_projection = False
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -87,6 +93,18 @@ class ImplicitSurface(FlatFacets, Constraint):
     def grad_F(self, x, size):
         """``grad F`` (..., 3) at the points ``x``."""
         raise NotImplementedError(f"{type(self).__name__} must define grad_F(x, size)")
+
+    def device_surface(self):
+        """``Implicit<Shape>`` of this class's CUDA code (:func:`implicit_device.device_surface`);
+        ValueError, saying what to add, if it has none."""
+        return implicit_device.device_surface(self)
+
+    def has_device_code(self) -> bool:
+        return implicit_device.shape_code(type(self)) is not None
+
+    def kernel_size(self, state):
+        """Per replica the parameters, the length scale and half the area (:func:`implicit_device.kernel_size`)."""
+        return implicit_device.kernel_size(self, state)
 
     def length_scale(self, size):
         """A length per row of ``size`` (tolerances scale with it): the largest parameter."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..device import array_module
-from .base import CellMeasures, Constraint
+from .base import CellMeasures, Constraint, DeviceSurface
 
 
 def _wrap(xp, x, box):
@@ -41,6 +41,9 @@ class PlaneGeometry(CellMeasures):
         out = xp.zeros((len(self.area), 3))
         out[:, 2] = self.area
         return out
+
+#: the periodic plane's device code (geometry/surface.cuh's functions on minimum images)
+DEVICE_SURFACE = DeviceSurface('#include "constraints/plane.cuh"', "PlaneSurface")
 
 
 class PeriodicPlane(Constraint):
@@ -81,6 +84,10 @@ class PeriodicPlane(Constraint):
     def geodesic_offset(self, x, direction, distance, box):
         """The straight step ``x + distance direction``, wrapped into the box."""
         return self.project_normal(x + distance[..., None] * direction, box)
+
+    def device_surface(self):
+        """PlaneSurface (constraints/plane.cuh): minimum images in each replica's box."""
+        return DEVICE_SURFACE
 
     def chord_length(self, length, box):
         return length

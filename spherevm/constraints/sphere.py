@@ -7,7 +7,7 @@ import numpy as np
 
 from ..device import array_module, weighted_bincount
 from ..geometry import sphere as geo
-from .base import CellMeasures, Constraint
+from .base import CellMeasures, Constraint, DeviceSurface
 from .cell_rows import fan_rows, fold
 from .corners import corner_index, in_parallel
 from .flat import FlatFacets
@@ -47,6 +47,9 @@ def _cross(a, b):
 def _dot(a, b):
     # one fused pass (einsum), 1.7x to 2.6x faster than three products and two sums
     return array_module(a, b).einsum("ij,ij->j", a, b)
+
+#: the sphere's device code (geometry/surface.cuh's functions on the geodesic metric)
+DEVICE_SURFACE = DeviceSurface('#include "constraints/sphere.cuh"', "SphereSurface")
 
 
 class Sphere(Constraint):
@@ -111,6 +114,10 @@ class Sphere(Constraint):
     def polygon_area(self, points, radius) -> float:
         """The spherical polygon's area (:func:`spherevm.geometry.sphere.polygon_area`)."""
         return float(geo.polygon_area(geo.normalize(points), float(radius)))
+
+    def device_surface(self):
+        """SphereSurface (constraints/sphere.cuh), the geodesic metric; None under the flat metric."""
+        return DEVICE_SURFACE if self.metric == "geodesic" else None
 
     def chord_length(self, length, radius):
         """``2 R sin(L / 2R)`` (capped at the diameter)."""

@@ -29,6 +29,7 @@ class Torus(ImplicitSurface):
     name = "torus"
     size_names = ("major_radius", "minor_radius")
     euler_characteristic = 0
+    cuda_file, cuda_projection = "torus.cuh", True
 
     def __init__(self, major_radius: float = 3.0, minor_radius: float = 1.0):
         self.shape = tuple(self.check_size([major_radius, minor_radius])[0])

@@ -13,10 +13,23 @@ extern "C" __global__ void cell_measures(const double* __restrict__ pos, const i
                            area + c, perimeter + c);
 }
 
-#ifdef SVM_SURFACE_PLANE
 // Sets *open (a word of the replica summary, spherevm.simplicity.flag_open_cells) if a cell's
-// minimum-image edges do not add up to zero, relative to its box side, within `tolerance`
-// (simplicity.open_cells): an edge of it reached half the box. One thread a cell.
+// minimum-image edges (Surface::delta) do not add up to zero, relative to its box side
+// (Surface::period), within `tolerance` (simplicity.open_cells): an edge of it reached half the box.
+// One thread a cell; nothing on a surface without images (Surface::periodic false).
+template <class S>
+__device__ __forceinline__ void open_cell(const double* pos, const int* row, int n, typename S::Size s,
+                                          double tolerance, unsigned long long* open)
+{
+    if constexpr (S::periodic) {
+        auto b = S::period(s);
+        vec3 sum = v3(0.0, 0.0, 0.0);
+        for (int j = 0; j < n; ++j)
+            sum = sum + S::delta(load3(pos, row[j]), load3(pos, row[j + 1 < n ? j + 1 : 0]), s);
+        if (fabs(sum.x) / b.x > tolerance || fabs(sum.y) / b.y > tolerance) *open = 1ull;
+    }
+}
+
 extern "C" __global__ void open_cells(const double* __restrict__ pos, const int* __restrict__ cell_vertices,
                                       const int* __restrict__ cell_sides, const int* __restrict__ cell_replica,
                                       const double* __restrict__ size, int n_cells, int max_sides, double tolerance,
@@ -26,10 +39,6 @@ extern "C" __global__ void open_cells(const double* __restrict__ pos, const int*
     if (c >= n_cells) return;
     const int* row = cell_vertices + c * max_sides;
     int n = cell_sides[c];
-    box2 b = Surface::size(size, cell_replica[c]);
-    vec3 sum = v3(0.0, 0.0, 0.0);
-    for (int j = 0; j < n; ++j)
-        sum = sum + plane_edge(load3(pos, row[j]), load3(pos, row[j + 1 < n ? j + 1 : 0]), b);
-    if (fabs(sum.x) / b.x > tolerance || fabs(sum.y) / b.y > tolerance) *open = 1ull;
+    Surface::Size s = Surface::size(size, cell_replica[c]);
+    open_cell<Surface>(pos, row, n, s, tolerance, open);
 }
-#endif

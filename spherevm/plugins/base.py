@@ -84,6 +84,8 @@ class Operation(KeywordHints):
                 names = ", ".join(c.__name__ for c in supported)
                 raise ValueError(f"{type(self).__name__} on the GPU supports {names} surfaces only, but the "
                                  f"state is on {state.constraint!r}; use device='cpu' for this surface")
+            if state.device.is_gpu and supported is not None:
+                state.constraint.device_surface()   # a surface without device code says what to add
             bound[key] = getattr(self, f"_{name}_{state.device.name}")
         return bound[key]
 

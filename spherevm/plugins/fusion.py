@@ -29,7 +29,7 @@ A stage's CUDA type, by role:
   that ``takes_extra``: its ``vertex`` takes an ``Extra`` last, as the vertex model's) adds inside
   its vertex force, as the general kernels of the pair do.
 * ``"move"``: a run's integrator (``minimizer = False``): ``vertex(next, F, v, vc, s, r, timestep)``
-  and, where ``cell_phase``, ``cell(pos, cell_vertices, sides, max_sides, c, timestep)`` after every
+  and, where ``cell_phase``, ``cell(pos, cell_vertices, sides, max_sides, c, s, timestep)`` after every
   vertex moved; a minimiser (``minimizer = True``): its sums' ``terms``, ``control`` and ``vertex``
   (see ``plugins/integrators/fire_stage.cuh``).
 * ``"pass"``: an updater's topology pass, ``detect`` and ``settle`` (see

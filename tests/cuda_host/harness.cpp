@@ -7,7 +7,8 @@
 #include "cuda_host.h"
 
 #include "random_philox.cuh"
-#include "geometry/surface.cuh"   // geometry/sphere.cuh, geometry/plane.cuh and the two Surface structs
+#include "constraints/sphere.cuh"   // the two Surface structs (and geometry/sphere.cuh, geometry/plane.cuh)
+#include "constraints/plane.cuh"
 
 typedef unsigned int u32;
 typedef unsigned long long u64;
@@ -176,7 +177,7 @@ template <class S>
 static void surface_project(long n, const double* y, const int* rep, const double* size, double* normal, double* placed)
 {
     for (long i = 0; i < n; ++i) {
-        const vec3 m = S::normal(load3(y, i));
+        const vec3 m = S::normal(load3(y, i), S::size(size, rep[i]));
         store3(normal, i, m);
         store3(placed, i, S::place(load3(y, i), m, S::size(size, rep[i])));
     }
@@ -200,9 +201,10 @@ static void surface_t1(long n, const double* pos, const int* quad, const int* re
 // per cell: cell_normal
 template <class S>
 static void surface_cell_normals(long n_cells, const double* pos, const int* cell_vertices, const int* cell_sides,
-                                 int max_sides, double* out)
+                                 const int* cell_replica, const double* size, int max_sides, double* out)
 {
-    for (long c = 0; c < n_cells; ++c) store3(out, c, S::cell_normal(pos, cell_vertices + c * max_sides, cell_sides[c]));
+    for (long c = 0; c < n_cells; ++c)
+        store3(out, c, S::cell_normal(pos, cell_vertices + c * max_sides, cell_sides[c], S::size(size, cell_replica[c])));
 }
 
 #define EXPORT_SURFACE(NAME, S)                                                                                     \
@@ -221,8 +223,9 @@ static void surface_cell_normals(long n_cells, const double* pos, const int* cel
     extern "C" void h_##NAME##_t1(long n, const double* p, const int* q, const int* r, const double* sz,              \
                                   const double* full, double* x, double* y)                                           \
     { surface_t1<S>(n, p, q, r, sz, full, x, y); }                                                                  \
-    extern "C" void h_##NAME##_cell_normals(long n, const double* p, const int* cv, const int* cs, int ms, double* o) \
-    { surface_cell_normals<S>(n, p, cv, cs, ms, o); }
+    extern "C" void h_##NAME##_cell_normals(long n, const double* p, const int* cv, const int* cs, const int* cr,     \
+                                            const double* sz, int ms, double* o)                                      \
+    { surface_cell_normals<S>(n, p, cv, cs, cr, sz, ms, o); }
 
 EXPORT_SURFACE(sphere, SphereSurface)
 EXPORT_SURFACE(plane, PlaneSurface)

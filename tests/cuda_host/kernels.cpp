@@ -6,6 +6,8 @@
  */
 #include "cuda_host.h"
 #include "device_common.cuh"
+#include "constraints/sphere.cuh"   // the sphere's device code first, as surface_kernels compiles it
+#define SVM_SURFACE SphereSurface
 #include "plugins/forces/vertex_model.cu"
 #include "plugins/forces/bending.cu"
 

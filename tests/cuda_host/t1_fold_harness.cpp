@@ -2,8 +2,12 @@
 // (its fold rule and its bow-tie test) and Surface::t1_positions (geometry/surface.cuh), as t1_detect
 // uses them, on the CPU. Built and
 // loaded by tests/test_t1_fold.py as harness.cpp is by tests/test_cuda_headers.py, once per surface
-// (t1_fold_harness_plane.cpp defines SVM_SURFACE_PLANE first).
+// (t1_fold_harness_plane.cpp names the plane's surface first).
 #include "cuda_host.h"
+#ifndef SVM_SURFACE   // the sphere, unless a wrapper named another surface (as surface_kernels does)
+#include "constraints/sphere.cuh"
+#define SVM_SURFACE SphereSurface
+#endif
 
 #include "plugins/updaters/t1_fold.cuh"
 

@@ -20,6 +20,13 @@ class Sinusoid(ImplicitSurface):
     size_names = ("Lx", "Ly", "amplitude")   # per replica, all lengths
     periodic = True                          # the first two are the periodic box
     euler_characteristic = 0
+    # F and grad F in CUDA (p: the replica's Lx, Ly, amplitude): the same formulas on the GPU
+    cuda_code = r"""
+__device__ inline double F(vec3 x, const double* p) { return x.z - p[2] * sin(6.283185307179586 * x.x / p[0]); }
+__device__ inline vec3 grad_F(vec3 x, const double* p) {
+    return v3(-p[2] * (6.283185307179586 / p[0]) * cos(6.283185307179586 * x.x / p[0]), 0.0, 1.0);
+}
+"""
 
     def __init__(self, amplitude=1.0, box=10.0):
         lx, ly = np.broadcast_to(np.asarray(box, dtype=float).reshape(-1), (2,))

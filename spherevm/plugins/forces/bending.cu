@@ -37,6 +37,35 @@ extern "C" __global__ void bending_cell_normals(
     terms.cell(pos, cell_vertices + c * (long)max_sides, cell_sides[c], c);
 }
 
+// On a surface of flat facets (Surface::coef_width 4, the implicit surfaces): cell c's unit normal
+// and 1/|2a| from its vector area a (Surface::facet: nearest images on a periodic surface), one
+// thread a cell; nothing elsewhere (the sphere's normals come with BendingTerms::cell).
+template <class S>
+__device__ __forceinline__ void bending_facet_normal(const double* pos, const int* row, int n, typename S::Size s,
+                                                     double* normal, double* inv_area)
+{
+    if constexpr (S::coef_width == 4) {
+        double A, P;
+        vec3 a;
+        S::facet(pos, row, n, s, &A, &P, &a);
+        vec3 twice = 2.0 * a;
+        double k = rsqrt(dot3(twice, twice));
+        store3(normal, 0, k * twice);
+        *inv_area = k;
+    }
+}
+
+extern "C" __global__ void bending_facet_normals(
+    const double* __restrict__ pos, const int* __restrict__ cell_vertices, const int* __restrict__ cell_sides,
+    const int* __restrict__ cell_replica, const double* __restrict__ size, int n_cells, int max_sides,
+    double* __restrict__ normal, double* __restrict__ inv_area)
+{
+    long c = (long)blockIdx.x * blockDim.x + threadIdx.x;
+    if (c >= n_cells) return;
+    bending_facet_normal<Surface>(pos, cell_vertices + c * (long)max_sides, cell_sides[c],
+                                  Surface::size(size, cell_replica[c]), normal + 3 * c, inv_area + c);
+}
+
 // One thread per cell, over its neighbours (bending_neighbour_sum): the cell's energy (half of each
 // pair, B/4 |n_i - n_j|^2), the per-replica sum, and w_i = (dE/da_i) / 2 (bending_w). ADD (fused):
 // the energy is added to what the vertex model's cell kernel wrote and the sum is of both (that

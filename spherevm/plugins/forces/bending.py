@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ...constraints.kernels import GeodesicSphere
+from ...constraints.kernels import BENDING_SURFACES, FUSED_BENDING_SURFACES, surface_kernels
 from ...constraints.cell_rows import cell_blocks, fold, row_table
 from ...constraints.corners import in_parallel
-from ...device import array_module, launch, load_module, segment_sums, weighted_bincount
+from ...device import array_module, launch, segment_sums, weighted_bincount
 from ...kernel_struct import KernelStruct
 from ..base import Force, ForceResult
 from ..fusion import FusedStage, overrides
@@ -140,6 +140,12 @@ def _bending_stiffness(name, value):
     return arr
 
 
+def _facets(state) -> bool:
+    """Whether ``state``'s surface measures cells with flat facets on the device (per-cell vertex-model
+    coefficients (dE/dA a / A, dE/dP): DeviceSurface.coef_width 4)."""
+    return state.constraint.device_surface().coef_width == 4
+
+
 class Bending(Force):
     """``E_b = B sum over neighbouring cell pairs (i, j) of (1 - n_i . n_j)``, each pair once.
 
@@ -159,7 +165,7 @@ class Bending(Force):
         Not used (forces are evaluated whenever the integrator needs them)."""
 
     narrowable = True
-    gpu_surfaces = (GeodesicSphere,)
+    gpu_surfaces = BENDING_SURFACES
     surface_needs = ("cell_geometry", "shape_gradient")
 
     B = Parameter(_bending_stiffness)
@@ -237,7 +243,7 @@ class Bending(Force):
         return self._stage(simulation, extra=True) if type(other) is VertexModel else None
 
     def _stage(self, simulation, extra):
-        if not isinstance(simulation.state.constraint, self.gpu_surfaces) or \
+        if not isinstance(simulation.state.constraint, FUSED_BENDING_SURFACES) or \
                 overrides(self, Bending, ("compute", "_compute_gpu", "combined", "_combined_gpu")):
             return None
         return FusedStage("force", "BendingStage", '#include "plugins/forces/bending_stage.cuh"', self.FUSED_ARGS,
@@ -264,7 +270,9 @@ class Bending(Force):
         """Three kernels (bending.cu): area vectors and normals per cell; energy and dE/da per cell
         over its neighbours; forces per vertex over its three corners."""
         import cupy as cp
-        module = load_module(_KERNELS)
+        if _facets(state):
+            return self._facets_gpu(None, state)
+        module = surface_kernels(_KERNELS, state)[0]
         nc, nv = state.n_cells, state.n_vertices
         normal, inv_area = cp.empty((nc, 3)), cp.empty(nc)
         launch(module.get_function("bending_cell_normals"), nc,
@@ -283,18 +291,48 @@ class Bending(Force):
         vertex model's and sums both, and the vertex model's vertex kernel adds the bending gradient
         before its tangent projection."""
         import cupy as cp
+        if _facets(state):
+            return self._facets_gpu(model, state)
         kA, kP, A0, P0 = model.device_parameters(state)
-        module = load_module(_KERNELS)
+        module, size = surface_kernels(_KERNELS, state)
         nc, nv = state.n_cells, state.n_vertices
         coef, cell_energy, energy = cp.empty((nc, 2)), cp.empty(nc), cp.empty(state.n_replicas)
         normal, inv_area = cp.empty((nc, 3)), cp.empty(nc)
         launch(module.get_function("vm_bending_cell_geometry"), nc,
-               (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, state.size,
+               (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, size,
                 np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, cell_energy, normal, inv_area))
         w = self._cell_terms_gpu(state, module, normal, inv_area, cell_energy, energy, "bending_cell_terms_add")
         forces = cp.empty_like(state.positions)
         launch(module.get_function("vm_bending_vertex_forces"), nv,
-               (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, state.size,
+               (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, size,
+                np.int32(nv), coef, w, forces))
+        return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
+
+    def _facets_gpu(self, model, state) -> ForceResult:
+        """On a surface of flat facets (the implicit surfaces: per-cell coefficients (dE/dA a / A,
+        dE/dP), Surface::coef_width 4): the vertex model's cell kernel where ``model`` is given, each
+        cell's normal from its vector area (bending_facet_normals), the bending terms over the
+        neighbours added to its energies, dE/da = 2 w added to the coefficients, and the vertex
+        model's vertex kernel (Implicit::vertex_force: the flat-facet gradient of both)."""
+        import cupy as cp
+        module, size = surface_kernels(_KERNELS, state)
+        nc, nv = state.n_cells, state.n_vertices
+        coef, cell_energy, energy = cp.zeros((nc, 4)), cp.empty(nc), cp.empty(state.n_replicas)
+        normal, inv_area = cp.empty((nc, 3)), cp.empty(nc)
+        if model is not None:
+            kA, kP, A0, P0 = model.device_parameters(state)
+            launch(module.get_function("vm_bending_cell_geometry"), nc,
+                   (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, size,
+                    np.int32(nc), np.int32(state.max_sides), kA, kP, A0, P0, coef, cell_energy, normal, inv_area))
+        launch(module.get_function("bending_facet_normals"), nc,
+               (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, size, np.int32(nc),
+                np.int32(state.max_sides), normal, inv_area))
+        w = self._cell_terms_gpu(state, module, normal, inv_area, cell_energy, energy,
+                                 "bending_cell_terms" if model is None else "bending_cell_terms_add")
+        coef[:, :3] += 2.0 * w
+        forces = cp.empty_like(state.positions)
+        launch(module.get_function("vm_bending_vertex_forces"), nv,
+               (state.positions, state.vertex_neighbors, state.vertex_cells, state.vertex_replica, size,
                 np.int32(nv), coef, w, forces))
         return ForceResult(forces=forces, energy=energy, cell_energy=cell_energy)
 

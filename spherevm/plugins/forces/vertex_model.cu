@@ -1,5 +1,5 @@
 // Vertex-model energy and forces: the CUDA path of vertex_model.py, compiled once per surface
-// (geometry/surface.cuh: the sphere, or the periodic plane with -DSVM_SURFACE_PLANE). The kernel
+// (geometry/surface.cuh: the surface whose device code the module starts with). The kernel
 // bodies are in vertex_model.cuh (bending.cu fuses its terms into the same bodies on the sphere).
 #include "plugins/forces/vertex_model.cuh"
 

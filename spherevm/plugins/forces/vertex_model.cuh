@@ -22,6 +22,39 @@ __device__ __forceinline__ double vm_cell_terms(double A, double P, long c, Surf
     return kA[c] * dA * dA + kP[c] * dP * dP;
 }
 
+// The same for a cell of vector area a on a surface of flat facets (Surface::coef_width 4): its
+// coefficients (dE/dA a / A, dE/dP), a / A taken as 0 for a cell of zero area (FlatFacets.shape_gradient).
+__device__ __forceinline__ double vm_facet_terms(double A, double P, vec3 a, long c, const double* kA,
+                                                 const double* kP, const double* A0, const double* P0, double* coef)
+{
+    double dA = A - A0[c], dP = P - P0[c];
+    double per_area = A != 0.0 ? 2.0 * kA[c] * dA / A : 0.0;
+    coef[4 * c] = per_area * a.x;
+    coef[4 * c + 1] = per_area * a.y;
+    coef[4 * c + 2] = per_area * a.z;
+    coef[4 * c + 3] = 2.0 * kP[c] * dP;
+    return kA[c] * dA * dA + kP[c] * dP * dP;
+}
+
+// Cell c on surface S: its measures, its energy (returned) and its coefficients (vm_cell_terms, or
+// vm_facet_terms where S::coef_width is 4: the flat-facet metric of implicit surfaces).
+template <class S, class Extra>
+__device__ __forceinline__ double vm_cell(const double* pos, const int* row, int n, long c, typename S::Size s,
+                                          const double* kA, const double* kP, const double* A0, const double* P0,
+                                          double* coef, const Extra& extra)
+{
+    double A, P;
+    if constexpr (S::coef_width == 2) {
+        S::cell_measures(pos, row, n, s, &A, &P);
+        extra.cell(pos, row, n, c);
+        return vm_cell_terms(A, P, c, s, kA, kP, A0, P0, coef);
+    } else {
+        vec3 a;
+        S::facet(pos, row, n, s, &A, &P, &a);
+        return vm_facet_terms(A, P, a, c, kA, kP, A0, P0, coef);
+    }
+}
+
 // One thread per cell: area and perimeter (Surface::cell_measures), the cell's energy, the
 // per-replica energy sum (device_common.cuh: `sums` over the cells; left to a later kernel of the
 // extra's where Extra::sums_energy), and the two coefficients the vertex kernel needs (vm_cell_terms).
@@ -42,10 +75,7 @@ __device__ __forceinline__ void vm_cell_geometry_body(
         Surface::Size s = Surface::size(size, rep);
         const int* row = cell_vertices + c * max_sides;
         int n = cell_sides[c];
-        double A, P;
-        Surface::cell_measures(pos, row, n, s, &A, &P);
-        extra.cell(pos, row, n, c);
-        e = vm_cell_terms(A, P, c, s, kA, kP, A0, P0, coef);
+        e = vm_cell<Surface>(pos, row, n, c, s, kA, kP, A0, P0, coef, extra);
         cell_energy[c] = e;
     }
     if (!Extra::sums_energy) segment_sum(e, rep, sums, replica_energy);

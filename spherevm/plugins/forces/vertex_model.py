@@ -217,7 +217,8 @@ class VertexModel(Force):
             return None
         kA, kP, A0, P0 = self.device_parameters(simulation.state)
         return FusedStage("force", "VertexModelStage", '#include "plugins/forces/vertex_model_stage.cuh"',
-                          self.FUSED_ARGS, dict(kA=kA, kP=kP, A0=A0, P0=P0), cell_doubles=2, measures=True,
+                          self.FUSED_ARGS, dict(kA=kA, kP=kP, A0=A0, P0=P0),
+                          cell_doubles=simulation.state.constraint.device_surface().coef_width, measures=True,
                           takes_extra=True)
 
     def _compute_gpu(self, state) -> ForceResult:
@@ -227,7 +228,7 @@ class VertexModel(Force):
         kA, kP, A0, P0 = self.device_parameters(state)
         module, size = surface_kernels(_KERNELS, state)
         nc, nv = state.n_cells, state.n_vertices
-        coef, cell_energy = cp.empty((nc, 2)), cp.empty(nc)
+        coef, cell_energy = cp.empty((nc, state.constraint.device_surface().coef_width)), cp.empty(nc)
         energy = cp.empty(state.n_replicas)
         launch(module.get_function("vm_cell_geometry"), nc,
                (state.positions, state.cell_vertices, state.cell_sides, state.cell_replica, size,

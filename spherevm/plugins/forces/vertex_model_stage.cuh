@@ -10,14 +10,19 @@
 #include "plugins/forces/vertex_model.cuh"
 
 struct VertexModelStage {
-    static constexpr int cell_doubles = 2;     // coef: 2 kA (A - A0) and 2 kP (P - P0), in surface units
+    // coef: 2 kA (A - A0) and 2 kP (P - P0), in surface units; on flat facets (dE/dA a / A, dE/dP)
+    static constexpr int cell_doubles = Surface::coef_width;
     static constexpr bool measures = true;     // takes each cell's area and perimeter
     VertexModelArgs a;
 
-    __device__ __forceinline__ void cell(double A, double P, long c, Surface::Size s, double* coef, const double*,
-                                         const int*, int) const
+    // on flat facets (Surface::coef_width 4) the cell's vector area too: vm_cell measures it again
+    __device__ __forceinline__ void cell(double A, double P, long c, Surface::Size s, double* coef, const double* pos,
+                                         const int* row, int n) const
     {
-        vm_cell_terms(A, P, c, s, a.kA, a.kP, a.A0, a.P0, coef);
+        if constexpr (Surface::coef_width == 2)
+            vm_cell_terms(A, P, c, s, a.kA, a.kP, a.A0, a.P0, coef);
+        else
+            vm_cell<Surface>(pos, row, n, c, s, a.kA, a.kP, a.A0, a.P0, coef, NoExtra());
     }
 
     template <class Extra = NoExtra>

@@ -24,11 +24,12 @@ extern "C" __global__ void brownian_move(
 extern "C" __global__ void active_cell_directors(
     const double* __restrict__ pos, const int* __restrict__ cell_vertices, const int* __restrict__ cell_sides,
     double* __restrict__ directors, int n_cells, int max_sides, double rot_amp, unsigned int seed,
-    unsigned long long step0, const unsigned long long* __restrict__ step_add)
+    unsigned long long step0, const unsigned long long* __restrict__ step_add, const int* __restrict__ cell_replica,
+    const double* __restrict__ size)
 {
     long c = (long)blockIdx.x * blockDim.x + threadIdx.x;
     if (c >= n_cells) return;
     unsigned long long timestep = step0 + *step_add;
-    vec3 m = Surface::cell_normal(pos, cell_vertices + c * max_sides, cell_sides[c]);
+    vec3 m = Surface::cell_normal(pos, cell_vertices + c * max_sides, cell_sides[c], Surface::size(size, cell_replica[c]));
     store3(directors, c, transport_and_rotate(load3(directors, c), m, rot_amp, seed, timestep, (unsigned int)c));
 }

@@ -35,7 +35,7 @@ __device__ __forceinline__ void brownian_vertex(
     unsigned int seed, unsigned long long timestep, unsigned long long* error)
 {
     vec3 x = load3(pos, i);
-    vec3 n = Surface::normal(x);
+    vec3 n = Surface::normal(x, s);
     vec3 drift = mu * load3(forces, i);
     if (mode == 1) {
         vec3 p = load3(directors, vertex_cells[3 * i]) + load3(directors, vertex_cells[3 * i + 1]);
@@ -57,7 +57,7 @@ __device__ __forceinline__ void brownian_vertex(
         return;
     }
     vec3 y = x + dr;
-    vec3 m = Surface::normal(y);
+    vec3 m = Surface::normal(y, s);
     store3(pos, i, Surface::place(y, m, s));
     if (mode == 2)
         store3(directors, i, transport_and_rotate(load3(directors, i), m, rot_amp, seed, timestep, (unsigned int)i));

@@ -114,7 +114,8 @@ class Brownian(Integrator):
         if self._mode == 1:
             launch(module.get_function("active_cell_directors"), state.n_cells,
                    (state.positions, state.cell_vertices, state.cell_sides, self.directors, np.int32(state.n_cells),
-                    np.int32(state.max_sides), np.float64(rot_amp), np.uint32(simulation.seed), step0, step_add))
+                    np.int32(state.max_sides), np.float64(rot_amp), np.uint32(simulation.seed), step0, step_add,
+                    state.cell_replica, size))
         simulation.state_changed()
 
     def capture_ready(self, simulation, steps):

@@ -23,9 +23,9 @@ struct BrownianStage {
 
     // Cell c's director, after every vertex moved (pos: the new positions), as active_cell_directors.
     __device__ __forceinline__ void cell(const double* pos, const int* cell_vertices, const int* sides, int max_sides,
-                                         long c, unsigned long long timestep) const
+                                         long c, Surface::Size s, unsigned long long timestep) const
     {
-        vec3 m = Surface::cell_normal(pos, cell_vertices + c * max_sides, sides[c]);
+        vec3 m = Surface::cell_normal(pos, cell_vertices + c * max_sides, sides[c], s);
         store3(a.directors, c, transport_and_rotate(load3(a.directors, c), m, a.rot_amp, a.seed, timestep,
                                                     (unsigned int)c));
     }

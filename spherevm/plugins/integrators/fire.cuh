@@ -51,7 +51,7 @@ __device__ __forceinline__ void fire_move_vertex(double* pos, double* vel, const
         return;
     }
     vec3 x = add3_rn(load3(pos, i), hw);
-    vec3 n = Surface::normal(x);
+    vec3 n = Surface::normal(x, s);
     x = Surface::place(x, n, s);
     w = fma3_rn(-dot3(w, n), n, w);
     store3(pos, i, x);

@@ -12,7 +12,7 @@
 // turn clockwise about the normal, i.e. two of the three turns between consecutive edges are negative.
 __device__ __forceinline__ bool t1_inverted(vec3 w, vec3 n0, vec3 n1, vec3 n2, Surface::Size s)
 {
-    vec3 nrm = Surface::normal(w);
+    vec3 nrm = Surface::normal(w, s);
     vec3 e0 = Surface::delta(w, n0, s), e1 = Surface::delta(w, n1, s), e2 = Surface::delta(w, n2, s);
     int negative = (dot3(nrm, cross3(e0, e1)) < 0.0 ? 1 : 0) + (dot3(nrm, cross3(e1, e2)) < 0.0 ? 1 : 0)
                  + (dot3(nrm, cross3(e2, e0)) < 0.0 ? 1 : 0);

@@ -363,12 +363,18 @@ def _pinched(state, replica):
     return pos
 
 
-def test_untangle_pass_sends_back_a_replica_its_flips_leave_crossed(device):
-    """docs/validation.md: a replica still not simple after untangle_pass's flips takes back, to
-    the bit, the rows the last call left (its step is refused and counted); the other replicas
-    keep their moves; a wider cell table since then keeps its width. With revert=False nothing goes
-    back (nor are rows kept); a replica that the last call left crossed has nothing to go back to."""
+@pytest.mark.parametrize("local_rounds", [3, 0])
+def test_untangle_pass_sends_back_a_replica_its_flips_leave_crossed(device, local_rounds, monkeypatch):
+    """docs/validation.md: in a replica still not simple after untangle_pass's flips, the vertices
+    of the cells at fault take back their positions from the last call (``local_rounds``: rounds of
+    that), and failing that the whole replica its rows, to the bit (its step is refused and
+    counted); the other replicas keep their moves; a wider cell table since then keeps its width.
+    With revert=False nothing goes back (nor are rows kept); a replica that the last call left
+    crossed has nothing to go back to."""
     from spherevm import simplicity
+    from spherevm.plugins.updaters import untangle
+    assert untangle.LOCAL_ROUNDS == 3
+    monkeypatch.setattr(untangle, "LOCAL_ROUNDS", local_rounds)
     sim = svm.Simulation(device=device, seed=1)
     sim.state = svm.init.random_tiling(60, replicas=3, seed=4)
     t1 = T1(untangle=True)
@@ -379,17 +385,20 @@ def test_untangle_pass_sends_back_a_replica_its_flips_leave_crossed(device):
     sim.state.cell_vertices = xp.concatenate([sim.state.cell_vertices, xp.full((sim.state.n_cells, 1), -1,
                                                                               dtype=xp.int32)], axis=1)
     pos = _pinched(sim.state, 1)
-    w = int(sim.state.vertex_start[2])                         # replica 2 moves too, staying simple
-    pos[w] = np.linalg.norm(pos[w]) * (pos[w] + [1e-3, 0, 0]) / np.linalg.norm(pos[w] + [1e-3, 0, 0])
+    pinched = np.flatnonzero(np.any(pos != kept["positions"], axis=1))
+    for w in (int(sim.state.vertex_start[2]) - 1, int(sim.state.vertex_start[2])):   # far ones move, simply
+        pos[w] = np.linalg.norm(pos[w]) * (pos[w] + [1e-3, 0, 0]) / np.linalg.norm(pos[w] + [1e-3, 0, 0])
     sim.state.positions = xp.asarray(pos)
     sim.state_changed()
     assert simplicity.counts(sim.state)["crossed"].tolist()[1] > 0
     t1.untangle_pass(sim)
     assert t1.untangle_refused.tolist() == [0, 1, 0] and to_numpy(sim.log("t1_untangle_refused")).tolist() == [0, 1, 0]
     vrep, crep = sim.state.vertex_replica_np(), sim.state.cell_replica_np()
+    back = vrep == 1 if local_rounds == 0 else np.isin(np.arange(len(vrep)), pinched)   # what went back
+    assert len(pinched) == 1 and np.count_nonzero(vrep == 1) > 100
     for name in ROWS:
-        now, rep = to_numpy(getattr(sim.state, name)), (crep if name == "cell_sides" else vrep)
-        want = np.where((rep == 1).reshape((-1,) + (1,) * (now.ndim - 1)), kept[name], pos if name == "positions"
+        now, rep = to_numpy(getattr(sim.state, name)), (crep == 1 if name == "cell_sides" else back)
+        want = np.where(rep.reshape((-1,) + (1,) * (now.ndim - 1)), kept[name], pos if name == "positions"
                         else kept[name])
         assert np.array_equal(now, want), name
     table = to_numpy(sim.state.cell_vertices)

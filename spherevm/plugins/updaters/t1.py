@@ -147,8 +147,7 @@ class T1(DevicePass, Updater):
         self.total_flips = np.zeros(n_replicas, dtype=np.int64)
         self.total_refused = np.zeros(n_replicas, dtype=np.int64)
         self.flip_backs = np.zeros(n_replicas, dtype=np.int64)
-        self._refusal = StepRefusal()     # untangle_pass's refused replica steps (per replica)
-        self._refusal.reset(n_replicas)
+        self._refusal = StepRefusal(n_replicas)     # untangle_pass's kept rows and refused steps
         self._forget_pairs()
 
     def _forget_pairs(self):
@@ -269,10 +268,12 @@ class T1(DevicePass, Updater):
         """Flip the edges that are turned past zero length (:func:`spherevm.folding.inverted_edges`)
         by this updater's rules, adding to this step's counts, again while a round flips some (at
         most ``rounds``: edges of one cell wait for the next round). On the GPU each round is the
-        device pass on the crossed edges (one small read-back), the same flips. Then (``revert``) a
-        replica still not simple (:func:`spherevm.simplicity.counts`) that the previous call left
-        simple takes back what that call left: its step is refused (counted in ``untangle_refused``).
-        Called right after every step, what writers and checks see is simple. Returns the flips made."""
+        device pass on the crossed edges (one small read-back), the same flips. Then (``revert``) in
+        a replica still not simple (:func:`spherevm.simplicity.faults`) that the last such call left
+        simple, the vertices at fault take back their places from that call, or failing that the
+        whole replica its rows (:class:`~spherevm.plugins.updaters.untangle.StepRefusal`; counted in
+        ``untangle_refused``). Called right after every step, what writers and checks see is
+        simple. Returns the flips made."""
         gpu = simulation.state.device.is_gpu
         before = self._flips_so_far(simulation.state)
         for _ in range(rounds):

@@ -25,12 +25,6 @@ def faults(state):
     return bad, cells
 
 
-def not_simple(state):
-    """Per replica: whether a cell crosses itself, does not close (periodic surfaces), has signed
-    area <= 0, or the areas do not add up to the surface's (:func:`spherevm.simplicity.faults`)."""
-    return faults(state)[0]
-
-
 class StepRefusal:
     """What the last untangling pass left, and the steps it refused since. Where the flips leave a
     replica that was simple at the last pass not simple, the vertices of its cells at fault take
@@ -38,14 +32,13 @@ class StepRefusal:
     :data:`LOCAL_ROUNDS` rounds); a replica still not simple takes back all its positions and tables.
     Every replica's rows are kept for the next pass."""
 
-    def __init__(self):
-        self.saved = None        # the arrays the last pass left (device arrays), or None
-        self.simple = None       # per replica: its saved rows are simple
-        self.refused = np.zeros(0, dtype=np.int64)
+    def __init__(self, n_replicas=0):
+        self.reset(n_replicas)
 
     def reset(self, n_replicas):
         """Forget the saved rows; zero the per-replica count of refused steps."""
-        self.saved, self.simple = None, None
+        self.saved = None        # the arrays the last pass left (device arrays), or None
+        self.simple = None       # per replica: its saved rows are simple
         self.refused = np.zeros(n_replicas, dtype=np.int64)
 
     def _usable(self, state):

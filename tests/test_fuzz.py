@@ -238,8 +238,8 @@ def test_untangling_by_flips_alone_leaves_crossed_cells(surface):
 @pytest.mark.parametrize("surface", list(SURFACES))
 def test_untangling_a_million_hot_flips(surface):
     """docs/validation.md's count: 10^6 flips of hot Brownian dynamics on 8 tissues of 256 cells
-    (T = 0.05, dt = 0.02), no crossed cell left after any pass. 100-200 flips a second on the 2-core
-    VM (the bump 50): 1.5 to 6 hours per surface, so run with SPHEREVM_LONG=1 (or
+    (T = 0.05, dt = 0.02), no crossed cell left after any pass. 195-290 flips a second on the 2-core
+    VM (the bump 112): 1 to 2.5 hours per surface, so run with SPHEREVM_LONG=1 (or
     ``python benchmarks/untangle_fuzz.py --flips 1000000``)."""
     if not os.environ.get("SPHEREVM_LONG"):
         pytest.skip("10^6 hot flips take hours on the CPU; run with SPHEREVM_LONG=1")

@@ -32,12 +32,13 @@ CASES = [("fig3", 3.775, 0.0, 0.004), ("fig3", 3.775, 0.0, 0.01), ("fig3", 3.775
          ("inset", 3.75, 1.0, 5e-4), ("hot", 3.775, 0.0, 0.05), ("hot", 3.8, 1.0, 0.05)]
 
 
-def measure(surface, n_cells, replicas, p0, kr, T, steps, every, relax, seed=0, untangle=False, dt=0.05):
+def measure(surface, n_cells, replicas, p0, kr, T, steps, every, relax, seed=0, untangle=False, dt=0.05, revert=False):
     """Counts of :func:`spherevm.simplicity.counts` summed over the checks, the checks with any
     crossing, the largest count in one check and the flips. ``untangle``: T1(untangle=True), and
     its :meth:`~spherevm.plugins.updaters.T1.untangle_pass` before each check (as if run after
     every step: its updater pass would make the same flips at the next step); ``crossed_before``
-    counts the crossings the pass found."""
+    counts the crossings the pass found. ``revert``: the pass also refuses the steps of replicas
+    its flips leave not simple (else its flips alone)."""
     tiling = svm.init.random_planar_tiling if surface == "plane" else svm.init.random_tiling
     sim = svm.Simulation(device="cpu", seed=seed)
     sim.state = tiling(n_cells, replicas=replicas, seed=seed)
@@ -58,7 +59,7 @@ def measure(surface, n_cells, replicas, p0, kr, T, steps, every, relax, seed=0, 
             break
         if untangle:
             out["crossed_before"] += int(simplicity.counts(sim.state)["crossed"].sum())
-            t1.untangle_pass(sim)
+            t1.untangle_pass(sim, revert=revert)
         c = simplicity.counts(sim.state)
         out["checks"] += 1
         for k in ("crossed", "inverted", "open", "uncovered"):
@@ -112,6 +113,8 @@ def main(argv=None):
     ap.add_argument("--T", type=float, default=0.05)
     ap.add_argument("--dt", type=float, default=0.05, help="Brownian time step (hot runs explode at 0.05)")
     ap.add_argument("--untangle", action="store_true", help="T1(untangle=True), untangled before each check")
+    ap.add_argument("--revert", action="store_true", help="with --untangle: untangle_pass refuses the steps of "
+                    "replicas it leaves not simple (else flips alone)")
     ap.add_argument("--cost", action="store_true", help="time the checks instead (N = 1,000 and 65,536)")
     args = ap.parse_args(argv)
     if args.cost:
@@ -127,7 +130,7 @@ def main(argv=None):
             for label, p0, kr, T in cases:
                 t0 = time.time()
                 r = measure(surface, n, args.replicas, p0, kr, T, args.steps, args.every, args.relax,
-                            untangle=args.untangle, dt=args.dt)
+                            untangle=args.untangle, dt=args.dt, revert=args.revert)
                 print(f"{surface:<7} {n:>4} {label:<6} {p0:>6} {kr:>3g} {T:>7g} {r['checks']:>6} {r['crossed']:>7} "
                       f"{r['checks_crossed']:>6} {r['worst']:>5} {r['inverted']:>6} {r['open']:>4} "
                       f"{r['uncovered']:>5} {r['flips']:>6} {r['crossed_before']:>6} {time.time() - t0:>5.0f} {r['exploded']}",

@@ -79,22 +79,29 @@ def open_cells(state):
     return state.constraint.open_cells(state)
 
 
-def counts(state, areas=None):
-    """Per replica: cells that cross themselves, open cells (periodic plane), cells of signed area
-    <= 0, and whether the areas fail to add up to the surface's (1 or 0); a dict of int arrays.
-    ``areas``: the cells' signed areas if already measured."""
-    crep = state.cell_replica_np()
-    n = state.n_replicas
+def faults(state, areas=None):
+    """The cells that are not simple: those that cross themselves, open cells (periodic surfaces)
+    and cells of signed area <= 0 (cell index arrays, sorted), and per replica whether the areas
+    fail to add up to the surface's (bool); a dict. ``areas``: the cells' signed areas if already
+    measured."""
     found = self_crossings(state)
-    crossed = np.zeros(n, dtype=np.int64) if found is None else \
-        np.bincount(crep[np.unique(found[0])], minlength=n)
-    opened = np.bincount(crep[open_cells(state)[0]], minlength=n)
     con = state.constraint
     areas = con.tiling_areas_np(state) if areas is None else areas
-    total = np.bincount(crep, weights=areas, minlength=n)
+    total = np.bincount(state.cell_replica_np(), weights=areas, minlength=state.n_replicas)
     surface = con.total_area_np(con.size_np(state))
-    return dict(crossed=crossed, open=opened, inverted=np.bincount(crep[areas <= 0], minlength=n),
-                uncovered=(np.abs(total - surface) > con.cover_tolerance * surface).astype(np.int64))
+    return dict(crossed=np.zeros(0, dtype=np.int64) if found is None else np.unique(found[0]),
+                open=np.unique(open_cells(state)[0]), inverted=np.flatnonzero(areas <= 0),
+                uncovered=np.abs(total - surface) > con.cover_tolerance * surface)
+
+
+def counts(state, areas=None):
+    """Per replica: cells that cross themselves, open cells (periodic plane), cells of signed area
+    <= 0, and whether the areas fail to add up to the surface's (1 or 0); a dict of int arrays
+    (:func:`faults` counted). ``areas``: the cells' signed areas if already measured."""
+    crep, n = state.cell_replica_np(), state.n_replicas
+    found = faults(state, areas)
+    out = {k: np.bincount(crep[found[k]], minlength=n) for k in ("crossed", "open", "inverted")}
+    return dict(out, uncovered=found["uncovered"].astype(np.int64))
 
 
 def closed_on_device(state) -> bool:

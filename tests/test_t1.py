@@ -345,3 +345,77 @@ def test_untangle_is_a_flag_and_untangles_on_both_devices(device):
             break
     assert made > 0 and len(folding.inverted_edges(sim.state)[0]) < crossed
     assert int(to_numpy(sim.log("t1_flips")).sum()) == step + made     # added to the step's count
+
+
+ROWS = ("positions", "vertex_neighbors", "vertex_cells", "cell_sides")
+
+
+def _pinched(state, replica):
+    """Push the first vertex of replica ``replica``'s first cell of six or more sides to beyond its
+    fourth: the cell is pinched across (edges two apart and more cross), which no flip undoes."""
+    cv, sides = to_numpy(state.cell_vertices), to_numpy(state.cell_sides)
+    cells = np.arange(int(state.cell_start[replica]), int(state.cell_start[replica + 1]))
+    c = int(cells[np.flatnonzero(sides[cells] >= 6)[0]])
+    pos = to_numpy(state.positions).copy()
+    w, far = cv[c, 0], cv[c, 3]
+    pos[w] = pos[far] + 0.5 * (pos[far] - pos[w])
+    pos[w] *= np.linalg.norm(pos[far]) / np.linalg.norm(pos[w])
+    return pos
+
+
+@pytest.mark.parametrize("local_rounds", [3, 0])
+def test_untangle_pass_sends_back_a_replica_its_flips_leave_crossed(device, local_rounds, monkeypatch):
+    """docs/validation.md: in a replica still not simple after untangle_pass's flips, the vertices
+    of the cells at fault take back their positions from the last call (``local_rounds``: rounds of
+    that), and failing that the whole replica its rows, to the bit (its step is refused and
+    counted); the other replicas keep their moves; a wider cell table since then keeps its width.
+    With revert=False nothing goes back (nor are rows kept); a replica that the last call left
+    crossed has nothing to go back to."""
+    from spherevm import simplicity
+    from spherevm.plugins.updaters import untangle
+    assert untangle.LOCAL_ROUNDS == 3
+    monkeypatch.setattr(untangle, "LOCAL_ROUNDS", local_rounds)
+    sim = svm.Simulation(device=device, seed=1)
+    sim.state = svm.init.random_tiling(60, replicas=3, seed=4)
+    t1 = T1(untangle=True)
+    sim.operations.updaters.append(t1)
+    assert t1.untangle_pass(sim) == 0                       # every replica simple: its rows kept
+    kept = {k: to_numpy(getattr(sim.state, k)).copy() for k in ROWS + ("cell_vertices",)}
+    xp = sim.state.device.xp
+    sim.state.cell_vertices = xp.concatenate([sim.state.cell_vertices, xp.full((sim.state.n_cells, 1), -1,
+                                                                              dtype=xp.int32)], axis=1)
+    pos = _pinched(sim.state, 1)
+    pinched = np.flatnonzero(np.any(pos != kept["positions"], axis=1))
+    for w in (int(sim.state.vertex_start[2]) - 1, int(sim.state.vertex_start[2])):   # far ones move, simply
+        pos[w] = np.linalg.norm(pos[w]) * (pos[w] + [1e-3, 0, 0]) / np.linalg.norm(pos[w] + [1e-3, 0, 0])
+    sim.state.positions = xp.asarray(pos)
+    sim.state_changed()
+    assert simplicity.counts(sim.state)["crossed"].tolist()[1] > 0
+    t1.untangle_pass(sim)
+    assert t1.untangle_refused.tolist() == [0, 1, 0] and to_numpy(sim.log("t1_untangle_refused")).tolist() == [0, 1, 0]
+    vrep, crep = sim.state.vertex_replica_np(), sim.state.cell_replica_np()
+    back = vrep == 1 if local_rounds == 0 else np.isin(np.arange(len(vrep)), pinched)   # what went back
+    assert len(pinched) == 1 and np.count_nonzero(vrep == 1) > 100
+    for name in ROWS:
+        now, rep = to_numpy(getattr(sim.state, name)), (crep == 1 if name == "cell_sides" else back)
+        want = np.where(rep.reshape((-1,) + (1,) * (now.ndim - 1)), kept[name], pos if name == "positions"
+                        else kept[name])
+        assert np.array_equal(now, want), name
+    table = to_numpy(sim.state.cell_vertices)
+    assert table.shape[1] == kept["cell_vertices"].shape[1] + 1 and (table[:, -1] == -1).all()
+    assert np.array_equal(table[:, :-1], kept["cell_vertices"])
+    sim.state.validate()
+    sim.state.positions = xp.asarray(_pinched(sim.state, 0))
+    t1.untangle_pass(sim, revert=False)                      # flips alone: nothing goes back
+    assert t1.untangle_refused.tolist() == [0, 1, 0] and simplicity.counts(sim.state)["crossed"].tolist()[0] > 0
+    t1.untangle_pass(sim)                                    # the last call with revert left replica 0 simple
+    assert t1.untangle_refused.tolist() == [1, 1, 0] and simplicity.counts(sim.state)["crossed"].sum() == 0
+    crossed = sim.state.copy()
+    crossed.positions = xp.asarray(_pinched(crossed, 0))
+    again = svm.Simulation(device=device)
+    again.state = crossed
+    t1 = T1(untangle=True)
+    again.operations.updaters.append(t1)
+    for _ in range(2):                                       # never seen simple: nothing to go back to
+        t1.untangle_pass(again)
+    assert t1.untangle_refused.tolist() == [0, 0, 0] and simplicity.counts(again.state)["crossed"].tolist()[0] > 0

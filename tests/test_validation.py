@@ -56,17 +56,19 @@ import spherevm as svm  # noqa: E402
 from spherevm import folding, simplicity  # noqa: E402
 
 from test_fuzz import brute_force_crossings  # noqa: E402
+from untangle_fuzz import tiling  # noqa: E402
 
 TILINGS = {"sphere": svm.init.random_tiling, "plane": svm.init.random_planar_tiling}
 
 
 def _kicked(surface, scale, seed=3):
-    """Two 60-cell tilings with every vertex kicked by ``scale`` sqrt(<A>) (no forces: crossings)."""
-    state = TILINGS[surface](60, replicas=2, seed=seed)
+    """Two 60-cell tilings (of any surface of benchmarks/untangle_fuzz.py) with every vertex kicked
+    by ``scale`` sqrt(<A>) (no forces: crossings)."""
+    state = tiling(surface, 60, 2, seed)
     con, rng = state.constraint, np.random.default_rng(seed)
     kick = rng.normal(scale=scale * np.sqrt(state.mean_cell_area[0]), size=state.positions.shape)
-    state.positions = con.project_normal(state.positions + con.project_tangent(state.positions, kick),
-                                         con.size(state, state.vertex_replica))
+    size = con.size(state, state.vertex_replica)
+    state.positions = con.project_normal(state.positions + con.project_tangent(state.positions, kick, size), size)
     return state
 
 
@@ -82,9 +84,10 @@ def _swapped(surface):
     return state, u, v
 
 
-@pytest.mark.parametrize("surface", ["sphere", "plane"])
-def test_crossings_are_those_a_brute_force_finds(surface):
-    state = _kicked(surface, 0.3 if surface == "sphere" else 0.12)
+@pytest.mark.parametrize("surface, scale", [("sphere", 0.3), ("plane", 0.12), ("torus", 0.12), ("ellipsoid", 0.3),
+                                            ("bump", 0.2)])
+def test_crossings_are_those_a_brute_force_finds(surface, scale):
+    state = _kicked(surface, scale)
     cell, i, j = simplicity.self_crossings(state)
     found = set(zip(cell.tolist(), i.tolist(), j.tolist()))
     assert found == brute_force_crossings(state) and len(found) > 10, len(found)

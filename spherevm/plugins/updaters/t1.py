@@ -12,6 +12,7 @@ from ..parameters import Parameter
 from ..rows import saved_field, saved_where
 from ...validation import integer, positive
 from .t1_device import DevicePass
+from .untangle import StepRefusal
 
 PRESETS = {
     # The rules of the paper's own code: threshold 0.1, new edge twice the old length.
@@ -83,8 +84,8 @@ class T1(DevicePass, Updater):
         Also flip the edges that a step turned past zero length (a bow tie: the edges before and
         after one cross, :func:`spherevm.folding.inverted_edges`), by the same rules, so that cells
         stay simple polygons; where no edge is crossed the pass is the same to the bit. Both devices
-        make the same flips. :meth:`untangle_pass` flips them alone, for a call after the
-        integrator's step. Default False; see docs/validation.md."""
+        make the same flips. :meth:`untangle_pass` flips them alone after a step, and refuses the
+        step of a replica left not simple. Default False; see docs/validation.md."""
 
     preset = Parameter(_preset)
     threshold = Parameter(positive)
@@ -146,6 +147,7 @@ class T1(DevicePass, Updater):
         self.total_flips = np.zeros(n_replicas, dtype=np.int64)
         self.total_refused = np.zeros(n_replicas, dtype=np.int64)
         self.flip_backs = np.zeros(n_replicas, dtype=np.int64)
+        self._refusal = StepRefusal(n_replicas)     # untangle_pass's kept rows and refused steps
         self._forget_pairs()
 
     def _forget_pairs(self):
@@ -262,19 +264,29 @@ class T1(DevicePass, Updater):
             u, slot, lengths = self._with_inverted(state, u, slot, lengths)
         self._flip_pass(simulation, u, slot, lengths)
 
-    def untangle_pass(self, simulation, rounds: int = 4):
+    def untangle_pass(self, simulation, rounds: int = 4, revert: bool = True):
         """Flip the edges that are turned past zero length (:func:`spherevm.folding.inverted_edges`)
         by this updater's rules, adding to this step's counts, again while a round flips some (at
-        most ``rounds``: edges of one cell wait for the next round): a call right after the
-        integrator's step leaves what writers and checks see simple. Nothing happens where no edge
-        is crossed. On the GPU each round is the device pass on the crossed edges (one small
-        read-back), the same flips. Returns the flips made."""
+        most ``rounds``: edges of one cell wait for the next round). On the GPU each round is the
+        device pass on the crossed edges (one small read-back), the same flips. Then (``revert``) in
+        a replica still not simple (:func:`spherevm.simplicity.faults`) that the last such call left
+        simple, the vertices at fault take back their places from that call, or failing that the
+        whole replica its rows (:class:`~spherevm.plugins.updaters.untangle.StepRefusal`; counted in
+        ``untangle_refused``). Called right after every step, what writers and checks see is
+        simple. Returns the flips made."""
         gpu = simulation.state.device.is_gpu
         before = self._flips_so_far(simulation.state)
         for _ in range(rounds):
             if not (self._update_gpu(simulation, crossed_only=True) if gpu else self._untangle_round(simulation)):
                 break
+        if revert:
+            self._refusal.apply(simulation)
         return self._flips_so_far(simulation.state) - before
+
+    @property
+    def untangle_refused(self):
+        """Per replica: the steps :meth:`untangle_pass` refused (replicas it sent back)."""
+        return self._refusal.refused.copy()
 
     def _flips_so_far(self, state):
         """All flips made, on the host or (one small read-back) the device."""
@@ -480,7 +492,7 @@ class T1(DevicePass, Updater):
             return value
         return {"t1_flips": read("last_flips"), "t1_refused": read("last_refused"),
                 "t1_total_flips": read("total_flips"), "t1_total_refused": read("total_refused"),
-                "t1_flip_backs": read("flip_backs")}
+                "t1_flip_backs": read("flip_backs"), "t1_untangle_refused": lambda sim: self.untangle_refused}
 
     def __repr__(self):
         length = f"length_factor={self.length_factor}" if self.length_factor else f"new_length={self.new_length}"

@@ -133,8 +133,10 @@ def test_pairs_between_rekeys_and_drops():
 
 def test_loggables_and_counters_after_a_pass():
     sim, t = _attached(threshold=1.0, new_length=1.1)     # every edge short, no flip folds
-    assert set(t.loggables) == {"t1_flips", "t1_refused", "t1_total_flips", "t1_total_refused", "t1_flip_backs"}
+    assert set(t.loggables) == {"t1_flips", "t1_refused", "t1_total_flips", "t1_total_refused", "t1_flip_backs",
+                                "t1_untangle_refused"}
     sim.run(1)
+    assert np.array_equal(t.loggables["t1_untangle_refused"](sim), np.zeros(2))   # no untangle_pass: none refused
     flips = t.loggables["t1_flips"](sim)
     assert flips.shape == (2,) and np.all(flips > 0)
     assert np.array_equal(t.loggables["t1_total_flips"](sim), t.total_flips)

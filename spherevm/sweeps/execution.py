@@ -40,10 +40,9 @@ MAX_TILING_PROCESSES = 32
 def build_chunk_state(sweep: RigiditySweep, chunk: Chunk, state=None, seeds=None):
     """The batched State of a chunk (``state`` and ``seeds`` if they were made elsewhere, as
     :class:`TilingPrefetch` does) and its per-replica (p0, p0_index, replica, tiling_seed)."""
+    units = [sweep.unit(u) for u in range(chunk.start, chunk.stop)]
     if seeds is None:
-        units, seeds = chunk_seeds(sweep, chunk)
-    else:
-        units = [sweep.unit(u) for u in range(chunk.start, chunk.stop)]
+        seeds = chunk_seeds(sweep, chunk)[1]
     if state is None:   # shared tilings: a repeated seed gives the same tiling
         state = build_tilings(sweep.surface, chunk.n_cells, seeds)
     p0 = np.array([sweep.p0[k] for k, _ in units])

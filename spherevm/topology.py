@@ -79,6 +79,7 @@ def build_vertex_tables(cell_vertices, cell_sides, n_vertices: int):
 def dual_network(tri, n_pts):
     """The trivalent network dual to counter-clockwise triangles ``tri`` of ``n_pts`` points (each
     directed edge once): ``(cell_vertices, cell_sides, vertex_neighbors, vertex_cells)``."""
+    tri = np.asarray(tri, dtype=np.int64)      # the edge keys reach n_pts**2: int32 keys collide from 65,536 points
     n_tri = len(tri)
     # neighbour across the directed edge (i, j) of triangle t is the triangle holding (j, i)
     key = tri * n_pts + np.roll(tri, -1, axis=1)          # edge (t[k], t[k+1]) sits in slot k

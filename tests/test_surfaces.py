@@ -125,6 +125,23 @@ def test_areas_fall_short_by_the_flat_facet_error(name):
     assert 0.15 < short[1] / short[0] < 0.4
 
 
+def test_the_dual_of_a_large_hull_is_trivalent_and_reciprocal():
+    """Edge keys i * n + j, wrapped in int32, collide from 65,536 points: the dual of a 70,000-point
+    hull (the ellipsoid's tilings from that size) keeps every vertex a corner of its facet's cells."""
+    from spherevm import topology
+    from spherevm.init_surface import oriented_hull
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(70_000, 3))
+    tri, inside = oriented_hull(points / np.linalg.norm(points, axis=1)[:, None])
+    assert inside and tri.max() >= 65_536
+    table, sides, vn, vc = topology.dual_network(tri, len(points))
+    assert np.array_equal(vc, tri)
+    assert np.all((vn[vn] == np.arange(len(vn))[:, None, None]).sum(axis=2) == 1)   # each neighbour's neighbour
+    shared = np.array([len(np.intersect1d(vc[v], vc[w])) for v, w in zip(np.repeat(np.arange(50), 3), vn[:50].ravel())])
+    assert np.all(shared == 2)                                                     # an edge: two cells in common
+    assert sides.sum() == 3 * len(vn)
+
+
 def test_too_few_cells_are_refused_with_the_minimum():
     with pytest.raises(ValueError, match=r"n_cells must be at least 27 to tile Torus\(major_radius=3, "
                                          r"minor_radius=1\) .*, got 20"):

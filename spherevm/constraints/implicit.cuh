@@ -148,7 +148,7 @@ struct Implicit {
                 p = p + step;
                 done = sqrt(dot3(step, step)) <= limit;
             }
-            if (!done) p = v3(NAN, NAN, NAN);
+            if (!done) p = v3(nan(""), nan(""), nan(""));
         }
         return wrap(p, s);
     }

@@ -107,14 +107,18 @@ def test_active_matches_numpy(surface, directors):
 
 
 def test_narrowed_minimisation_matches_numpy(surface):
+    """Minimisations that converge end in the same minima (80 cells: 40- and 60-cell tori do not
+    converge in 4,000 iterations, 723 T1s on the 60-cell ones, and runs that do not settle part on
+    rounding)."""
     def run(device, narrow):
         sim = svm.Simulation(device=device)
-        sim.state = _tissues(surface, 40, 4, seed=21)
+        sim.state = _tissues(surface, 80, 4, seed=21)
         sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.75))
         sim.operations.updaters.append(T1())
         sim.operations.integrator = FIRE(dt=0.02)
         return sim, sim.minimize(force_tol=1e-10, max_steps=4000, narrow=narrow)
     (g, rg), (c, rc) = run("gpu", True), run("cpu", True)
+    assert rc.converged.all()
     assert np.array_equal(rg.converged, rc.converged) and np.array_equal(rg.reason, rc.reason)
     assert np.allclose(rg.energy_per_cell, rc.energy_per_cell, rtol=1e-6, atol=1e-12)
     assert np.array_equal(g.log("t1_total_flips"), c.log("t1_total_flips"))

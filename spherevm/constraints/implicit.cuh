@@ -153,6 +153,9 @@ struct Implicit {
         return wrap(p, s);
     }
     __device__ static vec3 place(vec3 y, vec3, Size s) { return project(y, s); }
+    // off the surface grad F need not point along the normal line of the closest point (it does on
+    // the torus, not on the ellipsoid): the normal is taken again where the point landed
+    __device__ static vec3 placed_normal(vec3 x, vec3, Size s) { return normal(x, s); }
 
     // ---------------------------------------------------------------- the flat-facet metric
     // A cell's vector area a (the fan r x e / 2 about its first vertex, r and e nearest images), its

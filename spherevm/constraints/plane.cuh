@@ -35,6 +35,7 @@ struct PlaneSurface {
 
     __device__ static vec3 normal(vec3, Size) { return v3(0.0, 0.0, 1.0); }
     __device__ static vec3 place(vec3 y, vec3, Size b) { return wrap_into_box(y, b); }
+    __device__ static vec3 placed_normal(vec3, vec3 n, Size) { return n; }   // one normal everywhere
     __device__ static vec3 cell_normal(const double*, const int*, int, Size) { return v3(0.0, 0.0, 1.0); }
 
     // T1 takes the edge as PeriodicPlane.displacement(u, v): the minimum image of x_v - x_u

@@ -98,6 +98,7 @@ struct SphereSurface {
 
     __device__ static vec3 normal(vec3 x, Size) { return normalize3(x); }
     __device__ static vec3 place(vec3, vec3 n, Size R) { return R * n; }
+    __device__ static vec3 placed_normal(vec3, vec3 n, Size) { return n; }   // radial: P_N keeps it
 
     // the normalised centroid of the cell's unit vertex directions
     __device__ static vec3 cell_normal(const double* pos, const int* row, int n, Size) {

@@ -23,6 +23,8 @@
 //                             an `extra`, see plugins/forces/vertex_model.cuh)
 //   normal(x, s)              the unit normal at x
 //   place(y, n, s)            P_N: the surface point for y, whose normal n = normal(y) the caller has
+//   placed_normal(x, n, s)    the unit normal at x = place(y, n, s): n itself where P_N moves along
+//                             the normal line of y (the sphere, the plane), normal(x, s) otherwise
 //   cell_normal(..., s)       the normal at a cell's centre (active cell directors)
 //   chord2, edge_length       the T1 short-edge test and the edge's length
 //   t1_positions(...)         the two vertices of a flipped edge

@@ -58,7 +58,9 @@ __device__ __forceinline__ void brownian_vertex(
     }
     vec3 y = x + dr;
     vec3 m = Surface::normal(y, s);
-    store3(pos, i, Surface::place(y, m, s));
-    if (mode == 2)
-        store3(directors, i, transport_and_rotate(load3(directors, i), m, rot_amp, seed, timestep, (unsigned int)i));
+    vec3 z = Surface::place(y, m, s);
+    store3(pos, i, z);
+    if (mode == 2)   // the director into the tangent plane at the new place (Active._after_move)
+        store3(directors, i, transport_and_rotate(load3(directors, i), Surface::placed_normal(z, m, s), rot_amp, seed,
+                                                  timestep, (unsigned int)i));
 }

@@ -53,6 +53,7 @@ __device__ __forceinline__ void fire_move_vertex(double* pos, double* vel, const
     vec3 x = add3_rn(load3(pos, i), hw);
     vec3 n = Surface::normal(x, s);
     x = Surface::place(x, n, s);
+    n = Surface::placed_normal(x, n, s);       // P_T at the new place, as FIRE._move_cpu
     w = fma3_rn(-dot3(w, n), n, w);
     store3(pos, i, x);
     store3(vel, i, w);

@@ -7,17 +7,17 @@ settings (kr = 0 unless --kr; per cell kA = kr / <A>, kP = 1, A0 = <A>, P0 = p0 
 RigiditySweep's defaults). Per cell: shape index q = P / sqrt(A), area and side number, binned against
 K <A> at the cell's centroid (errors over tissues: each replica's bin mean is one sample), beside the
 local pentagon bound p_penta(K <A>); per surface the zero-energy fraction F(p0) (binomial errors).
-(b) Finite temperature: Brownian dynamics + T1 at p0 = 3.775, kr = 0 on one torus: per-cell mean-square
-displacement of the centroid over a fixed lag (embedding-space chord) and per-cell neighbour losses
+(b) Finite temperature: Brownian dynamics + T1 at p0 = 3.775, kr = 0 on a torus (R/r = 3) and a bump
+(h/w = 2): per cell the mean-square displacement of its centroid over a fixed lag (embedding-space
+chord, across a periodic box by minimum images), its self-overlap over that lag (the fraction of time
+origins after which it moved at most b = 0.5 sqrt(<A>), the paper's window) and its neighbour losses
 (a cell loses a neighbour in each T1 it takes part in along the lost edge; counted between snapshots,
-so flips undone within one interval are missed), both against K <A>.
+so flips undone within one interval are missed), all against K <A>.
 
-The torus, the bump and the flat-facet metric run on the NumPy path only (no GPU kernels yet), so every
-mode is a CPU job:
+Every surface runs on either device (``--device``, default the GPU where CuPy sees one):
 
     python examples/curvature_gradients.py --out curv/           # small default, minutes on a CPU
-    python examples/curvature_gradients.py --full --out curv/    # N = 256 and 1024, 16 replicas: a
-                                                                 # long CPU job (hours), for a cluster node
+    python examples/curvature_gradients.py --full --device gpu --out curv/   # N = 256 and 1024, 16 replicas
     python examples/curvature_gradients.py --tiny --out curv/    # seconds: the test's smoke run
 """
 import argparse
@@ -46,7 +46,8 @@ MODES = {   # cells, p0 values, replicas per p0, FIRE max steps, K bins, dynamic
     "full": dict(cells=[256, 1024], p0=list(np.round(np.arange(3.70, 3.901, 0.02), 2)), replicas=16,
                  max_steps=20000, bins=8, surfaces=list(SURFACES), dyn=(256, 16, 40000, 4000)),
 }
-DYN_SURFACE, DYN_P0, DYN_T, DYN_DT, SNAPSHOT, PRE_QUENCH = "torus R/r=3", 3.775, 0.02, 0.05, 10, 1000
+DYN_SURFACES = {"tiny": ["torus R/r=3"], "default": ["torus R/r=3", "bump h/w=2"], "full": ["torus R/r=3", "bump h/w=2"]}
+DYN_P0, DYN_T, DYN_DT, SNAPSHOT, PRE_QUENCH, OVERLAP_WINDOW = 3.775, 0.02, 0.05, 10, 1000, 0.5
 CELL_COLUMNS = ("surface", "n_cells", "p0", "replica", "status", "K_A", "p_penta", "q", "perimeter", "area", "sides")
 QUANTITIES = ("q", "perimeter", "area", "sides")   # perimeter and area in units of sqrt(<A>) and <A>
 BIN_COLUMNS = ("surface", "n_cells", "p0", "quantity", "bin", "K_low", "K_high", "K_A", "mean", "sem", "n_tissues",
@@ -61,44 +62,46 @@ def cell_curvature(state):
     return gaussian_curvature(state.constraint, x, size=size) * state.mean_cell_area[rep]
 
 
-def quench(spec, n, p0s, replicas, max_steps, kr=0.0, seed=0):
-    """FIRE + T1 quenches of ``replicas`` tilings per p0; per-cell rows (q NaN where a cell's flat area
-    is not positive: inverted) and per-replica statuses."""
+def quench(spec, n, p0s, replicas, max_steps, kr=0.0, seed=0, device="cpu"):
+    """FIRE + T1 quenches of ``replicas`` tilings per p0 on ``device``; per-cell rows (q NaN where a
+    cell's flat area is not positive: inverted) and per-replica statuses."""
     keys = [(seed + n, r) for r in range(replicas * len(p0s))]
     state = svm.init.tilings_on(spec, n, keys)
     p0 = np.repeat(p0s, replicas)
     rep = state.cell_replica_np()
     area = state.mean_cell_area[rep]
-    sim = svm.Simulation(device="cpu", seed=seed)
+    sim = svm.Simulation(device=device, seed=seed)
     sim.state = state
     sim.operations.forces.append(VertexModel(kA=kr / area, kP=1.0, A0=area, P0=p0[rep] * np.sqrt(area)))
     sim.operations.updaters.append(T1())
     sim.operations.integrator = FIRE(dt=0.02)
     res = sim.minimize(force_tol=1e-12, energy_tol=1e-16, max_steps=max_steps, check_every=10)
     status = classify(res.energy_per_cell, res.reason)
-    geo = sim.state.constraint.cell_geometry(sim.state)
+    final = sim.state.to("cpu")
+    geo = final.constraint.cell_geometry(final)
     a, per = np.asarray(geo.area), np.asarray(geo.perimeter)
-    k = cell_curvature(sim.state)
+    k = cell_curvature(final)
     cells = dict(p0=p0[rep], replica=rep, status=status[rep], K_A=k, p_penta=pentagon_perimeter_at_curvature(k),
-                 q=shape_index_of(a, per), perimeter=per / np.sqrt(area), area=a / area, sides=np.asarray(sim.state.cell_sides, dtype=np.float64))
+                 q=shape_index_of(a, per), perimeter=per / np.sqrt(area), area=a / area, sides=final.cell_sides.astype(np.float64))
     return cells, p0, status
 
 
 def neighbour_pairs(state):
     """Sorted cell pairs sharing an edge (:func:`spherevm.plugins.forces.bending.neighbor_pairs`), as
-    int64 keys ``a * n + b``."""
-    pairs = neighbor_pairs(state)
-    return pairs[:, 0] * state.n_cells + pairs[:, 1]
+    int64 keys ``a * n + b`` (NumPy, from a State on either device)."""
+    pairs = state.device.to_numpy(neighbor_pairs(state))
+    return pairs[:, 0].astype(np.int64) * state.n_cells + pairs[:, 1]
 
 
-def dynamics(spec, n, replicas, steps, lag, seed=1):
-    """Brownian + T1 at p0 = 3.775, kr = 0: per-cell centroid MSD at ``lag`` steps (mean over time
-    origins, snapshots every SNAPSHOT steps) and neighbour losses per unit time, with K <A>, after a
-    FIRE quench of at most PRE_QUENCH steps."""
+def dynamics(spec, n, replicas, steps, lag, seed=1, device="cpu"):
+    """Brownian + T1 at p0 = 3.775, kr = 0 on ``device``: per-cell centroid MSD and self-overlap
+    (displacement at most OVERLAP_WINDOW sqrt(<A>)) at ``lag`` steps, means over time origins
+    (snapshots every SNAPSHOT steps), and neighbour losses per unit time, with K <A>, after a FIRE
+    quench of at most PRE_QUENCH steps."""
     state = svm.init.tilings_on(spec, n, [(seed + n, r) for r in range(replicas)])
     rep = state.cell_replica_np()
     area = state.mean_cell_area[rep]
-    sim = svm.Simulation(device="cpu", seed=seed)
+    sim = svm.Simulation(device=device, seed=seed)
     sim.state = state
     sim.operations.forces.append(VertexModel(kA=0.0 * area, kP=1.0, A0=area, P0=DYN_P0 * np.sqrt(area)))
     sim.operations.updaters.append(T1())
@@ -107,16 +110,18 @@ def dynamics(spec, n, replicas, steps, lag, seed=1):
     sim.operations.integrator = Brownian(dt=DYN_DT, T=DYN_T)
     centres, losses, pairs = [], np.zeros(state.n_cells), neighbour_pairs(sim.state)
     for _ in range(steps // SNAPSHOT + 1):
-        centres.append(np.asarray(sim.state.constraint.cell_centroids(sim.state, "vertex")))
+        centres.append(sim.state.device.to_numpy(sim.state.constraint.cell_centroids(sim.state, "vertex")))
         sim.run(SNAPSHOT)
         now = neighbour_pairs(sim.state)
         lost = np.setdiff1d(pairs, now, assume_unique=True)
         np.add.at(losses, np.concatenate([lost // state.n_cells, lost % state.n_cells]), 1)
         pairs = now
-    c = np.stack(centres)
+    c = state.constraint.unwrap_path(np.stack(centres), state.size_np()[rep])   # across a periodic box
     m = lag // SNAPSHOT
-    msd = (((c[m:] - c[:-m]) ** 2).sum(axis=-1)).mean(axis=0)
-    return dict(replica=rep, K_A=cell_curvature(sim.state), msd=msd, t1_rate=losses / (len(centres) * SNAPSHOT * DYN_DT))
+    d2 = ((c[m:] - c[:-m]) ** 2).sum(axis=-1)                       # (origins, cells)
+    return dict(replica=rep, K_A=cell_curvature(sim.state.to("cpu")), msd=d2.mean(axis=0),
+                overlap=(d2 <= OVERLAP_WINDOW ** 2 * area).mean(axis=0),
+                t1_rate=losses / (len(centres) * SNAPSHOT * DYN_DT))
 
 
 def binned_rows(name, n, p0, cells, quantity, bins, edges=None):
@@ -141,19 +146,20 @@ def plot(bins, fractions, dyn_bins, path):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(2, 3, figsize=(15, 8.8))
+    fig, axes = plt.subplots(2, 4, figsize=(20, 8.8))
     p0s = sorted({r["p0"] for r in bins})
     mid = p0s[len(p0s) // 2]
 
     def curve(ax, rows, **options):
         ax.errorbar([r["K_A"] for r in rows], [r["mean"] for r in rows], [r["sem"] for r in rows], marker="o",
                     capsize=2, **options)
-    labels = {"q": "cell shape index q = P / sqrt(A)", "perimeter": "P / sqrt(<A>)", "sides": "side number"}
+    labels = {"q": "cell shape index q = P / sqrt(A)", "perimeter": "P / sqrt(<A>)", "sides": "side number",
+              "area": "A / <A>"}
     for ax, quantity in zip(axes[0], labels):
         for name in dict.fromkeys(r["surface"] for r in bins):
             curve(ax, [r for r in bins if r["surface"] == name and r["quantity"] == quantity and r["p0"] == mid],
                   label=name)
-        if quantity != "sides":
+        if quantity in ("q", "perimeter"):
             k = np.linspace(*ax.get_xlim(), 100)
             ax.plot(k, pentagon_perimeter_at_curvature(k), "k--", label="p_penta(K <A>)")
         ax.set(xlabel="K <A> at the cell", ylabel=labels[quantity], title=f"quenched, p0 = {mid:g}")
@@ -166,10 +172,13 @@ def plot(bins, fractions, dyn_bins, path):
     ax.set(xlabel="p0", ylabel="zero-energy fraction F", title="F(p0)")
     ax.legend(fontsize=7)
     for ax, quantity, label in ((axes[1, 1], "msd", "centroid MSD at fixed lag"),
-                                (axes[1, 2], "t1_rate", "neighbour losses per cell per unit time")):
+                                (axes[1, 2], "overlap", f"self-overlap at fixed lag (b = {OVERLAP_WINDOW})"),
+                                (axes[1, 3], "t1_rate", "neighbour losses per cell per unit time")):
         if dyn_bins:
-            curve(ax, [r for r in dyn_bins if r["quantity"] == quantity])
-            ax.set(xlabel="K <A> at the cell", ylabel=label, title=f"{DYN_SURFACE}, p0 = {DYN_P0}, T = {DYN_T}")
+            for name in dict.fromkeys(r["surface"] for r in dyn_bins):
+                curve(ax, [r for r in dyn_bins if r["quantity"] == quantity and r["surface"] == name], label=name)
+            ax.set(xlabel="K <A> at the cell", ylabel=label, title=f"p0 = {DYN_P0}, T = {DYN_T}")
+            ax.legend(fontsize=7)
         else:
             ax.axis("off")
     fig.tight_layout()
@@ -186,10 +195,12 @@ def main(argv=None):
     ap.add_argument("--cells", type=int, nargs="+", help="these N instead of the mode's")
     ap.add_argument("--replicas", type=int, help="tissues per (surface, N, p0) instead of the mode's")
     ap.add_argument("--kr", type=float, default=0.0, help="area stiffness of the quenches (RigiditySweep's default 0)")
-    ap.add_argument("--no-dynamics", action="store_true", help="leave out part (b), the Brownian run")
+    ap.add_argument("--no-dynamics", action="store_true", help="leave out part (b), the Brownian runs")
+    ap.add_argument("--device", default="auto", help="cpu, gpu or auto (the GPU where CuPy sees one)")
     ap.add_argument("--out", default=".", help="folder for the CSV files and the figure")
     args = ap.parse_args(argv)
-    mode = dict(MODES["full" if args.full else "tiny" if args.tiny else "default"])
+    name_of_mode = "full" if args.full else "tiny" if args.tiny else "default"
+    mode = dict(MODES[name_of_mode])
     mode.update({k: v for k, v in (("cells", args.cells), ("replicas", args.replicas)) if v})
     os.makedirs(args.out, exist_ok=True)
     t0 = time.time()
@@ -197,7 +208,8 @@ def main(argv=None):
     for n in mode["cells"]:
         for name in mode["surfaces"]:
             t = time.time()
-            cells, p0, status = quench(SURFACES[name], n, mode["p0"], mode["replicas"], mode["max_steps"], args.kr)
+            cells, p0, status = quench(SURFACES[name], n, mode["p0"], mode["replicas"], mode["max_steps"], args.kr,
+                                       device=args.device)
             for p in mode["p0"]:
                 sel = {k: v[cells["p0"] == p] for k, v in cells.items()}
                 for quantity in QUANTITIES:
@@ -213,15 +225,16 @@ def main(argv=None):
     write_csv(os.path.join(args.out, "curvature_fraction.csv"), fractions,
               ("surface", "n_cells", "p0", "n_replicas", "n_zero", "n_rigid", "n_unconverged", "F", "F_err"))
     dyn_bins = []
-    if not args.no_dynamics:
+    for name in [] if args.no_dynamics else DYN_SURFACES[name_of_mode]:
         t = time.time()
         n, reps, steps, lag = mode["dyn"]
-        d = dynamics(SURFACES[DYN_SURFACE], n, reps, steps, lag)
-        for quantity in ("msd", "t1_rate"):
-            dyn_bins += binned_rows(DYN_SURFACE, n, DYN_P0, d, quantity, mode["bins"])
-        write_csv(os.path.join(args.out, "curvature_dynamics.csv"), dyn_bins, BIN_COLUMNS)
-        print(f"dynamics on the {DYN_SURFACE}, N = {n}, {reps} tissues, {steps} steps (lag {lag * DYN_DT:g}): "
+        d = dynamics(SURFACES[name], n, reps, steps, lag, device=args.device)
+        for quantity in ("msd", "overlap", "t1_rate"):
+            dyn_bins += binned_rows(name, n, DYN_P0, d, quantity, mode["bins"])
+        print(f"dynamics on the {name}, N = {n}, {reps} tissues, {steps} steps (lag {lag * DYN_DT:g}): "
               f"{time.time() - t:.1f} s", flush=True)
+    if dyn_bins:
+        write_csv(os.path.join(args.out, "curvature_dynamics.csv"), dyn_bins, BIN_COLUMNS)
     plot(bin_rows, fractions, dyn_bins, os.path.join(args.out, "curvature_gradients.png"))
     print("\nsurface       N     p0    F (err)          | q against K <A> (bins low -> high): K <A>: q +- sem "
           "[p_penta]")
@@ -232,7 +245,8 @@ def main(argv=None):
         print(f"{fr['surface']:12s} {fr['n_cells']:5d} {fr['p0']:.3f} {fr['F']:.2f} +- {fr['F_err']:.2f} "
               f"({fr['n_zero']}/{fr['n_zero'] + fr['n_rigid']}, {fr['n_unconverged']} unconv.) | {q}")
     for r in dyn_bins:
-        print(f"{r['quantity']:8s} K <A> {r['K_A']:+.3f}: {r['mean']:.4g} +- {r['sem']:.2g} ({r['n_tissues']} tissues)")
+        print(f"{r['surface']:12s} {r['quantity']:8s} K <A> {r['K_A']:+.3f}: {r['mean']:.4g} +- {r['sem']:.2g} "
+              f"({r['n_tissues']} tissues)")
     print(f"\ntotal {time.time() - t0:.1f} s")
 
 

@@ -51,5 +51,15 @@ def test_bins_hold_every_cell_and_a_torus_has_both_signs(tiny):
     plane = [b for b in bins if b["surface"] == "plane" and b["quantity"] == "area"]
     assert len(plane) == 1 and float(plane[0]["K_A"]) == 0.0
     dyn = read(tiny / "curvature_dynamics.csv")
-    assert {b["quantity"] for b in dyn} == {"msd", "t1_rate"}
+    assert {b["quantity"] for b in dyn} == {"msd", "overlap", "t1_rate"}
+    for b in dyn:                 # a fraction of time origins
+        assert b["quantity"] != "overlap" or 0.0 <= float(b["mean"]) <= 1.0
     assert sum(int(b["n_cells_in_bin"]) for b in dyn if b["quantity"] == "msd") == 64
+
+
+def test_displacements_on_a_periodic_bump_are_minimum_images():
+    """Cells whose centroids cross the bump's periodic box do not count the box length as motion."""
+    dynamics = runpy.run_path(str(EXAMPLE))["dynamics"]
+    d = dynamics("bump:h=2,w=1,box=6.5", 64, 1, 400, 100, device="cpu")
+    assert np.all(np.isfinite(d["msd"])) and d["msd"].max() < 1.0     # a box length would be 8^2 / 6.5^2 ~ 1.5^2 x 64
+    assert np.all((d["overlap"] >= 0) & (d["overlap"] <= 1))

@@ -196,6 +196,7 @@ def main(argv=None):
     ap.add_argument("--replicas", type=int, help="tissues per (surface, N, p0) instead of the mode's")
     ap.add_argument("--kr", type=float, default=0.0, help="area stiffness of the quenches (RigiditySweep's default 0)")
     ap.add_argument("--no-dynamics", action="store_true", help="leave out part (b), the Brownian runs")
+    ap.add_argument("--dynamics-tissues", type=int, help="tissues per surface in part (b) instead of the mode's")
     ap.add_argument("--device", default="auto", help="cpu, gpu or auto (the GPU where CuPy sees one)")
     ap.add_argument("--out", default=".", help="folder for the CSV files and the figure")
     args = ap.parse_args(argv)
@@ -228,6 +229,7 @@ def main(argv=None):
     for name in [] if args.no_dynamics else DYN_SURFACES[name_of_mode]:
         t = time.time()
         n, reps, steps, lag = mode["dyn"]
+        reps = args.dynamics_tissues or reps
         d = dynamics(SURFACES[name], n, reps, steps, lag, device=args.device)
         for quantity in ("msd", "overlap", "t1_rate"):
             dyn_bins += binned_rows(name, n, DYN_P0, d, quantity, mode["bins"])

@@ -363,6 +363,38 @@ def _pinched(state, replica):
     return pos
 
 
+def test_an_untangling_run_restarts_bitwise(device, tmp_path):
+    """Hot Brownian steps, untangle_pass after each, a checkpoint at a step whose pass refuses
+    (written in the step, before its pass): restored, then its pass made, the run goes on as the
+    uninterrupted one to the bit, that refusal included (the checkpoint holds the rows the previous
+    pass kept)."""
+    def run(sim, t1, steps):
+        refused = []
+        for _ in range(steps):
+            sim.run(1)
+            t1.untangle_pass(sim)
+            refused.append(int(t1.untangle_refused.sum()))
+        return refused
+
+    tissues = svm.init.random_tiling(64, replicas=4, seed=8)
+    whole, t1 = _brownian(True, T=0.1, device=device, state=tissues)
+    refused = run(whole, t1, 40)
+    k = next(i + 1 for i in range(2, 30) if refused[i] > refused[i - 1])    # step k's pass refuses
+    first, t1_first = _brownian(True, T=0.1, device=device, state=tissues)
+    first.operations.writers.append(svm.plugins.writers.GSD(k, tmp_path / "ck.gsd"))
+    run(first, t1_first, k)
+    first.operations.writers[0].close()
+    second, t1_second = _brownian(True, T=0.1, device=device, state=tissues)
+    second.create_state_from_gsd(tmp_path / "ck.gsd")
+    assert second.timestep == k
+    t1_second.untangle_pass(second)
+    assert int(t1_second.untangle_refused.sum()) == refused[k - 1] > refused[k - 2]
+    run(second, t1_second, 40 - k)
+    assert t1_second.untangle_refused.tolist() == t1.untangle_refused.tolist()
+    for name in ("positions", "vertex_neighbors", "cell_vertices"):
+        assert to_numpy(getattr(second.state, name)).tobytes() == to_numpy(getattr(whole.state, name)).tobytes()
+
+
 @pytest.mark.parametrize("local_rounds", [3, 0])
 def test_untangle_pass_sends_back_a_replica_its_flips_leave_crossed(device, local_rounds, monkeypatch):
     """docs/validation.md: in a replica still not simple after untangle_pass's flips, the vertices

@@ -432,7 +432,7 @@ class T1(DevicePass, Updater):
         self._sync_counters()
         out = {name: np.array(getattr(self, name), dtype=np.int64) for name in self._COUNTERS}
         out.update(separated=self._separated.astype(np.int64), rejoins=self._rejoins.astype(np.int64))
-        return out
+        return dict(out, **(self._refusal.to_save() if self.untangle else {}))
 
     def restore_state(self, data: dict):
         """Counters per replica (>= 0, the last pass's at most the totals) and the flip-back memory:
@@ -454,6 +454,7 @@ class T1(DevicePass, Updater):
         for name in self._COUNTERS:
             setattr(self, name, saved[name].copy())
         self._separated, self._rejoins = keys.copy(), rejoins.copy()
+        self._refusal.restore(self, data, state)     # untangle_pass's kept rows, where saved
         self._gpu = None          # device counters are rebuilt from these totals
 
     def resized(self, change):

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ... import simplicity
+from ..rows import saved_field
 
 #: the State arrays a replica sent back gets back: per vertex, then per cell
 _VERTEX_ARRAYS = ("positions", "vertex_neighbors", "vertex_cells")
@@ -73,6 +74,40 @@ class StepRefusal:
         self.saved = dict(state=state, **{k: xp.copy(getattr(state, k)) for k in _VERTEX_ARRAYS + _CELL_ARRAYS})
         self.simple = ~bad
         return refused
+
+    def to_save(self) -> dict:
+        """Checkpoint fields: the refused steps per replica, and the rows the last pass kept (with
+        whether each replica's are simple), so that a restarted run's first pass can send back what
+        the uninterrupted run's would."""
+        out = {"untangle_refused": self.refused.astype(np.int64)}
+        if self.saved is not None:
+            host = lambda a: a.get() if hasattr(a, "get") else np.asarray(a)   # noqa: E731
+            out.update({f"untangle_{k}": host(self.saved[k]).copy() for k in _VERTEX_ARRAYS + _CELL_ARRAYS})
+            out["untangle_simple"] = self.simple.astype(np.uint8)
+        return out
+
+    def restore(self, op, data, state):
+        """The fields of :meth:`to_save` from ``data`` (``op``'s saved state), checked, the rows put
+        on ``state``'s device and tied to it; a checkpoint without them (untangling off when it was
+        written) starts afresh."""
+        n, n_v = state.n_replicas, state.n_vertices
+        self.reset(n)
+        if "untangle_refused" not in data:
+            return
+        self.refused = saved_field(op, data, "untangle_refused", np.int64, (n,), low=0).copy()
+        if "untangle_positions" not in data:
+            return
+        rows = {"positions": saved_field(op, data, "untangle_positions", np.float64, (n_v, 3))}
+        for name in ("vertex_neighbors", "vertex_cells"):
+            high = n_v - 1 if name == "vertex_neighbors" else state.n_cells - 1
+            rows[name] = saved_field(op, data, f"untangle_{name}", np.int32, (n_v, 3), low=0, high=high)
+        rows["cell_sides"] = saved_field(op, data, "untangle_cell_sides", np.int32, (state.n_cells,), low=3)
+        rows["cell_vertices"] = saved_field(op, data, "untangle_cell_vertices", np.int32, (state.n_cells, None),
+                                            low=-1, high=n_v - 1)
+        simple = saved_field(op, data, "untangle_simple", np.uint8, (n,), low=0, high=1)
+        xp = state.device.xp
+        self.saved = dict(state=state, **{k: xp.asarray(v.copy()) for k, v in rows.items()})
+        self.simple = simple.astype(bool)
 
     def _restore(self, simulation, vertices, cells):
         """The saved positions of ``vertices`` into the State, and with ``cells`` (a whole replica's

@@ -361,13 +361,58 @@ def test_radius_schedule_constant_area_fixed_and_callable():
         sim.run(1)
 
 
-def test_radius_schedule_refuses_the_plane_and_bad_modes():
+def test_radius_schedule_refuses_bad_modes_and_a_radius_function_off_the_sphere():
     with pytest.raises(ValueError, match="mode"):
         RadiusSchedule("sometimes")
     sim = svm.Simulation(device="cpu")
     sim.state = svm.init_plane.hexagonal_tiling(3, 4)
-    with pytest.raises(ValueError, match="Sphere"):
-        sim.operations.updaters.append(RadiusSchedule())
+    with pytest.raises(ValueError, match="radius function needs a surface sized by one radius.*mode='constant_area'"):
+        sim.operations.updaters.append(RadiusSchedule(lambda s: 2.0))
+
+
+@pytest.mark.parametrize("surface", ["sphere", "plane", "torus:R=3,r=1", "bump:height=1.5,width=1,box=12"])
+def test_a_new_mean_area_scales_every_length(surface):
+    """RadiusSchedule(area=2) on tilings of <A> = 1, nothing else moving: the surface's every
+    parameter and every vertex position scale by sqrt(2)."""
+    sim = svm.Simulation(device="cpu", seed=3)
+    sim.state = svm.init.tilings_on(surface, 64, [(1, 0), (1, 1)])
+    before = sim.state.copy()
+    sim.operations.updaters.append(RadiusSchedule("constant_area", area=2.0))
+    sim.operations.integrator = FIRE(dt=1e-12)
+    sim.run(1)
+    assert np.allclose(sim.state.size_np(), np.sqrt(2) * before.size_np(), rtol=1e-14)
+    assert np.allclose(sim.state.positions, np.sqrt(2) * before.positions, rtol=0, atol=1e-12)
+    assert np.allclose(sim.state.mean_cell_area, 2.0, rtol=1e-12)
+
+
+@pytest.mark.parametrize("surface", ["plane", "torus:R=3,r=1", "bump:height=1.5,width=1,box=12"])
+def test_the_size_schedule_keeps_the_mean_area_on_any_surface(surface):
+    """Cells divide; with mode="constant_area" every length of the surface (the plane's box, the
+    torus's radii, the bump's box, height and width) scales so that <A> stays what it was, its shape
+    kept, every vertex on the new surface and the tiling valid."""
+    sim = svm.Simulation(device="cpu", seed=3)
+    sim.state = svm.init.tilings_on(surface, 64, [(1, 0), (1, 1)])
+    shape = sim.state.size_np() / sim.state.size_np()[:, :1]
+    area0 = sim.state.mean_cell_area.copy()
+    start = sim.state.copy()
+
+    def covered(state):           # the cells' flat areas over the surface's: below 1 by the flat facets' cut
+        areas = np.bincount(state.cell_replica_np(), weights=state.constraint.cell_areas_np(state))
+        return areas / state.constraint.total_area_np(state.size_np())
+    sim.operations.forces.append(VertexModel.dimensionless(kr=1.0, p0=3.8))
+    sim.operations.updaters.append(T1())
+    sim.operations.updaters.append(Division(rule="rate", rate=0.5, dt=0.1))
+    sim.operations.updaters.append(RadiusSchedule("constant_area"))
+    sim.operations.integrator = FIRE(dt=0.02)
+    sim.run(6)
+    s = sim.state
+    assert np.all(s.cells_per_replica > 64)
+    assert np.allclose(s.mean_cell_area, area0, rtol=1e-12)
+    assert np.allclose(s.size_np() / s.size_np()[:, :1], shape, rtol=1e-12)
+    size = s.constraint.size(s, s.vertex_replica)
+    assert np.abs(s.constraint.distance_to_surface(s.positions, size)).max() < 1e-9
+    assert np.all(covered(s) > covered(start) - 0.01)     # the cells cover the grown surface as before
+    s.validate(simple=False)
 
 
 # ------------------------------------------------------------------ GSD with changing counts

@@ -188,6 +188,14 @@ class Constraint:
     def total_area_np(self, radius):
         raise NotImplementedError(f"{type(self).__name__}.total_area is not implemented yet")
 
+    def size_for_area(self, size, area):
+        """Each replica's size (rows of ``size``, NumPy) with its shape kept and its surface's total
+        area ``area`` (per replica): every parameter times sqrt(area / total area), for surfaces whose
+        parameters are all lengths (the plane's box, an implicit surface's; the sphere's radius)."""
+        size = np.asarray(size, dtype=np.float64)
+        factor = np.sqrt(np.asarray(area, dtype=np.float64) / self.total_area_np(size))
+        return size * factor.reshape((-1,) + (1,) * (size.ndim - 1))
+
     def cell_geometry(self, state, area_vectors: bool = False, metric: bool = True):
         """Per-cell areas and perimeters (``metric``) and area vectors (``area_vectors``,
         ``(n_cells, 3)``), with what :meth:`shape_gradient` reuses."""

@@ -131,6 +131,10 @@ class Sphere(Constraint):
     def total_area_np(self, radius):
         return 4.0 * np.pi * np.asarray(radius, dtype=np.float64) ** 2
 
+    def size_for_area(self, radius, area):
+        """The radius of the sphere of area ``area``: sqrt(area / 4 pi)."""
+        return np.sqrt(np.asarray(area, dtype=np.float64) / (4.0 * np.pi))
+
     def orientation_points(self, x, reference=None, size=None):
         """Unit vectors (a great circle's normal is ``a x b``)."""
         return x / np.linalg.norm(x, axis=-1)[..., None]

@@ -1,4 +1,5 @@
-"""The sphere's radius as a schedule: fixed, growing with N at constant <A>, or a user's function."""
+"""The surface's size as a schedule: fixed, growing with N at constant <A>, or (a sphere) a user's
+function of the radius."""
 from __future__ import annotations
 
 import numpy as np
@@ -25,18 +26,22 @@ def _target_area(name, value):
 
 
 class RadiusSchedule(Updater):
-    """Set each replica's sphere radius every time the trigger fires, rescaling its vertex
-    positions radially (``x -> x R_new / R_old``: shapes are kept, every length scales).
+    """Set each replica's surface size every time the trigger fires, rescaling its vertex positions
+    with it (``x -> x R_new / R_old`` on the sphere: shapes are kept, every length scales). On any
+    surface whose parameters are all lengths (the sphere's radius, the plane's box, the torus's
+    radii, the ellipsoid's axes, a height field's box and heights) every length scales alike
+    (:meth:`Constraint.size_for_area <spherevm.constraints.base.Constraint.size_for_area>`).
 
     Put it after the updaters that change N (Division, Extrusion) so the new N is seen in the same
-    step. Sphere only, both devices. Sits minimisations out, as Division does.
+    step. Both devices. Sits minimisations out, as Division does.
 
     Parameters
     ----------
     mode : {"fixed", "constant_area"} or callable
-        "fixed": never change R (dividing cells then lower <A> = 4 pi R^2 / N); "constant_area":
-        ``R = sqrt(N area / 4 pi)``, so that <A> stays ``area`` as N changes; a callable
-        ``f(simulation) -> R`` (a scalar or one per replica).
+        "fixed": never change the size (dividing cells then lower <A> = area / N); "constant_area":
+        the size whose area is ``N area`` (on the sphere ``R = sqrt(N area / 4 pi)``), so that <A>
+        stays ``area`` as N changes; on a sphere, a callable ``f(simulation) -> R`` (a scalar or one
+        per replica).
     area : float, optional
         For "constant_area" (default: each replica's <A> when the schedule attaches).
     trigger : Trigger or int"""
@@ -63,9 +68,9 @@ class RadiusSchedule(Updater):
     def attach(self, simulation):
         super().attach(simulation)
         con = simulation.state.constraint
-        if con.size_key != "radius":
-            raise ValueError(f"RadiusSchedule needs a surface sized by one radius per replica (a Sphere), got {con!r} "
-                             f"sized by {', '.join(con.size_names)}")
+        if callable(self.mode) and con.size_key != "radius":
+            raise ValueError(f"RadiusSchedule with a radius function needs a surface sized by one radius per replica "
+                             f"(a Sphere), got {con!r} sized by {', '.join(con.size_names)}; use mode='constant_area'")
         state = simulation.state
         self.target_area = (np.full(state.n_replicas, self.area) if self.area is not None
                             else np.array(state.mean_cell_area, dtype=np.float64))
@@ -85,12 +90,12 @@ class RadiusSchedule(Updater):
             self.target_area = area.copy()
 
     def target(self, simulation):
-        """The radius each replica should have now (NumPy, per replica)."""
+        """The size each replica should have now (NumPy, rows of ``state.size``)."""
         state = simulation.state
         if self.mode == "fixed":
-            return state.radius_np()
+            return state.size_np()
         if self.mode == "constant_area":
-            return np.sqrt(state.cells_per_replica * self.target_area / (4.0 * np.pi))
+            return state.constraint.size_for_area(state.size_np(), state.cells_per_replica * self.target_area)
         n, given = state.n_replicas, self.mode(simulation)
         try:
             r = np.asarray(state.device.to_numpy(given), dtype=np.float64)     # a CuPy array too
@@ -110,14 +115,15 @@ class RadiusSchedule(Updater):
             if np.array_equal(self.counts, state.cells_per_replica):     # of R) until N changes
                 return
             self.counts = state.cells_per_replica.copy()
-        old, new = state.radius_np(), self.target(simulation)
+        old, new = state.size_np(), self.target(simulation)
         if np.array_equal(old, new):
             return
         xp = state.device.xp
-        scale = xp.asarray(new / old)[state.vertex_replica]
-        radius = xp.asarray(new)
-        state.positions = state.constraint.project_normal(state.positions * scale[:, None], radius[state.vertex_replica])
-        state.radius = radius
+        first = (slice(None),) + (0,) * (new.ndim - 1)            # every length scales alike: the first's ratio
+        scale = xp.asarray(new[first] / old[first])[state.vertex_replica]
+        size = xp.asarray(new)
+        state.positions = state.constraint.project_normal(state.positions * scale[:, None], size[state.vertex_replica])
+        state.size = size
         state.clear_cache()          # cached parameters that depend on <A> (dimensionless forces) go stale
         simulation.state_changed()
 

@@ -137,8 +137,10 @@ def plot(bins, fractions, div_rows, path):
     fig, axes = plt.subplots(1, 3, figsize=(16, 4.6))
     for (name, rule_name), marker in zip([(s, r) for s in SURFACES for r in RULES], "os^v"):
         mine = [r for r in fractions if r["surface"] == name and r["rule"] == rule_name]
-        axes[0].plot([r["N"] for r in mine], [r["zero"] / r["n_replicas"] for r in mine], marker + "-",
-                     label=f"{name}, {rule_name}")
+        line, = axes[0].plot([r["N"] for r in mine], [r["zero"] / max(r["zero"] + r["rigid"], 1) for r in mine],
+                             marker + "-", label=f"{name}, {rule_name}: zero / converged")
+        axes[0].plot([r["N"] for r in mine], [1 - (r["zero"] + r["rigid"]) / r["n_replicas"] for r in mine],
+                     marker + ":", color=line.get_color(), alpha=0.6, label="not converged / all")
         last = max((r["N"] for r in bins if r["surface"] == name and r["rule"] == rule_name), default=None)
         rows = [r for r in bins if r["surface"] == name and r["rule"] == rule_name and r["N"] == last]
         axes[1].errorbar([r["K_A"] for r in rows], [r["tension"] for r in rows], [r["sem"] for r in rows],
@@ -146,7 +148,7 @@ def plot(bins, fractions, div_rows, path):
         rows = [r for r in div_rows if r["surface"] == name and r["rule"] == rule_name]
         axes[2].plot([0.5 * (r["K_low"] + r["K_high"]) for r in rows], [r["divisions"] / r["cells"] for r in rows],
                      marker + "-", label=f"{name}, {rule_name}")
-    axes[0].set(xlabel="N", ylabel="zero-energy fraction", title="growing at <A> = 1, P0 = 3.80", xscale="log")
+    axes[0].set(xlabel="N", ylabel="fraction of tissues", title="growing at <A> = 1, P0 = 3.80", xscale="log")
     axes[1].set(xlabel="K <A> at the cell", ylabel="(P - P0) / P0, rigid tissues", title="tension at the last N")
     axes[2].axhline(1.0, color="k", lw=0.5)
     axes[2].set(xlabel="K <A> at the cell (quartiles)", ylabel="share of divisions / share of cells",
@@ -191,7 +193,8 @@ def main(argv=None):
         for rule_name in args.rules:
             f = [r for r in fractions if r["surface"] == name and r["rule"] == rule_name]
             d = [r for r in div_rows if r["surface"] == name and r["rule"] == rule_name]
-            print(f"{name}, {rule_name}: " + ", ".join(f"N={r['N']}: {r['zero']}/{r['n_replicas']}" for r in f)
+            print(f"{name}, {rule_name} (zero/rigid/all): " + ", ".join(f"N={r['N']}: {r['zero']}/{r['rigid']}/{r['n_replicas']}"
+                                                                      for r in f)
                   + " | " + ", ".join(f"{r['divisions'] / r['cells']:.2f}" for r in d) + f" ({d[0]['n_divisions']} divisions)")
     for r in bins:
         print(f"{r['surface']}, {r['rule']}, N = {r['N']}: K <A> {r['K_A']:+.3f}: tension {r['tension']:.4f} "

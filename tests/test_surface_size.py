@@ -113,9 +113,10 @@ def test_a_surface_drawn_as_a_mesh(tmp_path):
     plt.close(fig)
 
 
-def test_radius_schedule_needs_a_radius():
+def test_a_radius_function_needs_a_radius():
     sim = svm.Simulation(device="cpu")
     sim.state = svm.init.random_planar_tiling(16, seed=0)
-    with pytest.raises(ValueError, match=r"RadiusSchedule needs a surface sized by one radius per replica \(a "
-                                         r"Sphere\), got PeriodicPlane\(\) sized by Lx, Ly"):
-        sim.operations.updaters.append(svm.plugins.updaters.RadiusSchedule(trigger=1))
+    with pytest.raises(ValueError, match=r"RadiusSchedule with a radius function needs a surface sized by one radius "
+                                         r"per replica \(a Sphere\), got PeriodicPlane\(\) sized by Lx, Ly; use "
+                                         r"mode='constant_area'"):
+        sim.operations.updaters.append(svm.plugins.updaters.RadiusSchedule(lambda s: 2.0, trigger=1))

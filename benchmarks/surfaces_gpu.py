@@ -12,7 +12,7 @@ The model is the digests' (``VertexModel.dimensionless(kr=0, p0=3.775)``, ``T1()
 turn, round after round (:func:`common.median_times`), and each row prints its median and its ratio
 to the sphere's, with ``sim.explain()``'s executor.
 
-    python benchmarks/surfaces_gpu.py                     # all three sizes (about 3 minutes on an H200)
+    python benchmarks/surfaces_gpu.py                     # all three sizes (under 2 minutes on an H200)
     python benchmarks/surfaces_gpu.py --sizes 8x1024 --repeat 5
 
 The tilings are built first, in parallel processes, before CUDA starts.

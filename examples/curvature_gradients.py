@@ -28,7 +28,7 @@ import time
 import numpy as np
 
 import spherevm as svm
-from spherevm.analysis import binned_mean, gaussian_curvature, pentagon_perimeter_at_curvature
+from spherevm.analysis import binned_mean, cell_curvature, pentagon_perimeter_at_curvature
 from spherevm.analysis.rigidity import classify, zero_fraction
 from spherevm.shapes import shape_index_of
 from spherevm.plugins.forces import VertexModel
@@ -52,14 +52,6 @@ CELL_COLUMNS = ("surface", "n_cells", "p0", "replica", "status", "K_A", "p_penta
 QUANTITIES = ("q", "perimeter", "area", "sides")   # perimeter and area in units of sqrt(<A>) and <A>
 BIN_COLUMNS = ("surface", "n_cells", "p0", "quantity", "bin", "K_low", "K_high", "K_A", "mean", "sem", "n_tissues",
                "n_cells_in_bin", "p_penta")
-
-
-def cell_curvature(state):
-    """K <A> at each cell's area centroid (NumPy)."""
-    rep = state.cell_replica_np()
-    x = np.asarray(state.constraint.cell_centroids(state, "area"))
-    size = np.asarray(state.size)[rep]
-    return gaussian_curvature(state.constraint, x, size=size) * state.mean_cell_area[rep]
 
 
 def quench(spec, n, p0s, replicas, max_steps, kr=0.0, seed=0, device="cpu"):

@@ -27,7 +27,7 @@ import time
 import numpy as np
 
 import spherevm as svm
-from spherevm.analysis import binned_mean, gaussian_curvature
+from spherevm.analysis import binned_mean, cell_curvature
 from spherevm.analysis.rigidity import classify
 from spherevm.plugins.forces import VertexModel
 from spherevm.plugins.integrators import FIRE
@@ -36,13 +36,6 @@ from spherevm.plugins.updaters import T1, Division, RadiusSchedule
 SURFACES = {"torus R/r=3": "torus:R=3,r=1", "bump h/w=2": "bump:h=2,w=1,box=6.5"}
 RULES = ("random", "largest")
 BINS = 4
-
-
-def cell_curvature(state):
-    """K <A> at each cell's area centroid (NumPy State)."""
-    rep = state.cell_replica_np()
-    x = np.asarray(state.constraint.cell_centroids(state, "area"))
-    return gaussian_curvature(state.constraint, x, size=state.size_np()[rep]) * state.mean_cell_area[rep]
 
 
 def grow(spec, rule_name, args, log):

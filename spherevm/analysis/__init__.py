@@ -9,7 +9,7 @@ from ..plugins.writers.recorder import Recorder, Recording, log_spaced_times
 from ..shapes import (cell_centroids, cell_shapes, mean_shape_index, pentagon_perimeter,
                       pentagon_perimeter_at_curvature, polygon_perimeter_at_curvature, regular_polygon_perimeter,
                       shape_index)
-from .curvature import Binned, binned_mean, gaussian_curvature, torus_curvature_range
+from .curvature import Binned, binned_mean, cell_curvature, gaussian_curvature, torus_curvature_range
 from ..trigger import OnTimesteps
 from .dynamics import (ArrheniusFit, NoRelaxationWarning, TimeCorrelation, arrhenius_fit, msd,
                        self_intermediate_scattering, self_overlap, tau_alpha)
@@ -19,7 +19,7 @@ from .trajectory import Trajectory, remove_rigid_rotation
 __all__ = ["ArrheniusFit", "Binned", "NoRelaxationWarning", "OnTimesteps", "Recorder", "Recording", "TimeCorrelation",
            "Trajectory", "arrhenius_fit", "binned_mean", "cell_centroids", "cell_shapes", "classify",
            "critical_perimeter", "p0_star", "rigidity", "smoothing_width", "transition_density", "zero_fraction",
-           "log_spaced_times", "mean_shape_index", "msd", "gaussian_curvature", "pentagon_perimeter",
+           "log_spaced_times", "mean_shape_index", "msd", "cell_curvature", "gaussian_curvature", "pentagon_perimeter",
            "pentagon_perimeter_at_curvature", "polygon_perimeter_at_curvature", "regular_polygon_perimeter",
            "remove_rigid_rotation", "self_intermediate_scattering", "self_overlap", "shape_index", "tau_alpha",
            "torus_curvature_range"]

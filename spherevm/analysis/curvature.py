@@ -44,6 +44,22 @@ def gaussian_curvature(constraint, x, radius=None, size=None):
     return constraint.gaussian_curvature(x, radius if size is None else size)
 
 
+
+def cell_curvature(state):
+    """``K <A>`` at each cell's area centroid: the Gaussian curvature the cell sits on, in units of its
+    replica's mean cell area (a State on the CPU).
+
+    Parameters
+    ----------
+    state : State
+
+    Returns
+    -------
+    numpy.ndarray (n_cells,)"""
+    rep = state.cell_replica_np()
+    x = np.asarray(state.constraint.cell_centroids(state, "area"))
+    return gaussian_curvature(state.constraint, x, size=state.size_np()[rep]) * state.mean_cell_area[rep]
+
 def torus_curvature_range(aspect, n_cells, mean_area=1.0):
     """Lowest and highest Gaussian curvature of the torus of aspect ratio ``R / r`` whose area
     ``4 pi^2 R r`` holds ``n_cells`` cells of ``mean_area``: ``-1 / (r (R - r))`` and ``1 / (r (R + r))``.

@@ -131,14 +131,23 @@ def run(surface, flips, cells=256, replicas=8, T=0.05, dt=0.02, relax=200, seed=
     sim.operations.updaters.append(t1)
     sim.operations.integrator = Brownian(dt=dt, T=T)
     t1.untangle_pass(sim, revert=revert)         # keeps the tiling's rows: every replica simple
-    for _ in range(relax):                       # the random tilings' first flips: not counted
-        sim.run(1)
-        t1.untangle_pass(sim, revert=revert)
+    out = dict(steps=0, flips=0, met=0, left=0, steps_left=0, refused_steps=0, pinched=0, flippable=0, refused=0,
+               stopped="", seconds=0.0)
+    try:
+        for _ in range(relax):                   # the random tilings' first flips: not counted
+            sim.run(1)
+            t1.untangle_pass(sim, revert=revert)
+    except FloatingPointError as err:            # a hot random tiling can blow up: report it, count nothing
+        out.update(stopped="while relaxing: " + str(err).split(";")[0], seconds=1.0)
+        return out
     start, refused = int(sim.log("t1_total_flips").sum()), int(t1.untangle_refused.sum())
-    out = dict(steps=0, flips=0, met=0, left=0, steps_left=0, refused_steps=0, pinched=0, flippable=0, refused=0)
     t0 = time.perf_counter()
     while out["flips"] < flips and (seconds is None or time.perf_counter() - t0 < seconds):
-        sim.run(1)
+        try:
+            sim.run(1)
+        except FloatingPointError as err:        # a hot random tiling can blow up: keep what was counted
+            out["stopped"] = str(err).split(";")[0]
+            break
         out["met"] += len({c for c, _, _ in brute_force_crossings(sim.state)})
         t1.untangle_pass(sim, revert=revert)
         found = brute_force_crossings(sim.state)
@@ -181,7 +190,7 @@ def main(argv=None):
                 args.classify, args.seconds, args.device)
         print(f"{surface:<9} {r['steps']:>7} {r['flips']:>8} {r['met']:>7} {r['left']:>5} {r['steps_left']:>8} "
               f"{r['refused_steps']:>7} {r['pinched']:>7} {r['flippable']:>8} {r['refused']:>7} "
-              f"{r['flips'] / r['seconds']:>7.0f}", flush=True)
+              f"{r['flips'] / r['seconds']:>7.0f}" + (f"  stopped: {r['stopped']}" if r["stopped"] else ""), flush=True)
 
 
 if __name__ == "__main__":

@@ -226,6 +226,15 @@ def test_untangling_leaves_no_crossed_cell_in_hot_dynamics(surface, cells, flips
     assert out["left"] == 0 and out["flips"] >= flips and out["met"] > flips // 2 and out["refused_steps"] > 0, out
 
 
+@pytest.mark.parametrize("relax, where", [(0, "exploding step"), (5, "while relaxing: exploding step")])
+def test_a_fuzz_run_that_blows_up_reports_it_and_keeps_its_counts(relax, where):
+    """A hot run can end on an exploding step (a random tiling's tiny cell): the fuzz run stops
+    there, says why and returns what it counted (a long count is summed over runs), instead of
+    losing the whole run to the exception."""
+    out = untangle_run("plane", 10**6, cells=64, replicas=2, T=0.1, dt=0.5, relax=relax, seed=2)
+    assert out["stopped"].startswith(where) and out["flips"] < 10**6 and out["seconds"] > 0, out
+
+
 @pytest.mark.parametrize("surface", ["sphere", "ellipsoid"])
 def test_untangling_by_flips_alone_leaves_crossed_cells(surface):
     """The same runs with the replica steps never refused (``untangle_pass(revert=False)``): the

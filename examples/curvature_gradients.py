@@ -1,12 +1,13 @@
-"""Cells against the local Gaussian curvature K: quenched shapes and the zero-energy fraction on tori,
-Gaussian bumps, the sphere and the plane; mobility and neighbour exchanges on a torus at finite T
+"""Cells against the local Gaussian curvature K: quenched shapes, the zero-energy fraction and p0* on
+tori, Gaussian bumps, an ellipsoid, the sphere and the plane; mobility and neighbour exchanges on a torus at finite T
 (docs/results.md, "Curvature gradients: first measurements").
 
 (a) Zero temperature: FIRE + T1 quenches of random tilings (<A> = 1) at several p0, with the sweeps'
 settings (kr = 0 unless --kr; per cell kA = kr / <A>, kP = 1, A0 = <A>, P0 = p0 sqrt(<A>); FIRE dt 0.02; T1 as
 RigiditySweep's defaults). Per cell: shape index q = P / sqrt(A), area and side number, binned against
 K <A> at the cell's centroid (errors over tissues: each replica's bin mean is one sample), beside the
-local pentagon bound p_penta(K <A>); per surface the zero-energy fraction F(p0) (binomial errors).
+local pentagon bound p_penta(K <A>); per surface the zero-energy fraction F(p0) (binomial errors) and,
+with two p0 or more, p0* (the paper's estimator, analysis.rigidity.p0_star).
 (b) Finite temperature: Brownian dynamics + T1 at p0 = 3.775, kr = 0 on a torus (R/r = 3) and a bump
 (h/w = 2): per cell the mean-square displacement of its centroid over a fixed lag (embedding-space
 chord, across a periodic box by minimum images), its self-overlap over that lag (the fraction of time
@@ -17,7 +18,7 @@ so flips undone within one interval are missed), all against K <A>.
 Every surface runs on either device (``--device``, default the GPU where CuPy sees one):
 
     python examples/curvature_gradients.py --out curv/           # small default, minutes on a CPU
-    python examples/curvature_gradients.py --full --device gpu --out curv/   # N = 256 and 1024, 16 replicas
+    python examples/curvature_gradients.py --full --device gpu --out curv/   # N = 256 and 1024: ~9 min on an H200
     python examples/curvature_gradients.py --tiny --out curv/    # seconds: the test's smoke run
 """
 import argparse
@@ -29,7 +30,7 @@ import numpy as np
 
 import spherevm as svm
 from spherevm.analysis import binned_mean, cell_curvature, pentagon_perimeter_at_curvature
-from spherevm.analysis.rigidity import classify, zero_fraction
+from spherevm.analysis.rigidity import classify, p0_star, zero_fraction
 from spherevm.shapes import shape_index_of
 from spherevm.plugins.forces import VertexModel
 from spherevm.plugins.forces.bending import neighbor_pairs
@@ -37,7 +38,8 @@ from spherevm.plugins.integrators import FIRE, Brownian
 from spherevm.plugins.updaters import T1
 
 SURFACES = {"plane": "plane", "sphere": "sphere", "torus R/r=2": "torus:R=2,r=1", "torus R/r=3": "torus:R=3,r=1",
-            "torus R/r=5": "torus:R=5,r=1", "bump h/w=1": "bump:h=1,w=1,box=6.5", "bump h/w=2": "bump:h=2,w=1,box=6.5"}
+            "torus R/r=5": "torus:R=5,r=1", "bump h/w=1": "bump:h=1,w=1,box=6.5", "bump h/w=2": "bump:h=2,w=1,box=6.5",
+            "ellipsoid 1:1.5:2": "ellipsoid:a=1,b=1.5,c=2"}
 MODES = {   # cells, p0 values, replicas per p0, FIRE max steps, K bins, dynamics (cells, replicas, steps, lag)
     "tiny": dict(cells=[64], p0=[3.8], replicas=1, max_steps=200, bins=3, surfaces=["plane", "torus R/r=3"],
                  dyn=(64, 1, 60, 20)),
@@ -50,6 +52,7 @@ DYN_SURFACES = {"tiny": ["torus R/r=3"], "default": ["torus R/r=3", "bump h/w=2"
 DYN_P0, DYN_T, DYN_DT, SNAPSHOT, PRE_QUENCH, OVERLAP_WINDOW = 3.775, 0.02, 0.05, 10, 1000, 0.5
 CELL_COLUMNS = ("surface", "n_cells", "p0", "replica", "status", "K_A", "p_penta", "q", "perimeter", "area", "sides")
 QUANTITIES = ("q", "perimeter", "area", "sides")   # perimeter and area in units of sqrt(<A>) and <A>
+STAR_COLUMNS = ("surface", "n_cells", "p0_star", "p0_star_err", "p0_half", "bracketed")
 BIN_COLUMNS = ("surface", "n_cells", "p0", "quantity", "bin", "K_low", "K_high", "K_A", "mean", "sem", "n_tissues",
                "n_cells_in_bin", "p_penta")
 
@@ -76,6 +79,15 @@ def quench(spec, n, p0s, replicas, max_steps, kr=0.0, seed=0, device="cpu"):
     cells = dict(p0=p0[rep], replica=rep, status=status[rep], K_A=k, p_penta=pentagon_perimeter_at_curvature(k),
                  q=shape_index_of(a, per), perimeter=per / np.sqrt(area), area=a / area, sides=final.cell_sides.astype(np.float64))
     return cells, p0, status
+
+
+def transition(f):
+    """p0* of one surface and N (:func:`spherevm.analysis.rigidity.p0_star`, the paper's estimator,
+    its error from resampling each F) from :func:`~spherevm.analysis.rigidity.zero_fraction`'s
+    ``f``, over the p0 with a converged tissue; None where fewer than two p0 have one."""
+    converged = f["n_zero"] + f["n_rigid"]
+    ok = converged > 0
+    return p0_star(f["p0"][ok], f["F"][ok], n=converged[ok]) if ok.sum() >= 2 else None
 
 
 def neighbour_pairs(state):
@@ -182,10 +194,14 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
                                  allow_abbrev=False)
     group = ap.add_mutually_exclusive_group()
-    group.add_argument("--full", action="store_true", help="N = 256 and 1024, 11 p0 values, 16 replicas (CPU, hours)")
+    group.add_argument("--full", action="store_true", help="N = 256 and 1024, 11 p0 values, 16 replicas "
+                       "(one GPU: about 9 minutes on an H200; hours on a CPU)")
     group.add_argument("--tiny", action="store_true", help="seconds: one p0, a plane and a torus (smoke test)")
     ap.add_argument("--cells", type=int, nargs="+", help="these N instead of the mode's")
     ap.add_argument("--replicas", type=int, help="tissues per (surface, N, p0) instead of the mode's")
+    ap.add_argument("--surfaces", nargs="+", choices=list(SURFACES), metavar="NAME",
+                    help=f"these surfaces instead of the mode's (of {', '.join(SURFACES)}); the dynamics run on "
+                         "those of them the mode runs dynamics on")
     ap.add_argument("--kr", type=float, default=0.0, help="area stiffness of the quenches (RigiditySweep's default 0)")
     ap.add_argument("--no-dynamics", action="store_true", help="leave out part (b), the Brownian runs")
     ap.add_argument("--dynamics-tissues", type=int, help="tissues per surface in part (b) instead of the mode's")
@@ -194,10 +210,11 @@ def main(argv=None):
     args = ap.parse_args(argv)
     name_of_mode = "full" if args.full else "tiny" if args.tiny else "default"
     mode = dict(MODES[name_of_mode])
-    mode.update({k: v for k, v in (("cells", args.cells), ("replicas", args.replicas)) if v})
+    mode.update({k: v for k, v in (("cells", args.cells), ("replicas", args.replicas), ("surfaces", args.surfaces))
+                 if v})
     os.makedirs(args.out, exist_ok=True)
     t0 = time.time()
-    cell_rows, bin_rows, fractions = [], [], []
+    cell_rows, bin_rows, fractions, stars = [], [], [], []
     for n in mode["cells"]:
         for name in mode["surfaces"]:
             t = time.time()
@@ -211,14 +228,20 @@ def main(argv=None):
                           for i in range(len(cells["q"]))]
             f = zero_fraction(np.full(len(p0), n), p0, status)
             fractions += [dict(surface=name, **{k: f[k][i] for k in f}) for i in range(len(f["p0"]))]
+            est = transition(f)
+            if est is not None:
+                stars.append(dict(surface=name, n_cells=n, p0_star=est.mean, p0_star_err=est.mean_err,
+                                  p0_half=est.p0_half, bracketed=est.bracketed))
             print(f"{name:12s} N = {n}: quenched in {time.time() - t:.1f} s; statuses "
                   f"{dict(zip(*np.unique(status, return_counts=True)))}", flush=True)
     write_csv(os.path.join(args.out, "curvature_cells.csv"), cell_rows, CELL_COLUMNS)
     write_csv(os.path.join(args.out, "curvature_bins.csv"), bin_rows, BIN_COLUMNS)
     write_csv(os.path.join(args.out, "curvature_fraction.csv"), fractions,
               ("surface", "n_cells", "p0", "n_replicas", "n_zero", "n_rigid", "n_unconverged", "F", "F_err"))
+    if stars:
+        write_csv(os.path.join(args.out, "curvature_p0star.csv"), stars, STAR_COLUMNS)
     dyn_bins = []
-    for name in [] if args.no_dynamics else DYN_SURFACES[name_of_mode]:
+    for name in [] if args.no_dynamics else [s for s in DYN_SURFACES[name_of_mode] if s in mode["surfaces"]]:
         t = time.time()
         n, reps, steps, lag = mode["dyn"]
         reps = args.dynamics_tissues or reps
@@ -238,6 +261,9 @@ def main(argv=None):
         q = "; ".join(f"{r['K_A']:+.3f}: {r['mean']:.4f} +- {r['sem']:.4f} [{r['p_penta']:.3f}]" for r in rows)
         print(f"{fr['surface']:12s} {fr['n_cells']:5d} {fr['p0']:.3f} {fr['F']:.2f} +- {fr['F_err']:.2f} "
               f"({fr['n_zero']}/{fr['n_zero'] + fr['n_rigid']}, {fr['n_unconverged']} unconv.) | {q}")
+    for r in stars:
+        print(f"{r['surface']:12s} {r['n_cells']:5d} p0* = {r['p0_star']:.4f} +- {r['p0_star_err']:.4f} "
+              f"(F = 1/2 at {r['p0_half']:.4f}{'' if r['bracketed'] else '; not bracketed by the grid'})")
     for r in dyn_bins:
         print(f"{r['surface']:12s} {r['quantity']:8s} K <A> {r['K_A']:+.3f}: {r['mean']:.4g} +- {r['sem']:.2g} "
               f"({r['n_tissues']} tissues)")

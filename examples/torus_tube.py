@@ -20,9 +20,9 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from curvature_gradients import quench, write_csv  # noqa: E402  (the sibling example)
+from curvature_gradients import quench, transition, write_csv  # noqa: E402  (the sibling example)
 
-from spherevm.analysis.rigidity import p0_star, zero_fraction  # noqa: E402
+from spherevm.analysis.rigidity import zero_fraction  # noqa: E402
 from spherevm.sweeps import parse_p0_grid  # noqa: E402
 
 MODES = {
@@ -56,11 +56,10 @@ def main(argv=None):
             f = zero_fraction(np.full(len(p0), n), p0, status)
             fractions += [dict(surface=surface, circumference=c, **{k: f[k][i] for k in f}) for i in range(len(f["p0"]))]
             converged = f["n_zero"] + f["n_rigid"]
-            ok = converged > 0
-            if ok.sum() < 2:
+            est = transition(f)
+            if est is None:
                 raise SystemExit(f"{surface}, C = {c}: fewer than two p0 values with a converged tissue; "
                                  "raise --replicas or the mode's max_steps")
-            est = p0_star(f["p0"][ok], f["F"][ok], n=converged[ok])
             stars.append(dict(surface=surface, circumference=c, n_cells=n, p0_star=est.mean, p0_star_err=est.mean_err,
                               p0_half=est.p0_half, bracketed=est.bracketed))
             print(f"{surface:12s} C = {c:4.1f} N = {n:4d}: p0* = {est.mean:.4f} +- {est.mean_err:.4f} "

@@ -63,3 +63,31 @@ def test_displacements_on_a_periodic_bump_are_minimum_images():
     d = dynamics("bump:h=2,w=1,box=6.5", 64, 1, 400, 100, device="cpu")
     assert np.all(np.isfinite(d["msd"])) and d["msd"].max() < 1.0     # a box length would be 8^2 / 6.5^2 ~ 1.5^2 x 64
     assert np.all((d["overlap"] >= 0) & (d["overlap"] <= 1))
+
+
+def test_transition_is_the_rigidity_sweeps_estimator_over_the_converged_points():
+    """p0* of a surface from zero_fraction's table: the p0 without a converged tissue are left out,
+    and fewer than two such p0 give None."""
+    from spherevm.analysis.rigidity import p0_star, zero_fraction
+    transition = runpy.run_path(str(EXAMPLE))["transition"]
+    p0 = np.repeat([3.80, 3.82, 3.84, 3.86, 3.88], 4)
+    status = np.array(["rigid"] * 4 + ["rigid", "rigid", "rigid", "zero"] + ["max_steps"] * 4
+                      + ["zero", "zero", "rigid", "zero"] + ["zero"] * 4)
+    f = zero_fraction(np.full(len(p0), 64), p0, status)
+    est = transition(f)
+    keep = [0, 1, 3, 4]                       # p0 = 3.84: every tissue unconverged
+    want = p0_star(f["p0"][keep], f["F"][keep], n=np.full(4, 4))
+    assert est.mean == want.mean and est.mean_err == want.mean_err
+    assert 3.82 < est.mean < 3.88
+    none = zero_fraction(np.full(8, 64), np.repeat([3.80, 3.82], 4), np.array(["zero"] * 4 + ["max_steps"] * 4))
+    assert transition(none) is None
+
+
+def test_surfaces_selects_the_quenched_surfaces_and_writes_p0_star(tmp_path):
+    pytest.importorskip("matplotlib")
+    main = runpy.run_path(str(EXAMPLE))["main"]
+    main(["--tiny", "--surfaces", "plane", "--no-dynamics", "--out", str(tmp_path)])
+    assert {r["surface"] for r in read(tmp_path / "curvature_fraction.csv")} == {"plane"}
+    assert not (tmp_path / "curvature_p0star.csv").exists()       # one p0: no transition to estimate
+    with pytest.raises(SystemExit):
+        main(["--tiny", "--surfaces", "torus", "--out", str(tmp_path)])   # not one of SURFACES' names

@@ -1,6 +1,6 @@
 """Cells against the local Gaussian curvature K: quenched shapes, the zero-energy fraction and p0* on
-tori, Gaussian bumps, an ellipsoid, the sphere and the plane; mobility and neighbour exchanges on a torus at finite T
-(docs/results.md, "Curvature gradients: first measurements").
+tori, Gaussian bumps, an ellipsoid, the sphere and the plane; mobility and neighbour exchanges on a
+torus and a bump at finite T (docs/results.md, "Curvature gradients").
 
 (a) Zero temperature: FIRE + T1 quenches of random tilings (<A> = 1) at several p0, with the sweeps'
 settings (kr = 0 unless --kr; per cell kA = kr / <A>, kP = 1, A0 = <A>, P0 = p0 sqrt(<A>); FIRE dt 0.02; T1 as

@@ -186,9 +186,9 @@ def main(argv=None):
         for rule_name in args.rules:
             f = [r for r in fractions if r["surface"] == name and r["rule"] == rule_name]
             d = [r for r in div_rows if r["surface"] == name and r["rule"] == rule_name]
-            print(f"{name}, {rule_name} (zero/rigid/all): " + ", ".join(f"N={r['N']}: {r['zero']}/{r['rigid']}/{r['n_replicas']}"
-                                                                      for r in f)
-                  + " | " + ", ".join(f"{r['divisions'] / r['cells']:.2f}" for r in d) + f" ({d[0]['n_divisions']} divisions)")
+            counts = ", ".join(f"N={r['N']}: {r['zero']}/{r['rigid']}/{r['n_replicas']}" for r in f)
+            shares = ", ".join(f"{r['divisions'] / r['cells']:.2f}" for r in d)
+            print(f"{name}, {rule_name} (zero/rigid/all): {counts} | {shares} ({d[0]['n_divisions']} divisions)")
     for r in bins:
         print(f"{r['surface']}, {r['rule']}, N = {r['N']}: K <A> {r['K_A']:+.3f}: tension {r['tension']:.4f} "
               f"+- {r['sem']:.4f} ({r['n_tissues']} tissues)")

@@ -44,7 +44,6 @@ def gaussian_curvature(constraint, x, radius=None, size=None):
     return constraint.gaussian_curvature(x, radius if size is None else size)
 
 
-
 def cell_curvature(state):
     """``K <A>`` at each cell's area centroid: the Gaussian curvature the cell sits on, in units of its
     replica's mean cell area (a State on the CPU).
@@ -59,6 +58,7 @@ def cell_curvature(state):
     rep = state.cell_replica_np()
     x = np.asarray(state.constraint.cell_centroids(state, "area"))
     return gaussian_curvature(state.constraint, x, size=state.size_np()[rep]) * state.mean_cell_area[rep]
+
 
 def torus_curvature_range(aspect, n_cells, mean_area=1.0):
     """Lowest and highest Gaussian curvature of the torus of aspect ratio ``R / r`` whose area

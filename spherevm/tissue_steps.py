@@ -120,7 +120,8 @@ class Layout:
 STEP_LAYOUT = Layout("TissueStepLayout", "tissue_step_layout", ("nv", "nc", "kept", "vchunk", "cd", "md"),
                      [("pos", "6 * nv"), ("coef", "cd * nc"), ("more", "md * nc"), ("inv", "2 * kept"),
                       ("force", "3 * vchunk")],
-                     [("claim", "nc"), ("flipped", "(nc + 3) // 4")])
+                     [("claim", "nc"), ("flipped", "(nc + 3) // 4"), ("mark", "nc * (md > 0)"),
+                      ("needed", "nc * (md > 0)")])
 #: A minimisation (one block a tissue): the positions, forces and the minimiser's vertex state (vd
 #: doubles a vertex), the forces' cell coefficients and neighbour parts, the kept inverse norms, the
 #: sums' warp parts (n_sums (n_warps + 1), n_warps the warps from v0 rounded down to a warp's start
@@ -342,7 +343,7 @@ def _forces_aggregate(forces):
     ``more``: ``neighbour_doubles``), its cell part, its neighbour part, and the vertex forces summed
     in order, an ``extra`` stage's gradient added inside the vertex force of the stage before it
     (``StageExtra``, tissue_steps.cu)."""
-    members, cells, neighbours, vertex, copies, more_copies = [], [], [], [], [], []
+    members, cells, neighbours, vertex, copies = [], [], [], [], []
     offset = more = 0
     regions = []
     for s in forces:
@@ -357,7 +358,6 @@ def _forces_aggregate(forces):
         if s.neighbour_doubles:
             neighbours.append(f"        s{k}.neighbours(pos, vc, cell_vertices, sides, max_sides, c, s, {coef}, "
                               f"{extra});")
-            more_copies.append(_copy(s.neighbour_doubles, more_at))
         if s.cell_doubles:
             copies.append(_copy(s.cell_doubles, at))
         if s.extra:
@@ -389,8 +389,6 @@ def _forces_aggregate(forces):
                 *vertex, "        return f;", "    }",
                 "    __device__ static __forceinline__ void copy_cell(long c, const double* from, double* to, long nc,",
                 "        long c0) {", *copies, "    }",
-                "    __device__ static __forceinline__ void copy_more(long c, const double* from, double* to, long nc,",
-                "        long c0) {", *more_copies, "    }",
                 "};"])]
 
 class TissueSteps:

@@ -332,8 +332,13 @@ def kernel_source(found, minimizing: bool) -> str:
     return "\n".join(out) + "\n"
 
 
-def _copy(width, region):
-    """The line of the forces' aggregate that copies a stage's ``width`` doubles of cell ``c``."""
+def _copy(width, region, paired):
+    """The line of the forces' aggregate that copies a stage's ``width`` doubles of cell ``c``:
+    ``paired`` (an even width at an even offset, so 16-byte aligned), two at a time (half the
+    stores, which cost most where they go to another block of the cluster)."""
+    if paired:
+        return (f"        for (int j = 0; j < {width}; j += 2) {{ long i = {region} + {width}L * c + j; "
+                "*(double2*)(to + i) = *(const double2*)(from + i); }")
     return f"        for (int j = 0; j < {width}; ++j) {{ long i = {region} + {width}L * c + j; to[i] = from[i]; }}"
 
 
@@ -345,8 +350,9 @@ def _forces_aggregate(forces):
     (``StageExtra``, tissue_steps.cu)."""
     members, cells, neighbours, vertex, copies = [], [], [], [], []
     offset = more = 0
-    regions = []
+    regions, aligned = [], []
     for s in forces:
+        aligned.append(offset % 2 == 0 and s.cell_doubles % 2 == 0)
         regions.append((f"{offset}L * nc - {s.cell_doubles}L * c0", f"{more}L * nc - {s.neighbour_doubles}L * c0"))
         offset, more = offset + s.cell_doubles, more + s.neighbour_doubles
     for k, s in enumerate(forces):
@@ -359,7 +365,7 @@ def _forces_aggregate(forces):
             neighbours.append(f"        s{k}.neighbours(pos, vc, cell_vertices, sides, max_sides, c, s, {coef}, "
                               f"{extra});")
         if s.cell_doubles:
-            copies.append(_copy(s.cell_doubles, at))
+            copies.append(_copy(s.cell_doubles, at, aligned[k]))
         if s.extra:
             continue
         args = coef + (f", {extra}" if s.neighbour_doubles else "") + ", norm"

@@ -115,8 +115,9 @@ class Layout:
 
 #: A run's steps: two copies of the positions, the forces' cell coefficients (cd a cell) and their
 #: neighbour parts' (md a cell), on the sphere two copies of the kept inverse norms (kept: nv, else
-#: 0), the forces of the block's vertices (vchunk of them); the pass's claims (an int a cell) and a
-#: pass's flips (an int per four cells).
+#: 0), the forces of the block's vertices (vchunk of them); the pass's claims (an int a cell), a
+#: pass's flips (an int per four cells) and, where a force has a neighbour part, the step at which
+#: each cell was last needed and the cells a step needs (an int a cell each).
 STEP_LAYOUT = Layout("TissueStepLayout", "tissue_step_layout", ("nv", "nc", "kept", "vchunk", "cd", "md"),
                      [("pos", "6 * nv"), ("coef", "cd * nc"), ("more", "md * nc"), ("inv", "2 * kept"),
                       ("force", "3 * vchunk")],

@@ -180,6 +180,34 @@ def test_bending_fuses_with_the_step_by_step_bits(monkeypatch, arrangement, per_
     assert runs[-1][2][0].sum() > 0, "T1 flipped"
 
 
+def scrambled(state, seed):
+    """One tiling with its vertices numbered at random: each block of a cluster then owns vertices
+    all over the tissue, whose cells are most of its cells."""
+    from spherevm.topology import renumber
+    arrays = state.arrays_np()
+    order = np.random.default_rng(seed).permutation(len(arrays["positions"]))
+    keys = ("positions", "cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cells")
+    arrays.update(zip(keys, renumber(*(arrays[k] for k in keys), order, np.arange(len(arrays["cell_sides"])))))
+    return svm.State(**arrays, constraint=state.constraint)
+
+
+@pytest.mark.gpu
+def test_bending_fuses_with_the_step_by_step_bits_whatever_the_vertex_order(monkeypatch):
+    """The neighbour parts each block computes are those of the cells of its own vertices (found
+    each step after T1's flips): with vertices numbered at random, every block needs most cells,
+    and the fused trajectory is still the step-by-step one bit for bit."""
+    monkeypatch.setattr(tissue_steps, "VERTICES_PER_BLOCK", 300)
+    state = svm.State.concatenate([scrambled(svm.init.random_tiling(n, seed=3 + i), i) for i, n in
+                                   enumerate((300, 60))])
+    arrange, T = ARRANGEMENTS["after"]
+    sim = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=T))
+    arrange(sim.operations.forces)
+    assert "fused" in sim.explain()
+    runs = three_runs(state, 200, T=T, arrange=arrange, check_every=64)
+    assert_same(runs)
+    assert runs[-1][2][0].sum() > 0, "T1 flipped"
+
+
 @pytest.mark.gpu
 def test_bending_fuses_in_minimisations_with_the_step_by_step_bits():
     """FIRE + T1 with the vertex model and bending: the fused minimisation is the general one's."""

@@ -407,7 +407,8 @@ def test_a_pair_that_combined_computes_is_one_fused_force():
 def test_the_fused_kernel_joins_the_bending_stage_into_the_vertex_models(monkeypatch):
     """The kernel's source: the bending stage's cell part beside the vertex model's, its neighbour part,
     and its gradient inside the vertex model's vertex force (StageExtra), summed with the others'
-    forces in order; the shared memory holds its 4 + 3 doubles a cell."""
+    forces in order; the shared memory holds its 4 + 3 doubles a cell, and two ints a cell for the
+    cells whose neighbour parts a block computes in a run's steps (not in a minimisation, one block)."""
     monkeypatch.syspath_prepend(str(pathlib.Path(__file__).parent / "plugin_example"))
     from spherevm_line_tension import FastLineTension
     forces = tissue_steps.force_stages(cpu_plan(VertexModel(), Bending(1.0), FastLineTension(0.1)))
@@ -422,7 +423,7 @@ def test_the_fused_kernel_joins_the_bending_stage_into_the_vertex_models(monkeyp
     assert "s1.vertex" not in source
     state = ensemble("sphere", (40, 100))   # 196 vertices; as test_the_fused_steps_need_the_gpu, 7 doubles a cell more
     assert tissue_steps.shared_bytes(state, 1, False, (tuple(forces), move, None)) == \
-        8 * (6 * 196 + 9 * 100 + 2 * 196 + 3 * 196) + 4 * (100 + 25)
+        8 * (6 * 196 + 9 * 100 + 2 * 196 + 3 * 196) + 4 * (100 + 25 + 2 * 100)
     assert tissue_steps.shared_bytes(state, 1, True, (tuple(forces), shapes(True)[1], None)) == \
         8 * (9 * 196 + 9 * 100 + 196 + 3 * 9) + 4 * 100
 

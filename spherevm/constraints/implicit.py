@@ -102,20 +102,10 @@ class ImplicitSurface(FlatFacets, Constraint):
         raise NotImplementedError(f"{type(self).__name__} must define grad_F(x, size)")
 
     def device_parameters(self, size):
-        """The values the CUDA code reads as ``p`` for each row of ``size`` (n, k): ``size`` itself, unless
-        the class names others in ``device_parameter_names`` and derives them here, once per size
-        rather than in every evaluation of F and grad F (reciprocals, wavenumbers: a division costs
-        tens of multiplications on a GPU).
-
-        Parameters
-        ----------
-        size : numpy.ndarray
-            (n, k), one row per replica, in the order of ``size_names``.
-
-        Returns
-        -------
-        numpy.ndarray
-            (n, m), ``m = len(device_parameter_names)`` (or k)."""
+        """The values the CUDA code reads as ``p``, per row of ``size`` (n, k): ``size`` itself, unless the
+        class names others in ``device_parameter_names`` and derives them here once per size, rather
+        than in every evaluation of F and grad F (reciprocals, wavenumbers: a division costs tens of
+        multiplications on a GPU). Returns an (n, m) array, m = len(device_parameter_names) or k."""
         return size
 
     def device_surface(self):

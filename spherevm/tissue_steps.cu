@@ -171,17 +171,15 @@ struct StageExtra {
 };
 
 // The forces' neighbour parts (Forces::neighbours: a second per-cell part, which may read any cell's
-// coefficients) of cells cb0..cb1 by the calling block, into the stages' regions of `more`; sent(c)
-// after each.
-template <class Forces, class Sent>
+// coefficients) of the cells cells(i), i < count, by the calling block, into the stages' regions of
+// `more`.
+template <class Forces, class Cells>
 __device__ __forceinline__ void tissue_neighbours(const Forces& forces, const TissueState& st, const double* P,
-                                                  Surface::Size s, int cb0, int cb1, const double* data,
-                                                  double* more, long nc, long c0, Sent sent)
+                                                  Surface::Size s, int count, Cells cells, const double* data,
+                                                  double* more, long nc, long c0)
 {
-    for (int c = cb0 + threadIdx.x; c < cb1; c += blockDim.x) {
-        forces.neighbours(P, st.vc, st.cell_vertices, st.sides, st.max_sides, c, s, data, more, nc, c0);
-        sent(c);
-    }
+    for (int i = threadIdx.x; i < count; i += blockDim.x)
+        forces.neighbours(P, st.vc, st.cell_vertices, st.sides, st.max_sides, cells(i), s, data, more, nc, c0);
 }
 
 // The steps of run (Plan.device_cycle: update, integrate). At most TISSUE_THREADS threads a block
@@ -191,14 +189,17 @@ __device__ __forceinline__ void tissue_neighbours(const Forces& forces, const Ti
 // coefficients (Forces::cell_doubles a cell) and neighbour parts (Forces::neighbour_doubles a
 // cell), on the sphere two copies of the kept 1 / |x| (nv each, as the positions), the forces of
 // the block's vertices (3 ceil(nv / TISSUE_CLUSTER)), then the pass's claims (nc ints) and flips
-// (ceil(nc / 4) ints).
+// (ceil(nc / 4) ints), and where a force has a neighbour part the step at which each cell was last
+// needed and the cells a step needs (nc ints each).
 //
 // A step: every block lists the short edges of its vertices and computes its cells' coefficients on
 // the step's positions (a barrier); if any edge is short, the first block checks and flips them and
 // computes again the four cells of each flip (a flip moves and re-links only its four cells, and the
 // flips of a pass share no cell: T1's claims), then a barrier; where a force has a neighbour part
-// (Forces::neighbours, read from every cell's coefficients: the bending force's), every block's cells'
-// neighbour parts, on the cells after the flips, then a barrier; then the forces and the move of
+// (Forces::neighbours, read from every cell's coefficients: the bending force's), every block
+// computes those of the cells of its own vertices, the only ones its vertex forces read (about 300
+// of 1,024 on a block of 512 vertices numbered as a tiling numbers them), on the cells after the
+// flips: no sending to the other blocks and no cluster barrier; then the forces and the move of
 // every block's vertices (a barrier). Where the move has a cell part (active cell directors), every block
 // does its cells' part of a step's move with the next step's first phase (on the positions before
 // that step's flips, as the general path does it) and after the last step. The cells are those the
@@ -208,7 +209,7 @@ __device__ __forceinline__ void tissue_steps_body(const TissueState& st, const F
                                                   const Pass& pass, unsigned long long step0, int steps)
 {
     extern __shared__ double shared[];
-    __shared__ int n_cand, n_flipped;
+    __shared__ int n_cand, n_flipped, n_needed;
     __shared__ double* bases[TISSUE_CLUSTER];
     const int r = blockIdx.x / TISSUE_CLUSTER, rank = blockIdx.x % TISSUE_CLUSTER;   // a 1-D cluster's rank
     const int tid = threadIdx.x, stride = blockDim.x;
@@ -230,24 +231,24 @@ __device__ __forceinline__ void tissue_steps_body(const TissueState& st, const F
     double* F = shared + at.force - 3L * vb0;
     int* claim = (int*)(shared + at.ints) + at.claim - c0;
     int* flipped = (int*)(shared + at.ints) + at.flipped;   // the first block's: the candidates its pass flipped
+    int* mark = (int*)(shared + at.ints) + at.mark - c0;     // the step at which a cell was last needed
+    int* needed = (int*)(shared + at.ints) + at.needed;      // the cells this block's vertices need
     if (tid < TISSUE_CLUSTER) bases[tid] = cluster_map(shared, tid);
-    if (tid == 0) { n_cand = 0; n_flipped = 0; }
+    if (tid == 0) { n_cand = 0; n_flipped = 0; n_needed = 0; }
     int* const count = cluster_map(&n_cand, 0);   // the first block's
     for (int j = tid; j < 3 * nv; j += stride) shared[at.pos + j] = st.pos[3L * v0 + j];
     __syncthreads();
     if (Surface::directions)
         for (int v = v0 + tid; v < v1; v += stride) shared[at_inv + v] = RsqrtNorm()(shared + at_pos, v);
     for (int c = c0 + tid; c < c1; c += stride) claim[c] = 0x7fffffff;
+    if constexpr (Forces::neighbour_doubles > 0)
+        for (int c = c0 + tid; c < c1; c += stride) mark[c] = -1;
     const Surface::Size s = Surface::size(st.size, r);
     const bool flipping = Pass::present && st.active[r];
     const int lanes = tissue_cell_lanes(cb1 - cb0);
     auto send = [&](int c) {   // a cell's coefficients to the other blocks
         for (int q = 0; q < TISSUE_CLUSTER; ++q)
             if (q != rank) Forces::copy_cell(c, coef, bases[q] + at.coef, nc, c0);
-    };
-    auto send_more = [&](int c) {   // a cell's neighbour parts to the other blocks
-        for (int q = 0; q < TISSUE_CLUSTER; ++q)
-            if (q != rank) Forces::copy_more(c, more, bases[q] + at.more, nc, c0);
     };
     cluster_sync();   // every block of the cluster has started (its shared memory may be written)
     int now = 0;
@@ -288,9 +289,16 @@ __device__ __forceinline__ void tissue_steps_body(const TissueState& st, const F
             cluster_sync();   // the flips and their cells everywhere; every block has read the count
             if (rank == 0 && tid == 0) { n_cand = 0; n_flipped = 0; }
         }
-        if constexpr (Forces::neighbour_doubles > 0) {   // this block's cells' neighbour parts, everywhere
-            tissue_neighbours(forces, st, P, s, cb0, cb1, coef, more, nc, c0, send_more);
-            cluster_sync();
+        if constexpr (Forces::neighbour_doubles > 0) {   // the neighbour parts of the cells of this block's vertices
+            for (int v = vb0 + tid; v < vb1; v += stride)
+                for (int k = 0; k < 3; ++k) {
+                    const int c = st.vc[3L * v + k];
+                    if (atomicExch(&mark[c], step) != step) needed[atomicAdd(&n_needed, 1)] = c;
+                }
+            __syncthreads();
+            tissue_neighbours(forces, st, P, s, n_needed, [=](int i) { return needed[i]; }, coef, more, nc, c0);
+            __syncthreads();
+            if (tid == 0) n_needed = 0;   // (read again after the step's last barrier)
         }
         for (int v = vb0 + tid; v < vb1; v += stride) {   // this block's vertices: force, then the move
             store3(F, v, forces.vertex(P, st.vn, st.vc, v, s, coef, more, nc, c0, norm));
@@ -369,7 +377,7 @@ __device__ __forceinline__ void tissue_minimize_body(const TissueState& st, cons
                                       [=](int i) { return c0 + i; }, lanes, forces, coef, nc, c0, [](int) {});
             __syncthreads();
             if constexpr (Forces::neighbour_doubles > 0) {
-                tissue_neighbours(forces, st, P, s, c0, c1, coef, more, nc, c0, [](int) {});
+                tissue_neighbours(forces, st, P, s, nc, [=](int i) { return c0 + i; }, coef, more, nc, c0);
                 __syncthreads();
             }
             for (int k = 0; k < rounds; ++k) {   // forces, and the terms of the sums

@@ -115,12 +115,14 @@ class Layout:
 
 #: A run's steps: two copies of the positions, the forces' cell coefficients (cd a cell) and their
 #: neighbour parts' (md a cell), on the sphere two copies of the kept inverse norms (kept: nv, else
-#: 0), the forces of the block's vertices (vchunk of them); the pass's claims (an int a cell) and a
-#: pass's flips (an int per four cells).
+#: 0), the forces of the block's vertices (vchunk of them); the pass's claims (an int a cell), a
+#: pass's flips (an int per four cells) and, where a force has a neighbour part, the step at which
+#: each cell was last needed and the cells a step needs (an int a cell each).
 STEP_LAYOUT = Layout("TissueStepLayout", "tissue_step_layout", ("nv", "nc", "kept", "vchunk", "cd", "md"),
                      [("pos", "6 * nv"), ("coef", "cd * nc"), ("more", "md * nc"), ("inv", "2 * kept"),
                       ("force", "3 * vchunk")],
-                     [("claim", "nc"), ("flipped", "(nc + 3) // 4")])
+                     [("claim", "nc"), ("flipped", "(nc + 3) // 4"), ("mark", "nc * (md > 0)"),
+                      ("needed", "nc * (md > 0)")])
 #: A minimisation (one block a tissue): the positions, forces and the minimiser's vertex state (vd
 #: doubles a vertex), the forces' cell coefficients and neighbour parts, the kept inverse norms, the
 #: sums' warp parts (n_sums (n_warps + 1), n_warps the warps from v0 rounded down to a warp's start
@@ -331,8 +333,13 @@ def kernel_source(found, minimizing: bool) -> str:
     return "\n".join(out) + "\n"
 
 
-def _copy(width, region):
-    """The line of the forces' aggregate that copies a stage's ``width`` doubles of cell ``c``."""
+def _copy(width, region, paired):
+    """The line of the forces' aggregate that copies a stage's ``width`` doubles of cell ``c``:
+    ``paired`` (an even width at an even offset, so 16-byte aligned), two at a time (half the
+    stores, which cost most where they go to another block of the cluster)."""
+    if paired:
+        return (f"        for (int j = 0; j < {width}; j += 2) {{ long i = {region} + {width}L * c + j; "
+                "*(double2*)(to + i) = *(const double2*)(from + i); }")
     return f"        for (int j = 0; j < {width}; ++j) {{ long i = {region} + {width}L * c + j; to[i] = from[i]; }}"
 
 
@@ -342,10 +349,11 @@ def _forces_aggregate(forces):
     ``more``: ``neighbour_doubles``), its cell part, its neighbour part, and the vertex forces summed
     in order, an ``extra`` stage's gradient added inside the vertex force of the stage before it
     (``StageExtra``, tissue_steps.cu)."""
-    members, cells, neighbours, vertex, copies, more_copies = [], [], [], [], [], []
+    members, cells, neighbours, vertex, copies = [], [], [], [], []
     offset = more = 0
-    regions = []
+    regions, aligned = [], []
     for s in forces:
+        aligned.append(offset % 2 == 0 and s.cell_doubles % 2 == 0)
         regions.append((f"{offset}L * nc - {s.cell_doubles}L * c0", f"{more}L * nc - {s.neighbour_doubles}L * c0"))
         offset, more = offset + s.cell_doubles, more + s.neighbour_doubles
     for k, s in enumerate(forces):
@@ -357,9 +365,8 @@ def _forces_aggregate(forces):
         if s.neighbour_doubles:
             neighbours.append(f"        s{k}.neighbours(pos, vc, cell_vertices, sides, max_sides, c, s, {coef}, "
                               f"{extra});")
-            more_copies.append(_copy(s.neighbour_doubles, more_at))
         if s.cell_doubles:
-            copies.append(_copy(s.cell_doubles, at))
+            copies.append(_copy(s.cell_doubles, at, aligned[k]))
         if s.extra:
             continue
         args = coef + (f", {extra}" if s.neighbour_doubles else "") + ", norm"
@@ -389,8 +396,6 @@ def _forces_aggregate(forces):
                 *vertex, "        return f;", "    }",
                 "    __device__ static __forceinline__ void copy_cell(long c, const double* from, double* to, long nc,",
                 "        long c0) {", *copies, "    }",
-                "    __device__ static __forceinline__ void copy_more(long c, const double* from, double* to, long nc,",
-                "        long c0) {", *more_copies, "    }",
                 "};"])]
 
 class TissueSteps:

@@ -131,6 +131,32 @@ def test_kernel_size_table():
     assert con.kernel_size(s)[0, 0] == 2 * size[0, 0]
 
 
+def test_device_parameters_replace_the_parameters_in_the_table():
+    """A class that derives its device parameters (the ellipsoid: 1/a^2, 1/b^2, 1/c^2; the user's
+    sinusoid: its box, amplitude and wavenumber) gives them to the kernels in place of the
+    parameters, with the length scale and half the area of the parameters after them."""
+    for con in (Ellipsoid(1.0, 1.5, 2.0), sinusoid()):
+        s = svm.init.random_tiling(60, replicas=2, seed=1, surface=con)
+        size = s.size_np()
+        expected = np.column_stack([1.0 / size ** 2] if isinstance(con, Ellipsoid) else
+                                   [size, 2 * np.pi / size[:, 0]])
+        table = con.kernel_size(s)
+        assert table.shape == (2, len(type(con).device_parameter_names) + 2)
+        np.testing.assert_array_equal(table[:, :-2], expected)
+        np.testing.assert_array_equal(table[:, -2:], np.column_stack([con.length_scale(size),
+                                                                      0.5 * con.total_area_np(size)]))
+        assert f"static constexpr int k = {len(type(con).device_parameter_names)};" in con.device_surface().source
+
+
+def test_a_periodic_surface_keeps_its_box_first_among_its_device_parameters():
+    """Implicit<Shape>::period reads the box from p[0], p[1]: a periodic class naming other device
+    parameters first is refused when it is defined."""
+    from spherevm.constraints import ImplicitSurface
+    with pytest.raises(TypeError, match="first two device parameters are its box"):
+        type("Wavy", (ImplicitSurface,), {"size_names": ("Lx", "Ly", "amplitude"), "periodic": True,
+                                          "device_parameter_names": ("wavenumber", "Lx", "Ly")})
+
+
 @pytest.mark.skipif(shutil.which("nvcc") is None, reason="no nvcc: the kernels are compiled at run time by CuPy")
 @pytest.mark.parametrize("cu", ["plugins/forces/vertex_model.cu", "plugins/integrators/brownian.cu"])
 def test_kernels_compile_for_an_implicit_surface(tmp_path, cu):

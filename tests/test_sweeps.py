@@ -388,6 +388,26 @@ def test_prefetched_tilings_are_the_chunk_states(surface):
         prefetch.close()
 
 
+def test_prefetch_runs_ahead_by_chunks_and_then_by_cells():
+    """TilingPrefetch submits the chunk asked for and ``ahead`` more, then more while the tilings it
+    holds stay within ``cells`` (the chunk asked for counted in); asking for the next moves the window."""
+    from spherevm.sweeps.tilings import TilingPrefetch
+    sweep = sweeps.RigiditySweep(cells=[16], p0=[3.7, 3.8, 3.9], replicas=4, seed=4)
+    chunks = sweeps.plan_chunks(sweep, batch_cells=32)          # 6 chunks of two 16-cell tilings
+    ids = [c.id for c in chunks]
+    assert len(ids) == 6 and all(c.n_cells * c.size == 32 for c in chunks)
+    for cells, expected in ((0, 2), (96, 3), (10 ** 9, 6)):
+        prefetch = TilingPrefetch(sweep, chunks, workers=1, ahead=1, cells=cells)
+        try:
+            assert prefetch.pending == ids[:expected], cells
+            prefetch.get(chunks[0])
+            assert prefetch.pending == ids[1:expected], cells
+            prefetch.get(chunks[1])                             # the window moves on from chunk 1
+            assert prefetch.pending == ids[2:expected + 1], cells
+        finally:
+            prefetch.close()
+
+
 @pytest.mark.gpu
 def test_gpu_sweep_matches_cpu(tiny_run, tmp_path):
     """Same classification and steps on the GPU; energies agree to round-off (not run here: no GPU)."""

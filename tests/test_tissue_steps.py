@@ -180,6 +180,34 @@ def test_bending_fuses_with_the_step_by_step_bits(monkeypatch, arrangement, per_
     assert runs[-1][2][0].sum() > 0, "T1 flipped"
 
 
+def scrambled(state, seed):
+    """One tiling with its vertices numbered at random: each block of a cluster then owns vertices
+    all over the tissue, whose cells are most of its cells."""
+    from spherevm.topology import renumber
+    arrays = state.arrays_np()
+    order = np.random.default_rng(seed).permutation(len(arrays["positions"]))
+    keys = ("positions", "cell_vertices", "cell_sides", "vertex_neighbors", "vertex_cells")
+    arrays.update(zip(keys, renumber(*(arrays[k] for k in keys), order, np.arange(len(arrays["cell_sides"])))))
+    return svm.State(**arrays, constraint=state.constraint)
+
+
+@pytest.mark.gpu
+def test_bending_fuses_with_the_step_by_step_bits_whatever_the_vertex_order(monkeypatch):
+    """The neighbour parts each block computes are those of the cells of its own vertices (found
+    each step after T1's flips): with vertices numbered at random, every block needs most cells,
+    and the fused trajectory is still the step-by-step one bit for bit."""
+    monkeypatch.setattr(tissue_steps, "VERTICES_PER_BLOCK", 300)
+    state = svm.State.concatenate([scrambled(svm.init.random_tiling(n, seed=3 + i), i) for i, n in
+                                   enumerate((300, 60))])
+    arrange, T = ARRANGEMENTS["after"]
+    sim = dynamics_simulation(state, "gpu", Brownian(dt=0.01, T=T))
+    arrange(sim.operations.forces)
+    assert "fused" in sim.explain()
+    runs = three_runs(state, 200, T=T, arrange=arrange, check_every=64)
+    assert_same(runs)
+    assert runs[-1][2][0].sum() > 0, "T1 flipped"
+
+
 @pytest.mark.gpu
 def test_bending_fuses_in_minimisations_with_the_step_by_step_bits():
     """FIRE + T1 with the vertex model and bending: the fused minimisation is the general one's."""
@@ -379,7 +407,8 @@ def test_a_pair_that_combined_computes_is_one_fused_force():
 def test_the_fused_kernel_joins_the_bending_stage_into_the_vertex_models(monkeypatch):
     """The kernel's source: the bending stage's cell part beside the vertex model's, its neighbour part,
     and its gradient inside the vertex model's vertex force (StageExtra), summed with the others'
-    forces in order; the shared memory holds its 4 + 3 doubles a cell."""
+    forces in order; the shared memory holds its 4 + 3 doubles a cell, and two ints a cell for the
+    cells whose neighbour parts a block computes in a run's steps (not in a minimisation, one block)."""
     monkeypatch.syspath_prepend(str(pathlib.Path(__file__).parent / "plugin_example"))
     from spherevm_line_tension import FastLineTension
     forces = tissue_steps.force_stages(cpu_plan(VertexModel(), Bending(1.0), FastLineTension(0.1)))
@@ -394,7 +423,7 @@ def test_the_fused_kernel_joins_the_bending_stage_into_the_vertex_models(monkeyp
     assert "s1.vertex" not in source
     state = ensemble("sphere", (40, 100))   # 196 vertices; as test_the_fused_steps_need_the_gpu, 7 doubles a cell more
     assert tissue_steps.shared_bytes(state, 1, False, (tuple(forces), move, None)) == \
-        8 * (6 * 196 + 9 * 100 + 2 * 196 + 3 * 196) + 4 * (100 + 25)
+        8 * (6 * 196 + 9 * 100 + 2 * 196 + 3 * 196) + 4 * (100 + 25 + 2 * 100)
     assert tissue_steps.shared_bytes(state, 1, True, (tuple(forces), shapes(True)[1], None)) == \
         8 * (9 * 196 + 9 * 100 + 196 + 3 * 9) + 4 * 100
 

@@ -44,10 +44,15 @@ class Ellipsoid(ImplicitSurface):
     size_names = ("a", "b", "c")
     euler_characteristic = 2
     cuda_file = "ellipsoid.cuh"
+    device_parameter_names = ("inv_a2", "inv_b2", "inv_c2")
 
     def __init__(self, a: float = 1.0, b: float = 1.0, c: float = 1.0):
         self.shape = tuple(self.check_size([a, b, c])[0])
         self.a, self.b, self.c = self.shape
+
+    def device_parameters(self, size):
+        """``(1/a^2, 1/b^2, 1/c^2)`` per replica: F and grad F in the CUDA code without a division."""
+        return 1.0 / np.asarray(size, dtype=np.float64) ** 2
 
     @property
     def rigid_motions(self):

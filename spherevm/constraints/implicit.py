@@ -80,10 +80,17 @@ class ImplicitSurface(FlatFacets, Constraint):
     cuda_code = None
     cuda_file = None
     cuda_projection = False
+    #: the names of the values the CUDA code reads as ``p[0], p[1], ...`` (:meth:`device_parameters`);
+    #: None: ``size_names``, the parameters themselves. A periodic surface's first two are its box
+    device_parameter_names = None
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
         cls.size_shape = (len(cls.size_names),)
+        names = cls.device_parameter_names
+        if names is not None and cls.periodic and tuple(names[:2]) != tuple(cls.size_names[:2]):
+            raise TypeError(f"{cls.__name__}: a periodic surface's first two device parameters are its box "
+                            f"{tuple(cls.size_names[:2])}, got {tuple(names[:2])}")
 
     # ------------------------------------------------------------------ what a subclass gives
     def F(self, x, size):
@@ -93,6 +100,13 @@ class ImplicitSurface(FlatFacets, Constraint):
     def grad_F(self, x, size):
         """``grad F`` (..., 3) at the points ``x``."""
         raise NotImplementedError(f"{type(self).__name__} must define grad_F(x, size)")
+
+    def device_parameters(self, size):
+        """The values the CUDA code reads as ``p``, per row of ``size`` (n, k): ``size`` itself, unless the
+        class names others in ``device_parameter_names`` and derives them here once per size, rather
+        than in every evaluation of F and grad F (reciprocals, wavenumbers: a division costs tens of
+        multiplications on a GPU). Returns an (n, m) array, m = len(device_parameter_names) or k."""
+        return size
 
     def device_surface(self):
         """``Implicit<Shape>`` of this class's CUDA code (:func:`implicit_device.device_surface`);

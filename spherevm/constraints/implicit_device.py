@@ -5,7 +5,8 @@ surface), and the size table the kernels take.
 
 The code defines, in a namespace of its own, ``__device__ double F(vec3 x, const double* p)`` and
 ``__device__ vec3 grad_F(vec3 x, const double* p)`` (``p``: the replica's parameters in the order of
-``size_names``; ``vec3``, ``v3``, ``dot3``, ``cross3`` and CUDA's math functions are available) and,
+``size_names``, or the values ``device_parameters`` derives from them, named by
+``device_parameter_names``; ``vec3``, ``v3``, ``dot3``, ``cross3`` and CUDA's math functions are available) and,
 where the class sets ``cuda_projection = True``, ``__device__ vec3 project(vec3 x, const double* p)``,
 a closed-form closest point (else Newton iterations as ImplicitSurface.project_normal).
 """
@@ -51,7 +52,7 @@ def device_surface(surface) -> DeviceSurface:
                    if cls.cuda_projection else "")
         source = (f'#include "constraints/implicit.cuh"\nnamespace svm_{name} {{\n{code}\n}}\n'
                   f"struct {name}Shape {{\n"
-                  f"    static constexpr int k = {len(cls.size_names)};\n"
+                  f"    static constexpr int k = {len(cls.device_parameter_names or cls.size_names)};\n"
                   f"    static constexpr bool periodic = {'true' if cls.periodic else 'false'};\n"
                   f"    static constexpr bool projects = {'true' if cls.cuda_projection else 'false'};\n"
                   f"    __device__ static double F(vec3 x, const double* p) {{ return svm_{name}::F(x, p); }}\n"
@@ -63,11 +64,13 @@ def device_surface(surface) -> DeviceSurface:
 
 def kernel_size(surface, state):
     """The size table of ``Implicit<Shape>::size``, on the State's device, kept until ``state.size`` is
-    assigned again: per replica the parameters, the length scale and half the area (``k + 2`` columns)."""
+    assigned again: per replica the device parameters (``surface.device_parameters``: by default the
+    parameters), the length scale and half the area (``k + 2`` columns)."""
     entry = state.cached((surface, "kernel size"), lambda: [None, None])
     if entry[0] is not state.size:
         size = np.asarray(state.size_np(), dtype=np.float64).reshape(state.n_replicas, -1)
-        table = np.concatenate([size, np.asarray(surface.length_scale(size)).reshape(-1, 1),
+        device = np.asarray(surface.device_parameters(size), dtype=np.float64).reshape(state.n_replicas, -1)
+        table = np.concatenate([device, np.asarray(surface.length_scale(size)).reshape(-1, 1),
                                 0.5 * np.asarray(surface.total_area_np(size)).reshape(-1, 1)], axis=1)
         entry[:] = [state.size, state.device.asarray(np.ascontiguousarray(table))]
     return entry[1]

@@ -17,7 +17,9 @@ A stage's CUDA type, by role:
   pos, const int* vc, const int* cell_vertices, const int* sides, int max_sides, long c,
   Surface::Size s, const double* coef, double* more) const``, a second per-cell part, run once every
   cell's ``cell`` is known everywhere (and after the pass's flips): it may read any cell's
-  coefficients (its neighbours') and writes its ``neighbour_doubles`` into its region ``more``; and
+  coefficients (its neighbours') and writes its ``neighbour_doubles`` into its region ``more``,
+  which the vertex parts read for the three cells of their vertex only (a block of a cluster
+  computes the neighbour parts of its own vertices' cells); and
   ``vec3 vertex(const double* pos, const int* vn, const int* vc, long v, Surface::Size s, const
   double* coef, KeptNorm norm) const`` (the force on vertex ``v``, tangent to the surface; a stage
   with ``neighbour_doubles`` takes ``more`` after ``coef``). The forces of the stages are summed in

@@ -43,21 +43,42 @@ def _tiling_worker(niceness: int):
     ignore_interrupts()
 
 
-class TilingPrefetch:
-    """Builds the tilings of the next ``ahead`` chunks in a process pool while the GPU minimises the
-    current one: each chunk's seeds are cut into one part per worker and the parts concatenated in
-    order, which is the State that :func:`~spherevm.sweeps.execution.build_chunk_state` builds alone
-    (tested); its workers run ``niceness`` (default :data:`TILING_NICENESS`) below this process."""
+#: cells of tilings a sweep may hold ahead of its GPUs, beyond its ``ahead`` chunks (about 150 bytes
+#: a cell: 300 MB): chunks are submitted while those built or being built and not yet taken hold at
+#: most this many, so the slack the pool gains on chunks that tile fast carries over to chunks whose
+#: tilings cost more than their minimisation (a paper-size sweep on a 3:1 torus: at 32 cells, two
+#: around the tube, a tiling takes 17 draws; 3,600 of them 50 s of a core, their minimisation 2 s
+#: of an H200)
+PREFETCH_CELLS = 2_000_000
 
-    def __init__(self, sweep: RigiditySweep, chunks, workers: int, ahead: int = 2, niceness: int | None = None):
-        self.sweep, self.chunks, self.workers, self.ahead = sweep, list(chunks), workers, ahead
+
+class TilingPrefetch:
+    """Builds the tilings of the next chunks in a process pool while the GPU minimises the current
+    one: at least ``ahead`` chunks after the one asked for, and more while the tilings held stay
+    within ``cells`` cells (:data:`PREFETCH_CELLS`). Each chunk's seeds are cut into one part per
+    worker and the parts concatenated in order, which is the State that
+    :func:`~spherevm.sweeps.execution.build_chunk_state` builds alone (tested); its workers run
+    ``niceness`` (default :data:`TILING_NICENESS`) below this process."""
+
+    def __init__(self, sweep: RigiditySweep, chunks, workers: int, ahead: int = 2, niceness: int | None = None,
+                 cells: int = PREFETCH_CELLS):
+        self.sweep, self.chunks, self.workers, self.ahead, self.cells = sweep, list(chunks), workers, ahead, cells
         nice = TILING_NICENESS if niceness is None else int(niceness)
         self.pool = process_pool(workers, initializer=_tiling_worker, initargs=(nice,))
         self.futures, self.seeds = {}, {}
-        self._submit_until(0)
+        self._submit_from(0)
 
-    def _submit_until(self, index):
-        for c in self.chunks[index:index + self.ahead + 1]:
+    @property
+    def pending(self) -> list:
+        """The ids of the chunks whose tilings are built or being built and not yet taken, in order."""
+        return list(self.futures)
+
+    def _submit_from(self, index):
+        held = 0
+        for k, c in enumerate(self.chunks[index:]):
+            held += c.n_cells * c.size
+            if k > self.ahead and held > self.cells:
+                break
             if c.id not in self.futures:
                 seeds = self.seeds[c.id] = chunk_seeds(self.sweep, c)[1]
                 parts = np.array_split(np.array(seeds, dtype=np.int64), min(self.workers, len(seeds)))
@@ -68,7 +89,7 @@ class TilingPrefetch:
         """The chunk's ``state`` (waits for its parts) and tiling ``seeds``, keyword arguments of
         :func:`~spherevm.sweeps.execution.run_chunk`; the next chunks submitted."""
         from ..state import State
-        self._submit_until(self.chunks.index(chunk))
+        self._submit_from(self.chunks.index(chunk))
         parts = [State(**arrays, constraint=constraint, validate=False)       # validated by the worker
                  for arrays, constraint in (f.result() for f in self.futures.pop(chunk.id))]
         return {"state": parts[0] if len(parts) == 1 else State.concatenate(parts), "seeds": self.seeds.pop(chunk.id)}

@@ -52,14 +52,14 @@ __device__ __forceinline__ vec3 bending_neighbour_sum(const Normal& normal, cons
     if (n <= BENDING_REGISTER_SIDES) {
         int js[BENDING_REGISTER_SIDES];
 #pragma unroll
-        for (int k = 0; k < BENDING_REGISTER_SIDES; ++k) {
-            if (k < n) {
-                int j = js[k] = cell_across(vertex_cells, row[k], c);
-                bool counted = j == c;
+        for (int k = 0; k < BENDING_REGISTER_SIDES; ++k)   // every neighbour first: loads that wait on none
+            js[k] = k < n ? cell_across(vertex_cells, row[k], c) : (int)c;   // (c: never counted)
 #pragma unroll
-                for (int i = 0; i < k; ++i) counted = counted || js[i] == j;
-                if (!counted) add(j);
-            }
+        for (int k = 0; k < BENDING_REGISTER_SIDES; ++k) {
+            bool counted = js[k] == c;
+#pragma unroll
+            for (int i = 0; i < k; ++i) counted = counted || js[i] == js[k];
+            if (!counted) add(js[k]);
         }
     } else {
         for (int k = 0; k < n; ++k) {

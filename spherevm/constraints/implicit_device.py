@@ -6,9 +6,10 @@ surface), and the size table the kernels take.
 The code defines, in a namespace of its own, ``__device__ double F(vec3 x, const double* p)`` and
 ``__device__ vec3 grad_F(vec3 x, const double* p)`` (``p``: the replica's parameters in the order of
 ``size_names``, or the values ``device_parameters`` derives from them, named by
-``device_parameter_names``; ``vec3``, ``v3``, ``dot3``, ``cross3`` and CUDA's math functions are available) and,
-where the class sets ``cuda_projection = True``, ``__device__ vec3 project(vec3 x, const double* p)``,
-a closed-form closest point (else Newton iterations as ImplicitSurface.project_normal).
+``device_parameter_names``; ``vec3``, ``v3``, ``dot3``, ``cross3`` and CUDA's math functions are
+available) and, where the class sets ``cuda_projection = True``, ``__device__ vec3 project(vec3 x,
+const double* p)``, a closed-form closest point (else Newton iterations as
+ImplicitSurface.project_normal).
 """
 from __future__ import annotations
 

@@ -351,13 +351,13 @@ def _forces_aggregate(forces):
     (``StageExtra``, tissue_steps.cu)."""
     members, cells, neighbours, vertex, copies = [], [], [], [], []
     offset = more = 0
-    regions, aligned = [], []
+    regions = []
     for s in forces:
-        aligned.append(offset % 2 == 0 and s.cell_doubles % 2 == 0)
-        regions.append((f"{offset}L * nc - {s.cell_doubles}L * c0", f"{more}L * nc - {s.neighbour_doubles}L * c0"))
+        regions.append((f"{offset}L * nc - {s.cell_doubles}L * c0", f"{more}L * nc - {s.neighbour_doubles}L * c0",
+                        offset % 2 == 0 and s.cell_doubles % 2 == 0))
         offset, more = offset + s.cell_doubles, more + s.neighbour_doubles
     for k, s in enumerate(forces):
-        (at, more_at), rest = regions[k], forces[k + 1:]
+        (at, more_at, paired), rest = regions[k], forces[k + 1:]
         coef, extra = f"data + {at}", f"more + {more_at}"
         members.append(f"    {s.struct} s{k};")
         if s.measures:
@@ -366,12 +366,12 @@ def _forces_aggregate(forces):
             neighbours.append(f"        s{k}.neighbours(pos, vc, cell_vertices, sides, max_sides, c, s, {coef}, "
                               f"{extra});")
         if s.cell_doubles:
-            copies.append(_copy(s.cell_doubles, at, aligned[k]))
+            copies.append(_copy(s.cell_doubles, at, paired))
         if s.extra:
             continue
         args = coef + (f", {extra}" if s.neighbour_doubles else "") + ", norm"
         if rest and rest[0].extra:
-            joined_at, joined_more_at = regions[k + 1]
+            joined_at, joined_more_at, _ = regions[k + 1]
             args += f", StageExtra<{rest[0].struct}>{{s{k + 1}, data + {joined_at}, more + {joined_more_at}}}"
         term = f"s{k}.vertex(pos, vn, vc, v, s, {args})"
         vertex.append(f"        f = add3_rn(f, {term});" if vertex else f"        vec3 f = {term};")

@@ -148,6 +148,18 @@ def test_device_parameters_replace_the_parameters_in_the_table():
         assert f"static constexpr int k = {len(type(con).device_parameter_names)};" in con.device_surface().source
 
 
+def test_device_parameters_of_another_width_than_their_names_are_refused():
+    """A class deriving values without naming them (its CUDA code would read p[] of the wrong width)
+    is told so when its size table is built, not left to read the wrong columns."""
+    class Unnamed(Ellipsoid):
+        def device_parameters(self, size):
+            return np.column_stack([size, 1.0 / size ** 2])
+    s = svm.init.random_tiling(40, seed=1, surface=Ellipsoid(1.0, 1.5, 2.0))
+    state = svm.State(**s.arrays_np(), constraint=Unnamed(1.0, 1.5, 2.0), validate=False)
+    with pytest.raises(ValueError, match="gives 6 values a replica, its CUDA code reads 3"):
+        state.constraint.kernel_size(state)
+
+
 def test_a_periodic_surface_keeps_its_box_first_among_its_device_parameters():
     """Implicit<Shape>::period reads the box from p[0], p[1]: a periodic class naming other device
     parameters first is refused when it is defined."""

@@ -71,6 +71,11 @@ def kernel_size(surface, state):
     if entry[0] is not state.size:
         size = np.asarray(state.size_np(), dtype=np.float64).reshape(state.n_replicas, -1)
         device = np.asarray(surface.device_parameters(size), dtype=np.float64).reshape(state.n_replicas, -1)
+        names = type(surface).device_parameter_names or surface.size_names
+        if device.shape[1] != len(names):     # the CUDA code would read the wrong columns
+            raise ValueError(f"{type(surface).__name__}.device_parameters gives {device.shape[1]} values a replica, "
+                             f"its CUDA code reads {len(names)} ({', '.join(names)}): name them in "
+                             "device_parameter_names")
         table = np.concatenate([device, np.asarray(surface.length_scale(size)).reshape(-1, 1),
                                 0.5 * np.asarray(surface.total_area_np(size)).reshape(-1, 1)], axis=1)
         entry[:] = [state.size, state.device.asarray(np.ascontiguousarray(table))]

@@ -46,7 +46,7 @@ __device__ __forceinline__ void solve4(double m[4][4], double b[4], double x[4])
 
 template <class Shape>
 struct Implicit {
-    struct Size { double p[Shape::k]; double scale, half; };
+    struct Size { double p[Shape::k]; double scale, half, inv_x, inv_y; };   // inv_: 1 / the period
     static constexpr bool vertex_size = true;
     static constexpr bool directions = false;     // a Norm is taken and not used
     static constexpr bool split_corners = false;  // one thread a cell
@@ -59,6 +59,8 @@ struct Implicit {
         for (int i = 0; i < Shape::k; ++i) s.p[i] = row[i];
         s.scale = row[Shape::k];
         s.half = row[Shape::k + 1];
+        s.inv_x = Shape::periodic ? 1.0 / s.p[0] : 0.0;
+        s.inv_y = Shape::periodic ? 1.0 / s.p[Shape::k > 1 ? 1 : 0] : 0.0;
         return s;
     }
     __device__ static double length_scale(Size s) { return s.scale; }
@@ -67,12 +69,14 @@ struct Implicit {
     __device__ static box2 period(Size s) { box2 b = {s.p[0], s.p[1]}; return b; }   // periodic shapes only
 
     // ---------------------------------------------------------------- images (periodic surfaces)
-    // the difference d taken to its nearest image in x and y (ImplicitSurface.nearest_images)
+    // the difference d taken to its nearest image in x and y (ImplicitSurface.nearest_images); the
+    // number of periods rint(d / L) taken as rint(d (1 / L)), the same but where d / L lies within
+    // rounding of a half-integer (an edge half the box long, which no valid tissue has)
     __device__ static vec3 image(vec3 d, Size s) {
         if constexpr (Shape::periodic) {
             box2 b = period(s);
-            d.x -= b.x * rint(d.x / b.x);
-            d.y -= b.y * rint(d.y / b.y);
+            d.x -= b.x * rint(d.x * s.inv_x);
+            d.y -= b.y * rint(d.y * s.inv_y);
         }
         return d;
     }

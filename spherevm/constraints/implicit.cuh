@@ -103,6 +103,12 @@ struct Implicit {
         return v3(g.x / n, g.y / n, g.z / n);
     }
     __device__ static vec3 tangent(vec3 v, vec3 n) { return v - dot3(v, n) * n; }
+    // the unit normal as a facet's orientation takes it (only the sign of a . sum of these is used):
+    // normal's direction with one reciprocal square root for its square root and three divisions
+    __device__ static vec3 facing(vec3 x, Size s) {
+        vec3 g = Shape::grad_F(x, s.p);
+        return rsqrt(dot3(g, g)) * g;
+    }
 
     // One Newton step on p - x + lambda grad F(p) = 0, F(p) = 0 (the Hessian by central differences
     // of grad F), ImplicitSurface._newton_step: returns dp, updates lambda (from x - p if start).
@@ -164,7 +170,8 @@ struct Implicit {
     // ---------------------------------------------------------------- the flat-facet metric
     // A cell's vector area a (the fan r x e / 2 about its first vertex, r and e nearest images), its
     // perimeter (the chords) and its area |a| signed by a . sum of the normals at its vertices
-    // (FlatFacets.cell_geometry, flat.signed_area).
+    // (FlatFacets.cell_geometry, flat.signed_area; the normals rounded otherwise, which changes the
+    // sign only where a . sum is within rounding of zero: a cell of no area or folded on edge).
     __device__ static void facet(const double* pos, const int* row, int n, Size s, double* area, double* perimeter,
                                  vec3* vector) {
         vec3 first = load3(pos, row[0]), a = v3(0.0, 0.0, 0.0), reference = v3(0.0, 0.0, 0.0);
@@ -175,7 +182,7 @@ struct Implicit {
             vec3 e = image(xn - xv, s);
             a = a + 0.5 * cross3(image(xv - first, s), e);
             length += norm3(e);
-            reference = reference + normal(xv, s);
+            reference = reference + facing(xv, s);
             xv = xn;
         }
         double d = dot3(a, reference);

@@ -94,6 +94,13 @@ def faults(state, areas=None):
                 uncovered=np.abs(total - surface) > con.cover_tolerance * surface)
 
 
+def inverted_counts(state, areas=None):
+    """Per replica: the cells of signed area <= 0 (the surface's tiling areas, as :func:`faults`
+    judges them; ``areas`` if already measured), an int array."""
+    areas = state.constraint.tiling_areas_np(state) if areas is None else areas
+    return np.bincount(state.cell_replica_np()[areas <= 0], minlength=state.n_replicas)
+
+
 def counts(state, areas=None):
     """Per replica: cells that cross themselves, open cells (periodic plane), cells of signed area
     <= 0, and whether the areas fail to add up to the surface's (1 or 0); a dict of int arrays

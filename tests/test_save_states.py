@@ -50,6 +50,30 @@ def test_saved_states_are_the_minimised_ones(tmp_path):
         np.testing.assert_allclose(frame.log["energy_per_cell"], chunk["energy_per_cell"], rtol=1e-12, atol=1e-20)
 
 
+def test_records_count_the_inverted_cells_of_the_saved_states(tmp_path, device):
+    """``inverted_cells``: tissues of 48 cells on a 3:1 torus reach zero energy at p0 = 3.60 with
+    cells turned over (docs/surfaces.md); each record counts the cells of signed area <= 0 that the
+    tiling checks (``simplicity.faults``) find in its saved state."""
+    from spherevm import simplicity
+    sweep = sweeps.RigiditySweep(cells=[48], p0=[3.6], replicas=3, kr=0.0, surface="torus:R=3,r=1", max_steps=2000)
+    result = sweeps.run_sweep(sweep, tmp_path / "torus", executor=sweeps.InProcessExecutor(), device=device,
+                              save_states=True)
+    rec = result.records
+    for r in range(3):
+        state, record = sweeps.load_state(tmp_path / "torus", 48, 3.6, r)
+        assert record["inverted_cells"] == rec["inverted_cells"][r] == len(simplicity.faults(state)["inverted"])
+    assert min(rec["inverted_cells"]) > 0 and set(rec["reason"]) == {"energy"}
+
+
+def test_cli_says_how_many_replicas_end_with_inverted_cells(tmp_path, capsys):
+    args = ["rigidity", "--cells", "48", "--p0", "3.6", "--replicas", "2", "--device", "cpu", "--workers", "1",
+            "--no-plots", "--max-steps", "2000", "--kr", "0"]
+    assert cli.main(args + ["--surface", "torus:R=3,r=1", "--out", str(tmp_path / "torus")]) == 0
+    assert "note: 2 replica(s) end with inverted cells" in capsys.readouterr().err
+    assert cli.main(args + ["--out", str(tmp_path / "sphere")]) == 0
+    assert "inverted cells" not in capsys.readouterr().err
+
+
 def test_resuming_with_save_states_fills_in_the_states(tmp_path):
     out = tmp_path / "sweep"
     sweep = sweeps.RigiditySweep(**SWEEP)

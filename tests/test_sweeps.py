@@ -264,6 +264,33 @@ def test_resume_recomputes_only_the_missing_chunk(tiny_run, tmp_path):
     _same_records(first.records, resumed.records)
 
 
+def test_chunk_files_from_before_inverted_cells_are_read_and_resumed(tiny_run, tmp_path):
+    """Chunk files written before the ``inverted_cells`` column existed: resumed without recomputing,
+    the column read as -1 (not measured), every other column as it was."""
+    import csv
+    import shutil
+    out, first, _ = tiny_run
+    old = tmp_path / "old"
+    shutil.copytree(out, old)
+    for f in (old / "chunks").iterdir():
+        with open(f, newline="") as fh:
+            rows = list(csv.reader(fh))
+        k = rows[0].index("inverted_cells")
+        with open(f, "w", newline="") as fh:
+            csv.writer(fh).writerows([r[:k] + r[k + 1:] for r in rows])
+    again = sweeps.run_sweep(sweeps.RigiditySweep(**TINY), old, executor=sweeps.InProcessExecutor(), device="cpu",
+                             batch_cells=32)
+    assert again.computed == [] and again.reused == 2
+    assert list(again.records["inverted_cells"]) == [-1] * 4 and list(first.records["inverted_cells"]) == [0] * 4
+    for col in sweeps.RECORD_COLUMNS:
+        if col not in ("inverted_cells", "chunk_seconds"):
+            assert np.array_equal(np.asarray(again.records[col]), np.asarray(first.records[col])), col
+    f = next((old / "chunks").iterdir())
+    f.write_text(f.read_text().replace("t1_flips", "flips", 1))          # any other header is refused
+    with pytest.raises(ValueError, match="not a sweep record file"):
+        sweeps.read_records(f)
+
+
 def test_parameter_mismatch_is_a_clear_error(tiny_run):
     out, _, _ = tiny_run
     listing = sorted(os.listdir(out / "chunks"))

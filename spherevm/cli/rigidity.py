@@ -113,6 +113,11 @@ def run(args) -> int:
         err.write(f"spherevm: {len(result.computed)} chunk(s) computed, {result.reused} found on disk, "
                   f"{result.elapsed:.1f} s; not converged: {n_max} max_steps, {n_osc} t1_oscillation "
                   f"(left out of F, counted in fraction.csv)\n")
+        inverted = sum(int(c) > 0 for c in result.records["inverted_cells"])
+        if inverted:
+            err.write(f"spherevm: note: {inverted} replica(s) end with inverted cells (signed area <= 0: "
+                      "inverted_cells in replicas.csv), classified by their energy as any other; see "
+                      "docs/surfaces.md, Rigidity sweeps on tori\n")
         if len(sweep.p0) < 2:
             err.write("spherevm: note: one p0 value: F(p0, N) is in fraction.csv, but p0* needs F at two or more "
                       "p0 values (give a range such as --p0 3.6:4.0:0.02)\n")

@@ -66,6 +66,7 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     from ..plugins.forces import VertexModel
     from ..plugins.integrators import FIRE
     from ..plugins.updaters import T1
+    from ..simplicity import inverted_counts
     from ..simulation import Simulation
 
     t0, started = time.perf_counter(), time.time()
@@ -88,6 +89,7 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
     res = sim.minimize(force_tol=sweep.force_tol, energy_tol=sweep.energy_tol, max_steps=sweep.max_steps,
                        check_every=sweep.check_every)
     flips = np.asarray(sim.log("t1_total_flips"))          # the loggable syncs the GPU counters
+    inverted = inverted_counts(sim.state)
     elapsed, minimized = time.perf_counter() - t0, time.time()
     n = chunk.size
     extra = {"state_gsd": chunk_state_gsd(sim, p0, p0_index, replica)} if save_states else {}
@@ -99,8 +101,8 @@ def run_chunk(parameters: dict, n_cells: int, start: int, stop: int, device="cpu
             "max_force": [float(f) for f in res.max_force],
             "mean_shape_index": [float(q) for q in res.mean_shape_index],
             "steps": [int(s) for s in res.steps], "reason": [str(r) for r in res.reason],
-            "t1_flips": [int(f) for f in flips], "chunk": [chunk.id] * n,
-            "chunk_seconds": [round(elapsed, 4)] * n}
+            "t1_flips": [int(f) for f in flips], "inverted_cells": [int(c) for c in inverted],
+            "chunk": [chunk.id] * n, "chunk_seconds": [round(elapsed, 4)] * n}
 
 
 # ---------------------------------------------------------------------------------------- executors

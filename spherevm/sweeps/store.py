@@ -21,24 +21,27 @@ MANIFEST = "manifest.json"
 CHUNK_DIR = "chunks"
 
 RECORD_COLUMNS = ("n_cells", "p0", "p0_index", "replica", "tiling_seed", "energy_per_cell", "max_force",
-                  "mean_shape_index", "steps", "reason", "t1_flips", "chunk", "chunk_seconds")
-_INT_COLUMNS = {"n_cells", "p0_index", "replica", "tiling_seed", "steps", "t1_flips"}
+                  "mean_shape_index", "steps", "reason", "t1_flips", "inverted_cells", "chunk", "chunk_seconds")
+_INT_COLUMNS = {"n_cells", "p0_index", "replica", "tiling_seed", "steps", "t1_flips", "inverted_cells"}
 _STR_COLUMNS = {"reason", "chunk"}
 
 
 @dataclass(frozen=True)
 class Columns:
     """The record columns of a sweep kind: their order, which are integers and which strings (the
-    rest are floats), and the columns records are sorted by, most significant first."""
+    rest are floats), the columns records are sorted by, most significant first, and ``added``:
+    ``(name, value)`` pairs of columns that files written before them lack, read as ``value``."""
     names: tuple
     ints: frozenset
     strs: frozenset
     sort: tuple
+    added: tuple = ()
 
 
 #: the rigidity sweep's records, one row per minimised tiling
+#: (``inverted_cells``: cells of signed area <= 0 at the end; -1 in files written before it was kept)
 RIGIDITY_COLUMNS = Columns(RECORD_COLUMNS, frozenset(_INT_COLUMNS), frozenset(_STR_COLUMNS),
-                           ("n_cells", "p0_index", "replica"))
+                           ("n_cells", "p0_index", "replica"), added=(("inverted_cells", -1),))
 #: the dynamics sweep's records, one row per tissue (tau_alpha NaN: Q_s stayed above 1/e)
 DYNAMICS_COLUMNS = Columns(
     ("n_cells", "point", "T", "p0", "B", "replica", "tiling_seed", "noise_seed", "tau_alpha", "msd_end",
@@ -81,17 +84,22 @@ def write_columns(path, columns: dict, order=None):
 
 
 def read_records(path, columns: Columns = RIGIDITY_COLUMNS) -> dict:
-    """Read a chunk (or replicas.csv) file back into typed columns (lists)."""
+    """Read a chunk (or replicas.csv) file back into typed columns (lists); a file written before
+    ``columns.added`` existed gets their values."""
     with open(path, newline="") as fh:
         rows = list(csv.reader(fh))
-    if not rows or tuple(rows[0]) != columns.names:
-        raise ValueError(f"{path}: not a sweep record file (header {rows[0] if rows else 'missing'})")
+    added = dict(columns.added)
+    header = tuple(rows[0]) if rows else None
+    if header not in (columns.names, tuple(c for c in columns.names if c not in added)):
+        raise ValueError(f"{path}: not a sweep record file (header {list(header) if rows else 'missing'})")
     out = {c: [] for c in columns.names}
     for row in rows[1:]:
-        if len(row) != len(columns.names):
+        if len(row) != len(header):
             raise ValueError(f"{path}: malformed row {row}")
-        for c, v in zip(columns.names, row):
+        for c, v in zip(header, row):
             out[c].append(v if c in columns.strs else int(v) if c in columns.ints else float(v))
+    for c in set(columns.names) - set(header):
+        out[c] = [added[c]] * (len(rows) - 1)
     return out
 
 

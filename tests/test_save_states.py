@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import spherevm as svm
-from spherevm import cli, sweeps
+from spherevm import cli, simplicity, sweeps
 from spherevm.plugins.forces import VertexModel
 
 SWEEP = dict(cells=[16, 20], p0=[3.6, 3.95], replicas=2, kr=0.5, seed=3)
@@ -54,7 +54,6 @@ def test_records_count_the_inverted_cells_of_the_saved_states(tmp_path, device):
     """``inverted_cells``: tissues of 48 cells on a 3:1 torus reach zero energy at p0 = 3.60 with
     cells turned over (docs/surfaces.md); each record counts the cells of signed area <= 0 that the
     tiling checks (``simplicity.faults``) find in its saved state."""
-    from spherevm import simplicity
     sweep = sweeps.RigiditySweep(cells=[48], p0=[3.6], replicas=3, kr=0.0, surface="torus:R=3,r=1", max_steps=2000)
     result = sweeps.run_sweep(sweep, tmp_path / "torus", executor=sweeps.InProcessExecutor(), device=device,
                               save_states=True)

@@ -1,7 +1,9 @@
 """Rigidity sweeps: F(p0, N), p0* distributions, chunked resumable runs on any executor."""
+import csv
 import json
 import math
 import os
+import shutil
 import warnings
 
 import numpy as np
@@ -267,8 +269,6 @@ def test_resume_recomputes_only_the_missing_chunk(tiny_run, tmp_path):
 def test_chunk_files_from_before_inverted_cells_are_read_and_resumed(tiny_run, tmp_path):
     """Chunk files written before the ``inverted_cells`` column existed: resumed without recomputing,
     the column read as -1 (not measured), every other column as it was."""
-    import csv
-    import shutil
     out, first, _ = tiny_run
     old = tmp_path / "old"
     shutil.copytree(out, old)

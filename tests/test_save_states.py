@@ -1,5 +1,6 @@
 """``save_states`` / ``spherevm rigidity --save-states`` (issue 14.9): the inherent states of a sweep
 kept as GSD files, each one the very state its record describes."""
+import csv
 import os
 
 import gsd.hoomd
@@ -64,11 +65,24 @@ def test_records_count_the_inverted_cells_of_the_saved_states(tmp_path, device):
     assert min(rec["inverted_cells"]) > 0 and set(rec["reason"]) == {"energy"}
 
 
+def _counts(folder):
+    """fraction.csv's (n_zero, n_other) of its one row."""
+    with open(folder / "fraction.csv", newline="") as fh:
+        row = next(csv.DictReader(fh))
+    return int(row["n_zero"]), int(row["n_other"])
+
+
 def test_cli_says_how_many_replicas_end_with_inverted_cells(tmp_path, capsys):
     args = ["rigidity", "--cells", "48", "--p0", "3.6", "--replicas", "2", "--device", "cpu", "--workers", "1",
             "--no-plots", "--max-steps", "2000", "--kr", "0"]
     assert cli.main(args + ["--surface", "torus:R=3,r=1", "--out", str(tmp_path / "torus")]) == 0
     assert "note: 2 replica(s) end with inverted cells" in capsys.readouterr().err
+    assert _counts(tmp_path / "torus") == (2, 0)        # both reached zero energy, with inverted cells
+    # the same folder again, tabulated without them: nothing recomputed, F has no tissue left
+    assert cli.main(args + ["--surface", "torus:R=3,r=1", "--out", str(tmp_path / "torus"), "--exclude-inverted"]) == 0
+    err = capsys.readouterr().err
+    assert "0 chunk(s) computed" in err and "left out of F (--exclude-inverted)" in err
+    assert _counts(tmp_path / "torus") == (0, 2)
     assert cli.main(args + ["--out", str(tmp_path / "sphere")]) == 0
     assert "inverted cells" not in capsys.readouterr().err
 

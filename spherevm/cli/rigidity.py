@@ -57,6 +57,9 @@ def add_parser(subparsers):
     g = r.add_argument_group("analysis")
     g.add_argument("--zero-tol", type=real(strict=True), default=None,
                    help="energy per cell below which a state counts as zero energy (default: 1e-12)")
+    g.add_argument("--exclude-inverted", action="store_true",
+                   help="leave tissues that end with inverted cells (signed area <= 0) out of F(p0), counted in "
+                        "fraction.csv's n_other (docs/surfaces.md, Rigidity sweeps on tori)")
     g.add_argument("--sigma", type=real(strict=True), default=None,
                    help="Gaussian width for dF/dp0 (default: half the measured width of the transition, "
                         "at least half the p0 spacing)")
@@ -105,7 +108,7 @@ def run(args) -> int:
                      f"{sweep.total_units} minimisations", "rigidity", "minimisations",
         batch_cells=args.batch_cells, save_states=args.save_states)
     tables = write_tables(args.out, result.records, zero_tol=args.zero_tol, plots=not args.no_plots,
-                          sigma=args.sigma, surface=sweep.surface)
+                          sigma=args.sigma, surface=sweep.surface, exclude_inverted=args.exclude_inverted)
     print(format_p0star_table(tables["p0star"]))
     if not args.quiet:
         frac = tables["fractions"]
@@ -115,9 +118,10 @@ def run(args) -> int:
                   f"(left out of F, counted in fraction.csv)\n")
         inverted = sum(int(c) > 0 for c in result.records["inverted_cells"])
         if inverted:
+            how = ("left out of F (--exclude-inverted)" if args.exclude_inverted else
+                   "classified by their energy as any other (--exclude-inverted leaves them out of F)")
             err.write(f"spherevm: note: {inverted} replica(s) end with inverted cells (signed area <= 0: "
-                      "inverted_cells in replicas.csv), classified by their energy as any other; see "
-                      "docs/surfaces.md, Rigidity sweeps on tori\n")
+                      f"inverted_cells in replicas.csv), {how}; see docs/surfaces.md, Rigidity sweeps on tori\n")
         if len(sweep.p0) < 2:
             err.write("spherevm: note: one p0 value: F(p0, N) is in fraction.csv, but p0* needs F at two or more "
                       "p0 values (give a range such as --p0 3.6:4.0:0.02)\n")

@@ -12,10 +12,19 @@ from ..analysis import rigidity
 from .store import DYNAMICS_COLUMNS, MANIFEST, RECORD_COLUMNS, read_curves, sorted_records, write_columns
 
 
-def summarize_records(records: dict, zero_tol=None, sigma=None, resamples: int = 400, surface: str = "sphere"):
-    """``(fractions, p0star, density)`` from per-replica records (see analysis.rigidity.summarize)."""
+def classify_records(records: dict, zero_tol=None, exclude_inverted: bool = False):
+    """Each record's status (:func:`spherevm.analysis.rigidity.classify`); with ``exclude_inverted``,
+    tissues that end with inverted cells are ``"inverted"``, left out of F."""
     tol = rigidity.ZERO_ENERGY_TOL if zero_tol is None else zero_tol
-    status = rigidity.classify(records["energy_per_cell"], records["reason"], tol)
+    return rigidity.classify(records["energy_per_cell"], records["reason"], tol,
+                             inverted_cells=records["inverted_cells"] if exclude_inverted else None)
+
+
+def summarize_records(records: dict, zero_tol=None, sigma=None, resamples: int = 400, surface: str = "sphere",
+                      exclude_inverted: bool = False):
+    """``(fractions, p0star, density)`` from per-replica records (see analysis.rigidity.summarize;
+    ``exclude_inverted``: :func:`classify_records`)."""
+    status = classify_records(records, zero_tol, exclude_inverted)
     return rigidity.summarize(records["n_cells"], records["p0"], status, sigma=sigma, resamples=resamples,
                               surface=surface)
 
@@ -29,7 +38,8 @@ def folder_surface(out) -> str:
         return "sphere"
 
 
-def write_tables(out, records: dict, zero_tol=None, plots=True, sigma=None, surface=None) -> dict:
+def write_tables(out, records: dict, zero_tol=None, plots=True, sigma=None, surface=None,
+                 exclude_inverted: bool = False) -> dict:
     """Write ``replicas.csv``, ``fraction.csv`` (F(p0,N)), ``p0star.csv`` (p0*(N) beside the pentagon
     bound), ``p0star_density.csv`` and, with matplotlib, ``fraction.png``, ``p0star_distribution.png``
     (Fig. 2 style, F in the inset) and ``p0star_vs_N.png``. (Fig. 4's ``P0* = sqrt(<A>) p0*(N)``
@@ -38,6 +48,8 @@ def write_tables(out, records: dict, zero_tol=None, plots=True, sigma=None, surf
 
     ``surface`` (None: the folder manifest's, else "sphere") picks the pentagon bound: spherical per
     N, or the flat one on the plane (and no pentagon markers on the planar distributions).
+    ``exclude_inverted``: tissues that end with inverted cells are left out of F (status
+    ``"inverted"``, counted in ``n_other``; :func:`classify_records`).
 
     Returns a dict with the tables (``fractions``, ``p0star``, ``density``), the ``files`` written
     and ``plot_note`` (why plots were skipped, or None).
@@ -46,8 +58,7 @@ def write_tables(out, records: dict, zero_tol=None, plots=True, sigma=None, surf
     os.makedirs(path, exist_ok=True)
     records = sorted_records(records)
     surface = folder_surface(path) if surface is None else surface
-    tol = rigidity.ZERO_ENERGY_TOL if zero_tol is None else zero_tol
-    status = rigidity.classify(records["energy_per_cell"], records["reason"], tol)
+    status = classify_records(records, zero_tol, exclude_inverted)
     frac, p0star, density = rigidity.summarize(records["n_cells"], records["p0"], status, sigma=sigma,
                                                surface=surface)
     files = []

@@ -56,11 +56,11 @@ def test_classify_separates_unconverged():
         rigidity.classify(e, reason, zero_tol=0)
     with pytest.raises(ValueError, match="same shape"):
         rigidity.classify(e, reason[:2])
-    # tissues that end with inverted cells, on request: left out of F; -1 (not measured) is not one
-    inverted = rigidity.classify(e, reason, zero_tol=1e-12, inverted_cells=[3, 1, 2, 0, -1, 0])
-    assert list(inverted) == ["inverted", "inverted", "max_steps", "t1_oscillation", "rigid", "zero"]
-    with pytest.raises(ValueError, match="inverted_cells must have one entry per replica"):
-        rigidity.classify(e, reason, inverted_cells=[1, 2])
+    # a sweep's tissues that end with inverted cells, on request: left out of F; -1 (not measured) is not one
+    records = {"energy_per_cell": e, "reason": reason, "inverted_cells": [3, 1, 2, 0, -1, 0]}
+    assert list(sweeps.classify_records(records, 1e-12)) == list(status)
+    assert list(sweeps.classify_records(records, 1e-12, exclude_inverted=True)) == [
+        "inverted", "inverted", "max_steps", "t1_oscillation", "rigid", "zero"]
 
 
 def test_zero_fraction_counts_unconverged_separately():

@@ -45,21 +45,17 @@ CONVERGED_REASONS = ("force", "energy")
 
 
 # ---------------------------------------------------------------------------------------- classification
-def classify(energy_per_cell, reason, zero_tol: float = ZERO_ENERGY_TOL, inverted_cells=None):
+def classify(energy_per_cell, reason, zero_tol: float = ZERO_ENERGY_TOL):
     """Status of each minimised replica: ``"zero"``, ``"rigid"`` or the non-convergence reason.
 
     A replica converged when its ``reason`` is "force" or "energy"; it is then zero energy when
     ``energy_per_cell < zero_tol``. Others keep their reason (``max_steps``, ``t1_oscillation``).
-    With ``inverted_cells``, a converged replica that has any is ``"inverted"`` (left out of F
-    like the unconverged ones; a negative count, not measured, is not).
 
     Parameters
     ----------
     energy_per_cell, reason : array
         Per replica (``MinimizeResult`` or a sweep's records).
     zero_tol : float
-    inverted_cells : array of int, optional
-        Per replica, its cells of signed area <= 0 (a sweep's ``inverted_cells`` record).
 
     Returns
     -------
@@ -75,11 +71,6 @@ def classify(energy_per_cell, reason, zero_tol: float = ZERO_ENERGY_TOL, inverte
     status = np.where(e < tol, "zero", "rigid").astype(object)
     status[~np.isfinite(e)] = "nan_energy"
     status[~converged] = r[~converged]
-    if inverted_cells is not None:
-        inverted = np.asarray(inverted_cells)
-        if inverted.shape != r.shape:
-            raise ValueError(f"inverted_cells must have one entry per replica ({r.shape}), got {inverted.shape}")
-        status[converged & (inverted > 0)] = "inverted"
     return status.astype(str)
 
 

@@ -42,13 +42,13 @@ from .spec import Chunk, RigiditySweep, Sweep, parse_p0_grid, plan_chunks, tilin
 from .store import (CHUNK_DIR, CURVE_DIR, DYNAMICS_COLUMNS, FORMAT, FORMAT_VERSION, MANIFEST, RECORD_COLUMNS,
                     open_sweep_folder, read_curves, read_records, scan_chunks, write_columns)
 from .states import STATE_DIR, load_state
-from .tables import (format_p0star_table, format_tau_table, summarize_dynamics, summarize_records,
-                     write_dynamics_tables, write_tables)
+from .tables import (classify_records, format_p0star_table, format_tau_table, summarize_dynamics,
+                     summarize_records, write_dynamics_tables, write_tables)
 
 __all__ = ["CHUNK_DIR", "CPU_BATCH_CELLS", "CURVE_DIR", "Chunk", "DYNAMICS_COLUMNS", "DynamicsSweep", "FORMAT",
            "FORMAT_VERSION", "GPU_BATCH_CELLS", "InProcessExecutor", "MANIFEST", "RECORD_COLUMNS", "RigiditySweep",
            "STATE_DIR", "Sweep", "SweepProgress", "SweepResult", "TextProgress", "build_chunk_state",
-           "default_executor", "format_p0star_table", "format_tau_table", "load_state", "open_sweep_folder",
+           "classify_records", "default_executor", "format_p0star_table", "format_tau_table", "load_state", "open_sweep_folder",
            "parse_p0_grid", "plan_chunks", "read_curves", "read_records", "run_chunk", "run_dynamics_chunk",
            "run_sweep", "scan_chunks", "summarize_dynamics", "summarize_records", "tiling_seed", "write_columns",
            "write_dynamics_tables", "write_tables"]

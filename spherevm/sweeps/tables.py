@@ -14,10 +14,14 @@ from .store import DYNAMICS_COLUMNS, MANIFEST, RECORD_COLUMNS, read_curves, sort
 
 def classify_records(records: dict, zero_tol=None, exclude_inverted: bool = False):
     """Each record's status (:func:`spherevm.analysis.rigidity.classify`); with ``exclude_inverted``,
-    tissues that end with inverted cells are ``"inverted"``, left out of F."""
+    a converged tissue that ends with inverted cells (``inverted_cells`` > 0; -1, not measured, is
+    not) is ``"inverted"``, left out of F like the unconverged ones."""
     tol = rigidity.ZERO_ENERGY_TOL if zero_tol is None else zero_tol
-    return rigidity.classify(records["energy_per_cell"], records["reason"], tol,
-                             inverted_cells=records["inverted_cells"] if exclude_inverted else None)
+    status = rigidity.classify(records["energy_per_cell"], records["reason"], tol)
+    if exclude_inverted:
+        inverted = np.asarray(records["inverted_cells"]) > 0
+        status = np.where(np.isin(status, ("zero", "rigid")) & inverted, "inverted", status)
+    return status
 
 
 def summarize_records(records: dict, zero_tol=None, sigma=None, resamples: int = 400, surface: str = "sphere",

@@ -46,9 +46,8 @@ def _tiling_worker(niceness: int):
 #: cells of tilings a sweep may hold ahead of its GPUs, beyond its ``ahead`` chunks (about 150 bytes
 #: a cell: 300 MB): chunks are submitted while those built or being built and not yet taken hold at
 #: most this many, so the slack the pool gains on chunks that tile fast carries over to chunks whose
-#: tilings cost more than their minimisation (a paper-size sweep on a 3:1 torus: at 32 cells, two
-#: around the tube, a tiling takes 17 draws; 3,600 of them 50 s of a core, their minimisation 2 s
-#: of an H200)
+#: tilings cost more than their minimisation. A pool busy throughout gains no slack: on a paper-size
+#: sweep of a 3:1 torus a limit of the whole sweep waited as long (docs/rigidity.md, Executors)
 PREFETCH_CELLS = 2_000_000
 
 

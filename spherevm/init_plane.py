@@ -28,10 +28,12 @@ MIN_PLANAR_CELLS = 8
 #: benchmarks/crossings.py): cells stopped closing at N = 10, 12 (T = 0.05, dt = 0.05) and 14
 #: (T = 0.2, dt = 0.01), never at N >= 16 there; at T = 0.5 also at 16 and 20.
 MIN_T1_PLANAR_CELLS = 16
-#: from this many cells on, periodic_voronoi triangulates only the images near the box (the full 3 x 3
-#: images cost 44 s at 1e5 cells on a 2-core VM, ~10 min at 1e6); below it the result is bitwise
-#: what it was before the margin existed
-MARGIN_MIN_CELLS = 20000
+#: from this many cells on, periodic_voronoi triangulates only the images within MARGIN_CELL_SIDES of
+#: the box and puts its triangles in a canonical order (Qhull of ~2.5 N points instead of 9 N: a
+#: 1,024-cell tiling of a 3:1 torus in 15 ms instead of 32 on a 2-core VM); below it the result is
+#: bitwise what it was before the margin existed (all 3 x 3 images in Qhull's order), so that the
+#: published results of small periodic tilings keep reproducing
+MARGIN_MIN_CELLS = 500
 #: the margin in cell sides sqrt(<A>): the largest empty circle among 2e6 Poisson triangles has a
 #: radius of about sqrt(ln(2e6) / pi) = 2.1 sides
 MARGIN_CELL_SIDES = 4.0
@@ -67,45 +69,63 @@ def _circumcenters(p):
     return p[:, 0] + np.stack([x, y], axis=1)
 
 
+def _rotated(tri, first):
+    """Triangles ``tri`` (T, 3) rotated to start at their corner ``first`` (T,)."""
+    return np.take_along_axis(tri, (first[:, None] + np.arange(3)) % 3, axis=1)
+
+
+def _points(pts, tri, box):
+    """The corners (T, 3, 2) of triangles of image labels ``k n + i``: point i shifted by image k."""
+    return pts[tri % len(pts)] + _SHIFTS[tri // len(pts)] * box
+
+
 def periodic_voronoi(points, box, margin=True):
     """The Voronoi tessellation of ``points`` (n, 2) in the periodic ``box``, as a trivalent network.
 
     Delaunay triangulation of the 3 x 3 periodic images (the Voronoi diagram's dual); each periodic
     triangle is kept once, the image whose circumcentre (its Voronoi vertex) lies in the central box;
     point indices are taken modulo n, which identifies the vertices across images. From
-    ``MARGIN_MIN_CELLS`` points on (and ``margin=True``) only the images within
-    ``MARGIN_CELL_SIDES`` cell sides of the box are triangulated (9x fewer points at large n): a kept
-    triangle whose empty circumcircle lies inside that margin is one of the full periodic
-    triangulation, and when every kept one does the result is the same tessellation (numbered in
-    another order); otherwise the full 3 x 3 images are used. Returns local
-    ``(positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells)``, or None if the result
-    is not a simple trivalent network (small n: a cell meeting itself or a neighbour twice).
+    ``MARGIN_MIN_CELLS`` points on, only the images within ``MARGIN_CELL_SIDES`` cell sides of the box
+    are triangulated (all of them with ``margin=False``, or where some kept triangle's empty
+    circumcircle reaches past the margin), and the kept triangles are put in a canonical order (each
+    starts at its lowest point index; sorted by their points, then images): the result does not
+    depend on how Qhull lists its triangles, so the margin and the full images give the same bits.
+    Returns local ``(positions, cell_vertices, cell_sides, vertex_neighbors, vertex_cells)``, or None
+    if the result is not a simple trivalent network (small n: a cell meeting itself or a neighbour
+    twice).
     """
     from scipy.spatial import Delaunay
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
     images = (pts[None] + _SHIFTS[:, None] * box).reshape(-1, 2)
-    index = np.arange(len(images)) % n
-    margin = MARGIN_CELL_SIDES * np.sqrt(np.prod(box) / n) if margin and n >= MARGIN_MIN_CELLS else None
-    if margin is not None:      # large n: only the images within `margin` of the box
-        near = ((images >= -margin) & (images < box + margin)).all(axis=1)
-        images, index = images[near], index[near]
+    label = np.arange(len(images))                 # image k of point i: k n + i
+    canonical = n >= MARGIN_MIN_CELLS
+    width = MARGIN_CELL_SIDES * np.sqrt(np.prod(box) / n) if canonical and margin else None
+    if width is not None:      # only the images within `width` of the box
+        near = ((images >= -width) & (images < box + width)).all(axis=1)
+        images, label = images[near], label[near]
     try:
-        tri = Delaunay(images).simplices.astype(np.int64)
+        tri = label[Delaunay(images).simplices]
     except RuntimeError as exc:     # QhullError: e.g. a box ~1e300 times longer than wide
         raise ValueError(f"qhull cannot triangulate {n} points in the box ({box[0]:g}, {box[1]:g}) "
                          f"({str(exc).strip().splitlines()[0]}); give a box a few cells wide in both "
                          "directions") from None
-    p = images[tri]
-    cc = _circumcenters(p)
-    keep = ((cc >= 0) & (cc < box)).all(axis=1)
-    tri, p, cc = tri[keep], p[keep], cc[keep]
-    if margin is not None and not np.all(np.hypot(*(cc - p[:, 0]).T) < margin):
-        return periodic_voronoi(pts, box, margin=False)    # an empty circle reaches past the margin
+    if canonical:
+        tri = _rotated(tri, np.argmin(tri, axis=1))         # each image from its lowest label
+    cc = _circumcenters(_points(pts, tri, box))
+    tri = tri[((cc >= 0) & (cc < box)).all(axis=1)]
+    p = _points(pts, tri, box)
     cw = ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
           - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0])) < 0
     tri[cw] = tri[cw][:, [0, 2, 1]]
-    t = index[tri]
+    if canonical:
+        tri = _rotated(tri, np.argmin(tri % n, axis=1))     # then from its lowest point, in order
+        tri = tri[np.lexsort(tuple((tri // n).T[::-1]) + tuple((tri % n).T[::-1]))]
+        p = _points(pts, tri, box)
+    cc = _circumcenters(p)
+    if width is not None and not np.all(np.hypot(*(cc - p[:, 0]).T) < width):
+        return periodic_voronoi(pts, box, margin=False)    # an empty circle reaches past the margin
+    t = tri % n
     if len(t) != 2 * n or np.any(t == np.roll(t, -1, axis=1)):
         return None
     key = t * n + np.roll(t, -1, axis=1)

@@ -3,6 +3,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import scipy.spatial
 
 import spherevm as svm
 from spherevm.constraints import PeriodicPlane, Sphere
@@ -82,26 +83,65 @@ def test_every_tiling_is_a_torus_covering_the_box(n, seed):
     assert np.all(s.constraint.cell_areas_np(s) > 0)
 
 
-def test_large_tilings_triangulate_a_margin_and_give_the_same_tessellation(monkeypatch):
-    """From MARGIN_MIN_CELLS on only the images near the box are triangulated: the same cells and
-    vertices as the full 3 x 3 images (numbered in another order); a margin too thin for some empty
-    circle falls back to the full images, bit for bit."""
-    from spherevm import init_plane
-    full = svm.init.random_planar_tiling(400, seed=9, box=(16.0, 25.0))
-    monkeypatch.setattr(init_plane, "MARGIN_MIN_CELLS", 100)
-    near = svm.init.random_planar_tiling(400, seed=9, box=(16.0, 25.0))
-    near.validate()
+_QHULL = scipy.spatial.Delaunay
 
-    def canonical(s):
-        return s.positions[np.lexsort(s.positions[:, :2].T)]
-    np.testing.assert_allclose(canonical(near), canonical(full), atol=1e-12)
-    np.testing.assert_allclose(np.sort(near.constraint.cell_areas_np(near)), np.sort(full.constraint.cell_areas_np(full)),
-                               atol=1e-12)
-    assert not np.array_equal(near.positions, full.positions)     # the margin path did run
-    monkeypatch.setattr(init_plane, "MARGIN_CELL_SIDES", 0.3)      # no empty circle fits: the full images
-    again = svm.init.random_planar_tiling(400, seed=9, box=(16.0, 25.0))
-    np.testing.assert_array_equal(again.positions, full.positions)
-    np.testing.assert_array_equal(again.cell_vertices, full.cell_vertices)
+
+class _ShuffledDelaunay:
+    """scipy's Delaunay with its triangles listed in another order, each from another corner;
+    ``sizes`` records how many points each call triangulated."""
+    sizes: list = []
+
+    def __init__(self, points):
+        self.sizes.append(len(points))
+        tri = _QHULL(points).simplices
+        rng = np.random.default_rng(len(points))
+        tri = tri[rng.permutation(len(tri))]
+        self.simplices = np.take_along_axis(tri, (rng.integers(0, 3, len(tri))[:, None] + np.arange(3)) % 3, axis=1)
+
+
+def _same_network(a, b):
+    assert a is not None and b is not None
+    return all(np.array_equal(x, y) for x, y in zip(a, b))
+
+
+def test_large_tessellations_do_not_depend_on_the_images_triangulated_or_their_order(monkeypatch):
+    """From MARGIN_MIN_CELLS on only the images within MARGIN_CELL_SIDES of the box are triangulated
+    and the kept triangles are put in a canonical order: the margin, all 3 x 3 images, and a
+    triangulation listing its triangles in another order and from other corners give the same
+    tessellation to the bit; a margin too thin for some empty circle falls back to the full images.
+    Below MARGIN_MIN_CELLS the full images are triangulated and Qhull's order is kept (the tilings
+    of earlier versions), so there the shuffled triangulation numbers the network otherwise."""
+    from spherevm import init_plane
+    rng = np.random.default_rng(9)
+    cases = [(1000, (50.0, 20.0), None), (600, (16.0, 37.5), None), (32, (9.8, 3.27), 8), (400, (16.0, 25.0), 100)]
+    for n, box, least in cases:
+        box = np.array(box)
+        with monkeypatch.context() as m:
+            if least is not None:       # the canonical path at a smaller N, as a small tiling would take it
+                m.setattr(init_plane, "MARGIN_MIN_CELLS", least)
+            full = None
+            while full is None:         # a simple network (most 32-point draws in this box are not)
+                pts = rng.uniform(0, 1, (n, 2)) * box
+                full = init_plane.periodic_voronoi(pts, box, margin=False)
+            _ShuffledDelaunay.sizes = []
+            m.setattr(scipy.spatial, "Delaunay", _ShuffledDelaunay)
+            assert _same_network(init_plane.periodic_voronoi(pts, box), full)
+            assert _same_network(init_plane.periodic_voronoi(pts, box, margin=False), full)
+            if n >= 400:
+                assert _ShuffledDelaunay.sizes[0] < 0.5 * 9 * n           # the margin path ran
+                m.setattr(init_plane, "MARGIN_CELL_SIDES", 0.3)       # no empty circle fits: the full images
+                assert _same_network(init_plane.periodic_voronoi(pts, box), full)
+                assert _ShuffledDelaunay.sizes[-1] == 9 * n
+    pts = rng.uniform(0, 1, (400, 2)) * 20.0
+    box = np.array([20.0, 20.0])
+    plain = init_plane.periodic_voronoi(pts, box)
+    with monkeypatch.context() as m:
+        _ShuffledDelaunay.sizes = []
+        m.setattr(scipy.spatial, "Delaunay", _ShuffledDelaunay)
+        shuffled = init_plane.periodic_voronoi(pts, box)
+    assert _ShuffledDelaunay.sizes == [9 * 400]
+    assert not _same_network(shuffled, plain)
+    np.testing.assert_allclose(np.sort(shuffled[0], axis=0), np.sort(plain[0], axis=0), atol=1e-12)
 
 
 def test_replicas_are_reproducible_and_may_differ_in_box():

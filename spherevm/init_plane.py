@@ -29,7 +29,7 @@ MIN_PLANAR_CELLS = 8
 #: (T = 0.2, dt = 0.01), never at N >= 16 there; at T = 0.5 also at 16 and 20.
 MIN_T1_PLANAR_CELLS = 16
 #: from this many cells on, periodic_voronoi triangulates only the images within MARGIN_CELL_SIDES of
-#: the box and puts its triangles in a canonical order (Qhull of ~2.5 N points instead of 9 N: a
+#: the box and puts its triangles in a canonical order (Qhull of 1.6-1.9 N points instead of 9 N: a
 #: 1,024-cell tiling of a 3:1 torus in 15 ms instead of 32 on a 2-core VM); below it the result is
 #: bitwise what it was before the margin existed (all 3 x 3 images in Qhull's order), so that the
 #: published results of small periodic tilings keep reproducing

@@ -50,7 +50,7 @@ class RigiditySweep(Sweep):
     """What to compute: every (N in ``cells``, p0 in ``p0``, replica < ``replicas``) minimised.
 
     The energy is ``E = sum_c kr/<A> (A_c - <A>)^2 + (P_c - p0 sqrt(<A>))^2`` per tiling (kP = 1), so
-    that ``energy_per_cell`` is in units of kP <A>^2 (<A> = 1 at the default radius sqrt(N/4 pi)).
+    that ``energy_per_cell`` is in units of kP <A> (<A> = 1 at the default radius sqrt(N/4 pi)).
     Defaults from docs/rigidity.md.
 
     Parameters

@@ -112,9 +112,10 @@ def periodic_voronoi(points, box, margin=True):
                          "directions") from None
     if canonical:
         tri = _rotated(tri, np.argmin(tri, axis=1))         # each image from its lowest label
-    cc = _circumcenters(_points(pts, tri, box))
-    tri = tri[((cc >= 0) & (cc < box)).all(axis=1)]
     p = _points(pts, tri, box)
+    cc = _circumcenters(p)
+    keep = ((cc >= 0) & (cc < box)).all(axis=1)
+    tri, p, cc = tri[keep], p[keep], cc[keep]
     cw = ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
           - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0])) < 0
     tri[cw] = tri[cw][:, [0, 2, 1]]
@@ -122,7 +123,7 @@ def periodic_voronoi(points, box, margin=True):
         tri = _rotated(tri, np.argmin(tri % n, axis=1))     # then from its lowest point, in order
         tri = tri[np.lexsort(tuple((tri // n).T[::-1]) + tuple((tri % n).T[::-1]))]
         p = _points(pts, tri, box)
-    cc = _circumcenters(p)
+        cc = _circumcenters(p)
     if width is not None and not np.all(np.hypot(*(cc - p[:, 0]).T) < width):
         return periodic_voronoi(pts, box, margin=False)    # an empty circle reaches past the margin
     t = tri % n

@@ -48,7 +48,7 @@ from .tables import (classify_records, format_p0star_table, format_tau_table, su
 __all__ = ["CHUNK_DIR", "CPU_BATCH_CELLS", "CURVE_DIR", "Chunk", "DYNAMICS_COLUMNS", "DynamicsSweep", "FORMAT",
            "FORMAT_VERSION", "GPU_BATCH_CELLS", "InProcessExecutor", "MANIFEST", "RECORD_COLUMNS", "RigiditySweep",
            "STATE_DIR", "Sweep", "SweepProgress", "SweepResult", "TextProgress", "build_chunk_state",
-           "classify_records", "default_executor", "format_p0star_table", "format_tau_table", "load_state", "open_sweep_folder",
-           "parse_p0_grid", "plan_chunks", "read_curves", "read_records", "run_chunk", "run_dynamics_chunk",
-           "run_sweep", "scan_chunks", "summarize_dynamics", "summarize_records", "tiling_seed", "write_columns",
-           "write_dynamics_tables", "write_tables"]
+           "classify_records", "default_executor", "format_p0star_table", "format_tau_table", "load_state",
+           "open_sweep_folder", "parse_p0_grid", "plan_chunks", "read_curves", "read_records", "run_chunk",
+           "run_dynamics_chunk", "run_sweep", "scan_chunks", "summarize_dynamics", "summarize_records", "tiling_seed",
+           "write_columns", "write_dynamics_tables", "write_tables"]

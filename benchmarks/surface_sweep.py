@@ -46,7 +46,8 @@ def one_sweep(surface, args):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
+                                 allow_abbrev=False)
     ap.add_argument("surfaces", nargs="+", help="surface specs, in the order to run them")
     ap.add_argument("--cells", type=int, nargs="+", default=list(PAPER_CELLS))
     ap.add_argument("--p0", default="3.60:3.95:0.01")
